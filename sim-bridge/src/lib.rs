@@ -4,4 +4,5 @@
 //! Parts, one module each: [`map`] (OpenDRIVE through the `xodr` crate, lane graph, traffic
 //! lights and stop signs), [`towngen`] (the deterministic generator of the bundled towns).
 
+pub mod map;
 pub mod towngen;

@@ -1,0 +1,263 @@
+//! Road maps: an OpenDRIVE file baked by the `xodr` crate into the lane graph the simulator
+//! drives on ([`lanes`]), a spatial index over it ([`spatial`]), and the traffic control the
+//! world enforces: junctions, traffic lights and stop signs ([`control`]).
+//!
+//! Frame: the OpenDRIVE map frame (right-handed, x east, y north, z up, metres). Guarantees:
+//! a loaded [`Map`] has at least one driving lane; a file over [`MAX_MAP_BYTES`] or one that is
+//! not OpenDRIVE is refused with a [`MapError`] that names the file and the problem.
+
+pub mod control;
+pub mod lanes;
+pub mod spatial;
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+use glam::{DVec2, DVec3};
+
+pub use control::{Approach, Junction, StopLine, StopSign, TrafficLight};
+pub use lanes::{JunctionIdx, Lane, LaneIdx, LaneKind, LanePose, Projection};
+use spatial::SegmentGrid;
+
+/// The largest OpenDRIVE file accepted (CARLA's largest towns are under 20 MB).
+pub const MAX_MAP_BYTES: u64 = 64 * 1024 * 1024;
+
+/// Why a map could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum MapError {
+    /// The file could not be read.
+    #[error("cannot read map {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    /// The file is larger than [`MAX_MAP_BYTES`].
+    #[error("map {path} is {bytes} bytes, over the {MAX_MAP_BYTES}-byte limit")]
+    TooLarge { path: String, bytes: u64 },
+    /// The OpenDRIVE importer refused the document.
+    #[error("map {origin} is not valid OpenDRIVE: {message}")]
+    Invalid { origin: String, message: String },
+    /// The document has no driving lane to route on.
+    #[error("map {origin} has no driving lanes")]
+    NoDrivingLanes { origin: String },
+}
+
+/// Options for loading a map.
+#[derive(Debug, Clone, Copy)]
+pub struct MapOptions {
+    /// Place traffic lights at multi-lane four-way junctions that the file gives none (CARLA's
+    /// old Town03 export has no `<signal>` at all). On by default.
+    pub place_missing_lights: bool,
+}
+
+impl Default for MapOptions {
+    fn default() -> Self {
+        Self { place_missing_lights: true }
+    }
+}
+
+/// A baked road map.
+#[derive(Debug)]
+pub struct Map {
+    /// Where the map came from (file name or a bundled town's name).
+    pub name: String,
+    /// Every lane, indexed by [`LaneIdx`].
+    pub lanes: Vec<Lane>,
+    /// Every junction, indexed by [`JunctionIdx`].
+    pub junctions: Vec<Junction>,
+    /// Traffic lights, one per signalized junction approach; `id` is the position here.
+    pub lights: Vec<TrafficLight>,
+    /// Stop signs; `id` is the position here.
+    pub stop_signs: Vec<StopSign>,
+    /// Plan bounds of all lanes: (min, max).
+    pub bounds: (DVec2, DVec2),
+    grid: SegmentGrid,
+}
+
+impl Map {
+    /// Load an OpenDRIVE file.
+    pub fn load_file(path: &Path, options: MapOptions) -> Result<Self, MapError> {
+        let shown = path.display().to_string();
+        let io = |source| MapError::Io { path: shown.clone(), source };
+        let bytes = std::fs::metadata(path).map_err(io)?.len();
+        if bytes > MAX_MAP_BYTES {
+            return Err(MapError::TooLarge { path: shown, bytes });
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(shown);
+        Self::from_str(&name, &text, options)
+    }
+
+    /// Load an OpenDRIVE document held in memory; `name` labels errors and results.
+    pub fn from_str(name: &str, xml: &str, options: MapOptions) -> Result<Self, MapError> {
+        let invalid = |message: String| MapError::Invalid { origin: name.to_string(), message };
+        if xml.len() as u64 > MAX_MAP_BYTES {
+            return Err(invalid(format!("document is over the {MAX_MAP_BYTES}-byte limit")));
+        }
+        let net = xodr::load_str(xml).map_err(|e| invalid(e.to_string()))?;
+        Self::from_network(name, &net, options)
+    }
+
+    /// Bake the simulator's view of an imported network.
+    pub fn from_network(
+        name: &str,
+        net: &xodr::RoadNetwork,
+        options: MapOptions,
+    ) -> Result<Self, MapError> {
+        let (lanes, junction_ids) = bake_lanes(net);
+        if !lanes.iter().any(|l| l.kind == LaneKind::Driving) {
+            return Err(MapError::NoDrivingLanes { origin: name.to_string() });
+        }
+        let grid = SegmentGrid::build(&lanes);
+        let mut lo = DVec2::splat(f64::INFINITY);
+        let mut hi = DVec2::splat(f64::NEG_INFINITY);
+        for p in lanes.iter().flat_map(|l| &l.points) {
+            lo = lo.min(p.truncate());
+            hi = hi.max(p.truncate());
+        }
+        let mut map = Map {
+            name: name.to_string(),
+            lanes,
+            junctions: Vec::new(),
+            lights: Vec::new(),
+            stop_signs: Vec::new(),
+            bounds: (lo, hi),
+            grid,
+        };
+        control::derive(&mut map, net, junction_ids, options);
+        Ok(map)
+    }
+
+    /// The lane at `idx`.
+    pub fn lane(&self, idx: LaneIdx) -> &Lane {
+        &self.lanes[idx.get()]
+    }
+
+    /// The driving lane whose centre line is nearest `p` (within 50 m).
+    pub fn nearest_driving(&self, p: DVec2) -> Option<(LaneIdx, Projection)> {
+        self.nearest(p, 50.0, |l| l.kind == LaneKind::Driving)
+    }
+
+    /// The lane accepted by `keep` nearest `p`, within `max_distance` metres.
+    pub fn nearest(
+        &self,
+        p: DVec2,
+        max_distance: f64,
+        keep: impl Fn(&Lane) -> bool,
+    ) -> Option<(LaneIdx, Projection)> {
+        self.grid.nearest(&self.lanes, p, max_distance, keep)
+    }
+
+    /// The lanes accepted by `keep` within `radius` of `p`, nearest first.
+    pub fn lanes_near(
+        &self,
+        p: DVec2,
+        radius: f64,
+        keep: impl Fn(&Lane) -> bool,
+    ) -> Vec<(LaneIdx, Projection)> {
+        self.grid.within(&self.lanes, p, radius, keep)
+    }
+
+    /// The driving lane that best matches a pose: nearest among those within 4 m whose heading
+    /// agrees with `yaw` within 60 degrees, else simply the nearest driving lane.
+    pub fn lane_for_pose(&self, p: DVec3, yaw: f64) -> Option<(LaneIdx, Projection)> {
+        let near = self.lanes_near(p.truncate(), 4.0, |l| l.kind == LaneKind::Driving);
+        near.into_iter()
+            .filter(|(idx, proj)| {
+                let lane = self.lane(*idx);
+                (p.z - lane.pose_at(proj.s).position.z).abs() < 3.0
+            })
+            .find(|(idx, proj)| angle_diff(self.lane(*idx).pose_at(proj.s).yaw, yaw).abs() < 1.05)
+            .or_else(|| self.nearest_driving(p.truncate()))
+    }
+}
+
+/// Signed difference `a - b` wrapped to (-pi, pi].
+pub fn angle_diff(a: f64, b: f64) -> f64 {
+    let mut d = (a - b) % std::f64::consts::TAU;
+    if d > std::f64::consts::PI {
+        d -= std::f64::consts::TAU;
+    } else if d <= -std::f64::consts::PI {
+        d += std::f64::consts::TAU;
+    }
+    d
+}
+
+/// Bake xodr lanes into travel-ordered [`Lane`]s; returns them and the OpenDRIVE junction id of
+/// each junction index handed out (in order of first appearance).
+fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
+    let mut index: HashMap<xodr::LaneId, LaneIdx> = HashMap::new();
+    let mut junction_index: BTreeMap<String, JunctionIdx> = BTreeMap::new();
+    let mut junction_ids: Vec<String> = Vec::new();
+    let mut lanes: Vec<Lane> = Vec::new();
+    for src in net.lanes() {
+        if src.center.points().len() < 2 || src.direction == xodr::Direction::Both {
+            continue;
+        }
+        let Some(road_lane) = net.road_lane(src.id) else { continue };
+        let Some(road) = net.road(road_lane.road) else { continue };
+        let mut points: Vec<DVec3> = src
+            .center
+            .points()
+            .iter()
+            .map(|p| DVec3::new(p.x as f64, p.y as f64, p.z as f64))
+            .collect();
+        if src.direction == xodr::Direction::Backward {
+            points.reverse();
+        }
+        points.dedup_by(|a, b| (*a - *b).length_squared() < 1e-8);
+        if points.len() < 2 || !points.iter().all(|p| p.is_finite()) {
+            continue;
+        }
+        let junction = road.junction().map(|j| {
+            *junction_index.entry(j.to_string()).or_insert_with(|| {
+                junction_ids.push(j.to_string());
+                JunctionIdx(junction_ids.len() as u32 - 1)
+            })
+        });
+        let idx = LaneIdx(lanes.len() as u32);
+        index.insert(src.id, idx);
+        lanes.push(Lane {
+            idx,
+            kind: LaneKind::from_xodr(src.kind),
+            road_id: road.od_id().to_string(),
+            section: road_lane.section,
+            lane_id: road_lane.od_id,
+            junction,
+            width: src.width as f64,
+            cum: lanes::cumulative_length(&points),
+            points,
+            successors: Vec::new(),
+            predecessors: Vec::new(),
+            left: None,
+            right: None,
+        });
+    }
+    let map_ids = |ids: &[xodr::LaneId]| -> Vec<LaneIdx> {
+        let mut out: Vec<LaneIdx> = ids.iter().filter_map(|i| index.get(i).copied()).collect();
+        out.sort();
+        out.dedup();
+        out
+    };
+    for src in net.lanes() {
+        let Some(&idx) = index.get(&src.id) else { continue };
+        let successors = map_ids(&src.successors);
+        let predecessors = map_ids(&src.predecessors);
+        let neighbours = map_ids(&src.neighbors);
+        let lane = &lanes[idx.get()];
+        let mid = lane.pose_at(lane.length() / 2.0);
+        let (mut left, mut right) = (None, None);
+        for n in neighbours {
+            let offset = lanes[n.get()].pose_at(lanes[n.get()].length() / 2.0).position - mid.position;
+            let forward = DVec2::from_angle(mid.yaw);
+            if forward.perp_dot(offset.truncate()) > 0.0 {
+                left = left.or(Some(n));
+            } else {
+                right = right.or(Some(n));
+            }
+        }
+        let lane = &mut lanes[idx.get()];
+        lane.successors = successors;
+        lane.predecessors = predecessors;
+        lane.left = left;
+        lane.right = right;
+    }
+    (lanes, junction_ids)
+}
