@@ -2,7 +2,12 @@
 //! CARLA leaderboard 1.0 does.
 //!
 //! Parts, one module each: [`map`] (OpenDRIVE through the `xodr` crate, lane graph, traffic
-//! lights and stop signs), [`towngen`] (the deterministic generator of the bundled towns).
+//! lights and stop signs), [`towngen`] (the deterministic generator of the bundled towns),
+//! [`route`] (route files, dense routes, global plan, route follower), [`world`] (the 20 Hz
+//! lockstep world), [`scoring`] (the leaderboard criteria and results).
 
 pub mod map;
+pub mod route;
+pub mod scoring;
 pub mod towngen;
+pub mod world;

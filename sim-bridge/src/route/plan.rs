@@ -1,0 +1,133 @@
+//! What an agent is told about its route: the leaderboard's downsampled global plan (LB1.0's
+//! `downsample_route`, 50 m) with GPS coordinates, and the TCP-style [`RouteFollower`]
+//! (`RoutePlanner(4, 50)`) that turns the ego position into the target point and command each
+//! tick.
+
+use std::collections::VecDeque;
+
+use glam::{DVec2, DVec3};
+
+use super::{DenseRoute, RoadOption};
+
+/// Longest stretch between plan nodes in LB1.0, metres.
+pub const PLAN_SPACING: f64 = 50.0;
+/// TCP's route follower: nodes nearer than this are passed.
+pub const FOLLOWER_MIN_DISTANCE: f64 = 4.0;
+/// TCP's route follower: how far ahead it looks along the plan.
+pub const FOLLOWER_MAX_DISTANCE: f64 = 50.0;
+
+/// One node of the global plan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanNode {
+    /// Position, OpenDRIVE frame.
+    pub position: DVec3,
+    /// The command at the node.
+    pub option: RoadOption,
+}
+
+/// The indices of the dense route the leaderboard hands the agent: every lane-change point,
+/// every point whose option differs from the previous one (unless that one was a lane change),
+/// a point after more than `spacing` metres, and the last point.
+pub fn downsample(route: &DenseRoute, spacing: f64) -> Vec<usize> {
+    let mut keep = Vec::new();
+    let mut prev: Option<RoadOption> = None;
+    let mut dist = 0.0;
+    let last = route.points.len().saturating_sub(1);
+    for (i, p) in route.points.iter().enumerate() {
+        let option = p.option;
+        let changed = prev != Some(option) && !prev.is_some_and(RoadOption::is_lane_change);
+        if option.is_lane_change() || changed || dist > spacing || i == last {
+            keep.push(i);
+            dist = 0.0;
+        } else {
+            dist += (p.position - route.points[i - 1].position).length();
+        }
+        prev = Some(option);
+    }
+    keep
+}
+
+/// The global plan of a dense route.
+pub fn global_plan(route: &DenseRoute) -> Vec<PlanNode> {
+    downsample(route, PLAN_SPACING)
+        .into_iter()
+        .map(|i| PlanNode { position: route.points[i].position, option: route.points[i].option })
+        .collect()
+}
+
+/// Geodetic coordinates of a map position, as the leaderboard computes them (spherical
+/// Mercator around the map's reference latitude/longitude). Returns (lat, lon) in degrees.
+pub fn to_gps(position: DVec3, lat_ref: f64, lon_ref: f64) -> (f64, f64) {
+    const EARTH_RADIUS: f64 = 6_378_137.0;
+    let scale = (lat_ref.to_radians()).cos();
+    let mut mx = scale * lon_ref.to_radians() * EARTH_RADIUS;
+    let mut my = scale * EARTH_RADIUS * ((90.0 + lat_ref).to_radians() / 2.0).tan().ln();
+    mx += position.x;
+    // CARLA subtracts its y, which is minus ours.
+    my += position.y;
+    let lon = (mx / (EARTH_RADIUS * scale)).to_degrees();
+    let lat = 2.0 * (my / (EARTH_RADIUS * scale)).exp().atan().to_degrees() - 90.0;
+    (lat, lon)
+}
+
+/// TCP's `RoutePlanner`: a queue of plan nodes, popped as the ego passes them.
+#[derive(Debug, Clone)]
+pub struct RouteFollower {
+    nodes: VecDeque<PlanNode>,
+    min_distance: f64,
+    max_distance: f64,
+}
+
+impl RouteFollower {
+    /// Follow `plan` with TCP's thresholds (4 m / 50 m).
+    pub fn new(plan: Vec<PlanNode>) -> Self {
+        Self::with_thresholds(plan, FOLLOWER_MIN_DISTANCE, FOLLOWER_MAX_DISTANCE)
+    }
+
+    /// Follow `plan` with other thresholds.
+    pub fn with_thresholds(plan: Vec<PlanNode>, min_distance: f64, max_distance: f64) -> Self {
+        Self { nodes: plan.into(), min_distance, max_distance }
+    }
+
+    /// Advance with the ego's position and return the next target node (its position and
+    /// command). Of the nodes within `max_distance` of plan length ahead, the farthest one that
+    /// is within `min_distance` of the ego is passed, with everything before it; at least two
+    /// nodes are always kept.
+    pub fn step(&mut self, ego: DVec2) -> PlanNode {
+        if self.nodes.len() <= 1 {
+            return self.nodes[0];
+        }
+        let mut to_pop = 0;
+        let mut farthest = f64::NEG_INFINITY;
+        let mut along = 0.0;
+        for i in 1..self.nodes.len() {
+            if along > self.max_distance {
+                break;
+            }
+            along += (self.nodes[i].position - self.nodes[i - 1].position).truncate().length();
+            let d = (self.nodes[i].position.truncate() - ego).length();
+            if d <= self.min_distance && d > farthest {
+                farthest = d;
+                to_pop = i;
+            }
+        }
+        for _ in 0..to_pop {
+            if self.nodes.len() > 2 {
+                self.nodes.pop_front();
+            }
+        }
+        self.nodes[1]
+    }
+
+    /// Nodes still queued.
+    pub fn remaining(&self) -> usize {
+        self.nodes.len()
+    }
+}
+
+/// A world point in the ego frame (x forward, y left, z up), ego at `position` heading `yaw`.
+pub fn to_ego_frame(point: DVec3, position: DVec3, yaw: f64) -> DVec3 {
+    let d = point - position;
+    let (s, c) = yaw.sin_cos();
+    DVec3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z)
+}
