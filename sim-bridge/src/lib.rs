@@ -6,7 +6,11 @@
 //! [`route`] (route files, dense routes, global plan, route follower), [`world`] (the 20 Hz
 //! lockstep world), [`scoring`] (the leaderboard criteria and results).
 
+pub mod agent;
+pub mod expert;
+pub mod eval;
 pub mod map;
+pub mod render;
 pub mod route;
 pub mod scoring;
 pub mod towngen;

@@ -1,1 +1,18 @@
-fn main() {}
+//! The `sim-bridge` command line: evaluate agents on route sets, generate the bundled towns and
+//! routes, inspect route sets, and benchmark the simulator.
+
+mod cli;
+
+use clap::Parser;
+
+fn main() -> std::process::ExitCode {
+    let args = cli::Cli::parse();
+    cli::init_logging(args.verbose);
+    match cli::run(args) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -58,3 +58,18 @@ impl DenseRoute {
         *self.cum.last().unwrap_or(&0.0)
     }
 }
+
+impl DenseRoute {
+    /// Track a position along the route: starting from index `k`, the index of the nearest point
+    /// in plan among the next `window` points (never behind `k`).
+    pub fn advance_index(&self, k: usize, p: DVec2, window: usize) -> usize {
+        let end = (k + window).min(self.points.len().saturating_sub(1));
+        (k..=end)
+            .min_by(|&a, &b| {
+                let da = (self.points[a].position.truncate() - p).length_squared();
+                let db = (self.points[b].position.truncate() - p).length_squared();
+                da.total_cmp(&db)
+            })
+            .unwrap_or(k)
+    }
+}

@@ -1,4 +1,218 @@
 //! The world: ego, background traffic, walkers, cyclists, static obstacles and traffic-light
-//! controllers, advanced in 20 Hz lockstep.
+//! controllers, advanced in 20 Hz lockstep ([`DT`]).
+//!
+//! One tick, as the leaderboard orders it: the agent sees the state, the scorer evaluates it,
+//! then [`World::step`] applies the control, moves everything and reports the contacts the
+//! scorer reads on the next tick. Everything random comes from one ChaCha8 stream seeded by
+//! [`WorldConfig::seed`], so a (map, route, config) triple always replays identically.
 
+pub mod ego;
+pub mod lights;
+pub mod scenarios;
 pub mod state;
+pub mod traffic;
+
+use glam::{DVec2, DVec3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::map::Map;
+use crate::route::DenseRoute;
+use ego::{Control, Ego, EgoParams};
+use lights::LightController;
+use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
+use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
+use traffic::{EgoPresence, Traffic};
+
+/// Simulation step, seconds (20 Hz).
+pub const DT: f64 = 0.05;
+
+/// What to populate the world with.
+#[derive(Debug, Clone, Copy)]
+pub struct WorldConfig {
+    /// Background vehicles (the leaderboard uses 120 on Town05).
+    pub vehicles: usize,
+    /// Background walkers on sidewalks.
+    pub walkers: usize,
+    /// Route scenarios (S3, S4, S7-S9).
+    pub scenarios: bool,
+    /// Parked cars on parking lanes.
+    pub parked_cars: bool,
+    /// Seed of every random choice.
+    pub seed: u64,
+}
+
+impl Default for WorldConfig {
+    fn default() -> Self {
+        Self { vehicles: 120, walkers: 0, scenarios: true, parked_cars: true, seed: 0 }
+    }
+}
+
+/// Another actor as agents and renderers see it.
+#[derive(Debug, Clone, Copy)]
+pub struct ActorView {
+    /// Actor id (0 for static props).
+    pub id: u32,
+    /// What it is.
+    pub kind: ActorKind,
+    /// Ground box.
+    pub obb: Obb,
+    /// Ground height.
+    pub z: f64,
+    /// Velocity in plan, m/s.
+    pub velocity: DVec2,
+}
+
+/// The simulated world of one route run.
+pub struct World<'m> {
+    /// The map.
+    pub map: &'m Map,
+    /// Seconds since the start.
+    pub time: f64,
+    /// The ego vehicle.
+    pub ego: Ego,
+    /// Background and scenario vehicles.
+    pub traffic: Traffic,
+    /// Walkers and cyclists.
+    pub crossers: Vec<Crosser>,
+    /// Static obstacles.
+    pub statics: Vec<StaticProp>,
+    /// Traffic lights.
+    pub lights: LightController,
+    /// Route scenarios.
+    pub scenarios: Vec<Scenario>,
+    route_progress: usize,
+    rng: ChaCha8Rng,
+    ids: IdSource,
+}
+
+impl<'m> World<'m> {
+    /// A world with the ego at rest at the start of `route`.
+    pub fn new(map: &'m Map, route: &DenseRoute, config: WorldConfig) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let start = route.points[0];
+        let ego = Ego::new(EgoParams::default(), start.position, start.yaw);
+        let lights = LightController::new(map, &mut rng);
+        let traffic = Traffic::new(map, config.vehicles, start.position.truncate(), 1000, &mut rng);
+        let mut ids = IdSource(100_000);
+        let mut statics = if config.parked_cars { scenarios::parked_cars(map, &mut rng) } else { Vec::new() };
+        let mut crossers = scenarios::background_walkers(map, config.walkers, &mut ids, &mut rng);
+        let mut scenario_list = Vec::new();
+        if config.scenarios {
+            let placed = scenarios::place_route_scenarios(map, route, &mut ids, &mut rng);
+            statics.extend(placed.statics);
+            crossers.extend(placed.crossers);
+            scenario_list = placed.scenarios;
+        }
+        // Nothing may start on top of the ego.
+        let ego_box = ego.state().obb();
+        statics.retain(|s| !s.obb.overlaps(&ego_box));
+        let mut world = World { map, time: 0.0, ego, traffic, crossers, statics, lights, scenarios: scenario_list, route_progress: 0, rng, ids };
+        world.settle_ego_height();
+        world
+    }
+
+    /// The ego's published state.
+    pub fn ego_state(&self) -> EgoState {
+        self.ego.state()
+    }
+
+    /// Light states, indexed like `Map::lights`.
+    pub fn light_states(&self) -> &[LightState] {
+        self.lights.states()
+    }
+
+    /// Every other actor.
+    pub fn actors(&self) -> Vec<ActorView> {
+        let mut out = Vec::with_capacity(self.traffic.vehicles.len() + self.crossers.len() + self.statics.len());
+        for v in &self.traffic.vehicles {
+            let (p, yaw) = v.pose(self.map);
+            let obb = Obb { centre: p.truncate(), yaw, half: v.half };
+            out.push(ActorView { id: v.id, kind: ActorKind::Vehicle, obb, z: p.z, velocity: DVec2::from_angle(yaw) * v.speed });
+        }
+        for c in &self.crossers {
+            out.push(ActorView { id: c.id, kind: c.kind, obb: c.obb(), z: c.position.z, velocity: c.velocity() });
+        }
+        for s in &self.statics {
+            out.push(ActorView { id: 0, kind: ActorKind::Static, obb: s.obb, z: s.z, velocity: DVec2::ZERO });
+        }
+        out
+    }
+
+    /// Fire scenarios whose trigger the ego has reached; `progress` is the ego's index on the
+    /// dense route.
+    pub fn trigger_scenarios(&mut self, progress: usize) {
+        self.route_progress = self.route_progress.max(progress);
+        for k in 0..self.scenarios.len() {
+            if self.scenarios[k].fired || self.scenarios[k].trigger > self.route_progress {
+                continue;
+            }
+            self.scenarios[k].fired = true;
+            match self.scenarios[k].action.clone() {
+                ScenarioAction::StartCrosser(id) => {
+                    if let Some(c) = self.crossers.iter_mut().find(|c| c.id == id) {
+                        c.moving = true;
+                    }
+                }
+                ScenarioAction::RedLightRunner { ego_light, lane, s } => {
+                    self.lights.force(ego_light, LightState::Green, self.time + 15.0);
+                    let id = self.ids.0 + 1;
+                    self.ids.0 += 1;
+                    self.traffic.spawn_runner(self.map, id, lane, s, &mut self.rng);
+                }
+            }
+        }
+    }
+
+    /// Apply `control` to the ego and advance everything by [`DT`]; returns the ego's contacts.
+    pub fn step(&mut self, control: Control) -> Vec<CollisionEvent> {
+        self.ego.step(control, DT);
+        self.settle_ego_height();
+        let ego = self.ego.state();
+        let on_lane = self.map.lane_for_pose(ego.position, ego.yaw).filter(|(_, p)| p.distance < 2.0).map(|(l, p)| (l, p.s));
+        let presence = EgoPresence { on_lane, position: ego.position.truncate(), half_length: ego.half_extent.x, speed: ego.speed };
+        self.time += DT;
+        self.lights.update(self.time);
+        self.traffic.step(self.map, self.lights.states(), &presence, self.time, DT, &mut self.rng);
+        for c in &mut self.crossers {
+            c.step(DT);
+        }
+        self.collisions()
+    }
+
+    /// Contacts of the ego box with every other actor; a crash stops the ego.
+    fn collisions(&mut self) -> Vec<CollisionEvent> {
+        let ego = self.ego.state();
+        let ego_box = ego.obb();
+        let mut events = Vec::new();
+        for a in self.actors() {
+            if (a.z - ego.position.z).abs() > 3.0 || (a.obb.centre - ego_box.centre).length() > 8.0 {
+                continue;
+            }
+            if a.obb.overlaps(&ego_box) {
+                events.push(CollisionEvent { other_id: a.id, class: a.kind.collision_class(), location: ego.position });
+            }
+        }
+        if !events.is_empty() {
+            self.ego.speed = 0.0;
+            let hit: Vec<u32> = events.iter().map(|e| e.other_id).collect();
+            for c in self.crossers.iter_mut().filter(|c| hit.contains(&c.id)) {
+                c.moving = false;
+            }
+        }
+        events
+    }
+
+    /// Put the ego on the road surface under it.
+    fn settle_ego_height(&mut self) {
+        let p = self.ego.position;
+        if let Some((lane, proj)) = self.map.lane_for_pose(p, self.ego.yaw) {
+            self.ego.position.z = self.map.lane(lane).pose_at(proj.s).position.z;
+        }
+    }
+
+    /// The ego's position, for convenience.
+    pub fn ego_position(&self) -> DVec3 {
+        self.ego.position
+    }
+}

@@ -1,0 +1,80 @@
+//! The interface between the simulator and whatever drives the ego: an [`Observation`] in, a
+//! [`Control`] out, every 20 Hz tick. The privileged expert, a remote gRPC agent and scripted
+//! test agents all implement [`Agent`]; scoring never knows which one drives.
+//!
+//! Conventions: world frame = OpenDRIVE map frame (x east, y north, z up); ego frame = x
+//! forward, y left, z up (ISO 8855) with the origin at the vehicle box centre; steer +1 = full
+//! right (CARLA); commands are CARLA RoadOption values.
+
+use glam::{DVec2, DVec3};
+
+use crate::map::Map;
+use crate::route::plan::PlanNode;
+use crate::route::{DenseRoute, RoadOption};
+pub use crate::world::ego::Control;
+use crate::world::World;
+
+/// One camera image (filled once the renderer exists; empty until then).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CameraFrame {
+    /// The rig's camera id.
+    pub camera: String,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major RGB8 pixels.
+    pub rgb: Vec<u8>,
+}
+
+/// What an agent is told each tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Simulation time, s.
+    pub time: f64,
+    /// Tick index from 0.
+    pub frame: u64,
+    /// Forward speed, m/s.
+    pub speed: f64,
+    /// Ego box centre, world frame.
+    pub position: DVec3,
+    /// Ego heading, rad counter-clockwise from +x (world frame).
+    pub yaw: f64,
+    /// CARLA compass: rad clockwise from north (= CARLA yaw + 90 degrees), in [0, 2 pi).
+    pub compass: f64,
+    /// The route follower's command.
+    pub command: RoadOption,
+    /// The route follower's target point in the ego frame (x forward, y left), m.
+    pub target_point: DVec2,
+    /// Camera images (empty until cameras are configured).
+    pub frames: Vec<CameraFrame>,
+}
+
+impl Observation {
+    /// CARLA's compass for a world-frame yaw.
+    pub fn compass_of(yaw: f64) -> f64 {
+        (std::f64::consts::FRAC_PI_2 - yaw).rem_euclid(std::f64::consts::TAU)
+    }
+}
+
+/// What an agent learns at the start of a route.
+#[derive(Debug, Clone, Copy)]
+pub struct RouteContext<'a> {
+    /// The map.
+    pub map: &'a Map,
+    /// The dense route (privileged: the leaderboard gives agents only the plan).
+    pub route: &'a DenseRoute,
+    /// The downsampled global plan, as the leaderboard hands it to agents.
+    pub plan: &'a [PlanNode],
+}
+
+/// Something that drives the ego.
+pub trait Agent {
+    /// A short name for results and logs.
+    fn name(&self) -> String;
+    /// Called once before the first tick of a route.
+    fn start_route(&mut self, ctx: &RouteContext<'_>);
+    /// Decide this tick's control. `world` is privileged ground truth: only in-process agents
+    /// such as the expert may read it; sensor-based agents use `obs` alone.
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control;
+}

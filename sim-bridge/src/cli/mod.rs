@@ -1,0 +1,98 @@
+//! Argument parsing and the subcommands, each a thin layer over the library.
+
+mod bench;
+mod eval;
+mod routes;
+mod towns;
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand};
+use sim_bridge::map::{Map, MapOptions};
+use sim_bridge::route::sets::RouteSet;
+use sim_bridge::route::xml::{self, RouteSpec};
+use sim_bridge::towngen::TownStyle;
+
+/// A kinematic driving simulator on OpenDRIVE maps that scores agents on routes exactly like the
+/// CARLA leaderboard 1.0 (route completion RC, infraction score IS, driving score DS).
+///
+/// Frames: OpenDRIVE map frame (x east, y north, z up, metres); route files use CARLA's frame
+/// (y flipped). The simulator ticks at 20 Hz in lockstep with the agent.
+#[derive(Debug, Parser)]
+#[command(name = "sim-bridge", version, propagate_version = true)]
+pub struct Cli {
+    /// More log output (-v info, -vv debug).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Drive an agent over a route set and score it like the leaderboard.
+    Eval(eval::EvalArgs),
+    /// List, show or regenerate route sets.
+    #[command(subcommand)]
+    Routes(routes::RoutesCommand),
+    /// List or regenerate the bundled towns.
+    #[command(subcommand)]
+    Towns(towns::TownsCommand),
+    /// Benchmarks that print figures.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+/// Logging to stderr; `RUST_LOG` overrides the level.
+pub fn init_logging(verbose: u8) {
+    let level = match verbose {
+        0 => "warn",
+        1 => "info",
+        _ => "debug",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}
+
+/// Run a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Eval(args) => eval::run(args),
+        Command::Routes(cmd) => routes::run(cmd),
+        Command::Towns(cmd) => towns::run(cmd),
+        Command::Bench(cmd) => bench::run(cmd),
+    }
+}
+
+/// Routes and their map from `--routes` (a bundled set name or a route XML file) and `--map`
+/// (an .xodr file or a bundled town name; for a bundled set it defaults to the set's town).
+pub fn load_routes(routes: &str, map: Option<&PathBuf>, options: MapOptions) -> anyhow::Result<(Map, Vec<RouteSpec>)> {
+    let map_arg = map.map(|m| m.to_string_lossy().into_owned());
+    if let Some(set) = RouteSet::find(routes) {
+        let specs = xml::parse(set.name, set.bundled_xml())?;
+        let map = match map_arg {
+            Some(m) => load_map(&m, options)?,
+            None => load_map(set.town.name(), options)?,
+        };
+        return Ok((map, specs));
+    }
+    let path = PathBuf::from(routes);
+    if !path.exists() {
+        let names: Vec<&str> = sim_bridge::route::sets::SETS.iter().map(|s| s.name).collect();
+        bail!("--routes {routes}: no such file and no bundled set of that name (bundled: {})", names.join(", "));
+    }
+    let specs = xml::read_file(&path)?;
+    let Some(map_arg) = map_arg else {
+        bail!("--routes {routes} is a route file: give its map with --map <file.xodr | bundled town>");
+    };
+    Ok((load_map(&map_arg, options)?, specs))
+}
+
+/// A map from an .xodr path or a bundled town name.
+pub fn load_map(arg: &str, options: MapOptions) -> anyhow::Result<Map> {
+    if let Some(style) = TownStyle::from_name(arg) {
+        return Map::from_str(style.name(), sim_bridge::towngen::bundled(style), options).with_context(|| format!("bundled town {arg}"));
+    }
+    Ok(Map::load_file(&PathBuf::from(arg), options)?)
+}

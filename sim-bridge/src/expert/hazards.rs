@@ -1,0 +1,181 @@
+//! What the expert must slow or stop for, read from the true world state: the nearest obstacle
+//! on its path (lead actor, red/yellow stop line, unserved stop sign), walkers nearby, and a
+//! constant-velocity collision forecast.
+
+use glam::DVec2;
+
+use super::{along, route_dir};
+use crate::map::LaneIdx;
+use crate::route::DenseRoute;
+use crate::world::state::{ActorKind, LightState, Obb};
+use crate::world::{ActorView, World};
+
+/// How far ahead the path is scanned, m.
+const SCAN_AHEAD: f64 = 50.0;
+/// Extra half width of the corridor the ego sweeps, m.
+const CORRIDOR_MARGIN: f64 = 0.6;
+/// Stop this far before a stop line, m.
+const STOP_LINE_MARGIN: f64 = 1.0;
+/// Comfortable braking used to decide whether to stop at yellow, m/s^2.
+const YELLOW_DECEL: f64 = 3.5;
+
+/// Stop signs already served on this route.
+#[derive(Debug, Default)]
+pub struct HazardMemory {
+    served_signs: Vec<usize>,
+}
+
+/// The result of a scan.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct HazardView {
+    /// Nearest obstacle on the path: (free gap in metres, its speed along the path).
+    pub obstacle: Option<(f64, f64)>,
+    /// A walker or cyclist is near the path ahead.
+    pub walker_near: bool,
+    /// The forecast predicts a collision.
+    pub collision_predicted: bool,
+}
+
+impl HazardView {
+    fn obstacle(&mut self, gap: f64, speed: f64) {
+        if self.obstacle.is_none_or(|(g, _)| gap < g) {
+            self.obstacle = Some((gap, speed));
+        }
+    }
+}
+
+/// Scan the world from route index `index`.
+pub fn scan(world: &World<'_>, route: &DenseRoute, index: usize, memory: &mut HazardMemory) -> HazardView {
+    let ego = world.ego_state();
+    let mut view = HazardView::default();
+    let end = ahead_end(route, index, SCAN_AHEAD);
+    let actors = world.actors();
+    let corridor = ego.half_extent.y + CORRIDOR_MARGIN;
+    for a in &actors {
+        let rel = a.obb.centre - ego.position.truncate();
+        if rel.length() > SCAN_AHEAD + 10.0 || (a.z - ego.position.z).abs() > 3.0 {
+            continue;
+        }
+        if let Some(j) = (index..=end).find(|&j| distance_to_box(route.points[j].position.truncate(), &a.obb) < corridor) {
+            let gap = along(route, index, j) - ego.half_extent.x;
+            let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
+            view.obstacle(gap, speed);
+        }
+        let local = DVec2::new(rel.dot(ego.forward()), rel.perp_dot(ego.forward()).abs());
+        let vulnerable = matches!(a.kind, ActorKind::Walker | ActorKind::Cyclist);
+        if vulnerable && a.velocity.length() > 0.1 && local.x > -2.0 && local.x < 20.0 && local.y < 10.0 {
+            view.walker_near = true;
+        }
+    }
+    let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
+    stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
+    view.collision_predicted = forecast(world, route, index, &actors);
+    view
+}
+
+/// Index of the last route point within `distance` of `index`.
+fn ahead_end(route: &DenseRoute, index: usize, distance: f64) -> usize {
+    let limit = route.cum[index] + distance;
+    route.cum.partition_point(|&c| c <= limit).saturating_sub(1).max(index)
+}
+
+/// For each lane on the route between `from` and `to`, the last route index on it.
+fn last_index_per_lane(route: &DenseRoute, from: usize, to: usize) -> Vec<(LaneIdx, usize)> {
+    let mut out: Vec<(LaneIdx, usize)> = Vec::new();
+    for j in from..=to {
+        let lane = route.points[j].lane;
+        match out.last_mut() {
+            Some((l, last)) if *l == lane => *last = j,
+            _ => out.push((lane, j)),
+        }
+    }
+    out
+}
+
+/// Red and yellow lights and unserved stop signs whose stop line ends a lane on the path.
+fn stop_lines(
+    world: &World<'_>,
+    route: &DenseRoute,
+    index: usize,
+    lanes_ahead: &[(LaneIdx, usize)],
+    memory: &mut HazardMemory,
+    view: &mut HazardView,
+) {
+    let ego = world.ego_state();
+    let map = world.map;
+    // The last lane ahead may continue past the scan window: its end is not in reach yet.
+    let ends_in_window = |j: usize| j + 1 < route.points.len() && route.points[j + 1].lane != route.points[j].lane;
+    let gap_to = |j: usize| along(route, index, j) - ego.half_extent.x - STOP_LINE_MARGIN;
+    for &(lane, j) in lanes_ahead {
+        if !ends_in_window(j) {
+            continue;
+        }
+        let gap = gap_to(j);
+        for light in map.lights.iter().filter(|l| l.stop_lines.iter().any(|s| s.lane == lane)) {
+            match world.light_states()[light.id] {
+                LightState::Red => view.obstacle(gap, 0.0),
+                LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => view.obstacle(gap, 0.0),
+                _ => {}
+            }
+        }
+        for sign in map.stop_signs.iter().filter(|s| s.stop_lines.iter().any(|l| l.lane == lane)) {
+            if memory.served_signs.contains(&sign.id) {
+                continue;
+            }
+            if ego.speed < 0.1 && gap < 3.0 {
+                memory.served_signs.push(sign.id);
+            } else {
+                view.obstacle(gap.max(0.0), 0.0);
+            }
+        }
+    }
+}
+
+/// Plan distance from a point to a box (0 inside).
+fn distance_to_box(p: DVec2, obb: &Obb) -> f64 {
+    let (f, l) = obb.axes();
+    let d = p - obb.centre;
+    let local = DVec2::new(d.dot(f).abs() - obb.half.x, d.dot(l).abs() - obb.half.y);
+    local.max(DVec2::ZERO).length()
+}
+
+/// Whether the ego, driving its route at a brisk speed, would overlap an actor that moves at
+/// constant velocity across or against its path, within 2 s (4 s near junctions).
+fn forecast(world: &World<'_>, route: &DenseRoute, index: usize, actors: &[ActorView]) -> bool {
+    let ego = world.ego_state();
+    let junction_ahead = (index..=ahead_end(route, index, 20.0)).any(|j| world.map.lane(route.points[j].lane).in_junction());
+    let horizon = if junction_ahead { 4.0 } else { 2.0 };
+    let speed = ego.speed.max(if junction_ahead { 4.0 } else { 2.0 });
+    let relevant: Vec<&ActorView> = actors
+        .iter()
+        .filter(|a| a.velocity.length() > 0.3 && (a.obb.centre - ego.position.truncate()).length() < 45.0)
+        .filter(|a| {
+            let ahead = (a.obb.centre - ego.position.truncate()).dot(ego.forward()) > -ego.half_extent.x;
+            let crossing = a.velocity.normalize_or_zero().dot(ego.forward()) < 0.85;
+            ahead && (crossing || matches!(a.kind, ActorKind::Walker | ActorKind::Cyclist))
+        })
+        .collect();
+    if relevant.is_empty() {
+        return false;
+    }
+    let mut t = 0.25;
+    while t <= horizon + 1e-9 {
+        let s = route.cum[index] + speed * t;
+        let j = route.cum.partition_point(|&c| c < s).min(route.points.len() - 1);
+        let p = route.points[j];
+        // The front half of the ego, slightly widened.
+        let front = Obb {
+            centre: p.position.truncate() + p.forward() * (ego.half_extent.x * 0.5),
+            yaw: p.yaw,
+            half: DVec2::new(ego.half_extent.x * 0.75, ego.half_extent.y + 0.3),
+        };
+        for a in &relevant {
+            let moved = Obb { centre: a.obb.centre + a.velocity * t, ..a.obb };
+            if moved.overlaps(&front) {
+                return true;
+            }
+        }
+        t += 0.25;
+    }
+    false
+}

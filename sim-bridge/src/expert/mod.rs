@@ -1,0 +1,164 @@
+//! The privileged rule-based expert: it reads the dense route and the true world state and
+//! drives like the CARLA autopilots the research notes describe (TransFuser-2022 / PDM-Lite).
+//!
+//! - Lateral: pure pursuit on the dense route, look-ahead 4-10 m growing with speed.
+//! - Speed targets: [`ROAD_SPEED`] on road, [`JUNCTION_SPEED`] in and just before junctions,
+//!   [`WALKER_SPEED`] near walkers and cyclists, capped by the curvature ahead.
+//! - Longitudinal: IDM towards the nearest obstacle on the path ahead ([`hazards`]): a lead
+//!   actor, the stop line of a red or yellow light (yellow only when it can still stop), a
+//!   stop sign it has not yet stopped at.
+//! - A short-horizon collision forecast (2 s, 4 s near junctions) of the ego along its route
+//!   against every moving actor at constant velocity brakes hard on a predicted overlap.
+
+pub mod hazards;
+
+use glam::DVec2;
+
+use crate::agent::{Agent, Control, Observation, RouteContext};
+use crate::map::angle_diff;
+use crate::route::DenseRoute;
+use crate::world::World;
+use crate::world::ego::EgoParams;
+
+/// Cruise speed on road, m/s.
+pub const ROAD_SPEED: f64 = 8.0;
+/// Speed in junctions, m/s.
+pub const JUNCTION_SPEED: f64 = 5.0;
+/// Speed near walkers and cyclists, m/s.
+pub const WALKER_SPEED: f64 = 2.0;
+/// Lateral acceleration allowed in curves, m/s^2.
+const LATERAL_ACCEL: f64 = 2.0;
+/// IDM parameters: comfortable acceleration and deceleration (m/s^2), standstill gap (m),
+/// time headway (s).
+const IDM_ACCEL: f64 = 2.0;
+const IDM_DECEL: f64 = 3.5;
+const IDM_GAP: f64 = 4.0;
+const IDM_HEADWAY: f64 = 0.8;
+
+/// The expert.
+#[derive(Debug, Default)]
+pub struct Expert {
+    route: Option<DenseRoute>,
+    /// Index of the ego on the dense route.
+    index: usize,
+    hazards: hazards::HazardMemory,
+    params: EgoParams,
+}
+
+impl Expert {
+    /// A new expert.
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+impl Agent for Expert {
+    fn name(&self) -> String {
+        "expert".into()
+    }
+
+    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+        self.route = Some(ctx.route.clone());
+        self.index = 0;
+        self.hazards = hazards::HazardMemory::default();
+        self.params = EgoParams::default();
+    }
+
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+        let Some(route) = self.route.as_ref() else {
+            return Control { steer: 0.0, throttle: 0.0, brake: 1.0 };
+        };
+        let map = world.map;
+        let ego = world.ego_state();
+        self.index = route.advance_index(self.index, ego.position.truncate(), 20);
+        let steer = pure_pursuit(route, self.index, &ego, &self.params);
+
+        let mut target = ROAD_SPEED.min(curve_speed(route, self.index));
+        if near_junction(map, route, self.index) {
+            target = target.min(JUNCTION_SPEED);
+        }
+        let view = hazards::scan(world, route, self.index, &mut self.hazards);
+        if view.walker_near {
+            target = target.min(WALKER_SPEED);
+        }
+        let mut accel = idm(obs.speed, target, view.obstacle);
+        if view.collision_predicted {
+            accel = -self.params.max_brake;
+        }
+        let control = to_pedals(accel, obs.speed, &self.params);
+        let steer = if control.brake > 0.5 { steer * 0.5 } else { steer };
+        Control { steer, ..control }
+    }
+}
+
+/// IDM acceleration towards `target` speed with an obstacle (gap, its speed) ahead.
+fn idm(speed: f64, target: f64, obstacle: Option<(f64, f64)>) -> f64 {
+    let free = 1.0 - (speed / target.max(0.1)).powi(4);
+    let interaction = obstacle.map_or(0.0, |(gap, lead)| {
+        let dv = speed - lead;
+        let s_star = IDM_GAP + (speed * IDM_HEADWAY + speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
+        (s_star / gap.max(0.05)).powi(2)
+    });
+    IDM_ACCEL * (free - interaction)
+}
+
+/// Throttle and brake that produce acceleration `accel` at `speed`.
+fn to_pedals(accel: f64, speed: f64, p: &EgoParams) -> Control {
+    let resist = if speed > 0.0 { p.rolling + p.drag * speed * speed } else { 0.0 };
+    if accel >= -resist {
+        let drive = p.max_accel * (1.0 - speed / p.top_speed).max(0.05);
+        Control { steer: 0.0, throttle: ((accel + resist) / drive).clamp(0.0, 0.75), brake: 0.0 }
+    } else if accel > -resist - 0.3 {
+        Control::default()
+    } else {
+        Control { steer: 0.0, throttle: 0.0, brake: ((-accel - resist) / p.max_brake).clamp(0.0, 1.0) }
+    }
+}
+
+/// Pure pursuit towards the route point one look-ahead distance past the ego.
+fn pure_pursuit(route: &DenseRoute, index: usize, ego: &crate::world::state::EgoState, p: &EgoParams) -> f64 {
+    let lookahead = (4.0 + 0.6 * ego.speed).clamp(4.0, 10.0);
+    let rear = ego.position.truncate() - ego.forward() * (p.wheelbase / 2.0);
+    let mut j = index;
+    while j + 1 < route.points.len() && (route.points[j].position.truncate() - rear).length() < lookahead + p.wheelbase / 2.0 {
+        j += 1;
+    }
+    let d = route.points[j].position.truncate() - rear;
+    let alpha = angle_diff(d.y.atan2(d.x), ego.yaw);
+    let wheel = (2.0 * p.wheelbase * alpha.sin() / d.length().max(1.0)).atan();
+    (-wheel / p.max_wheel_angle).clamp(-1.0, 1.0)
+}
+
+/// Speed that keeps lateral acceleration under the limit over the next 25 m.
+fn curve_speed(route: &DenseRoute, index: usize) -> f64 {
+    let mut limit = f64::INFINITY;
+    let end = (index + 25).min(route.points.len().saturating_sub(4));
+    for i in index..end {
+        let turn = angle_diff(route.points[i + 3].yaw, route.points[i].yaw).abs();
+        let len = route.cum[i + 3] - route.cum[i];
+        if turn > 1e-3 && len > 0.5 {
+            limit = limit.min((LATERAL_ACCEL * len / turn).sqrt());
+        }
+    }
+    limit
+}
+
+/// Whether a junction connector starts within 12 m ahead or the ego is in one.
+fn near_junction(map: &crate::map::Map, route: &DenseRoute, index: usize) -> bool {
+    let start = route.cum[index];
+    route.points[index..]
+        .iter()
+        .zip(&route.cum[index..])
+        .take_while(|(_, c)| **c - start < 12.0)
+        .any(|(p, _)| map.lane(p.lane).in_junction())
+}
+
+/// Distance along the route from index `a` to index `b`.
+pub(crate) fn along(route: &DenseRoute, a: usize, b: usize) -> f64 {
+    route.cum[b] - route.cum[a]
+}
+
+/// Unit vector of the route at index `i`.
+pub(crate) fn route_dir(route: &DenseRoute, i: usize) -> DVec2 {
+    route.points[i].forward()
+}

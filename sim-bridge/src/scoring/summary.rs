@@ -1,0 +1,73 @@
+//! A readable fixed-width table of a results file: one row per record (route id, repetition,
+//! status, DS, RC, IS and the event count per infraction kind) and a mean row (means of DS, RC
+//! and IS each taken separately, as the leaderboard does, and mean counts per record).
+
+use std::fmt::Write as _;
+
+use super::{InfractionKind, Results};
+
+/// The table for `results`, one line per record plus a header, a rule and the mean row.
+pub fn summary_table(results: &Results) -> String {
+    let records = &results.checkpoint.records;
+    let id_width = records
+        .iter()
+        .map(|r| r.route_id.len())
+        .max()
+        .unwrap_or(0)
+        .max(10);
+    let status_width = records
+        .iter()
+        .map(|r| r.status.len())
+        .max()
+        .unwrap_or(0)
+        .max(6);
+
+    let mut out = String::new();
+    let mut header = format!(
+        "{:<id_width$} {:>4}  {:<status_width$} {:>7} {:>7} {:>6}",
+        "route", "rep", "status", "DS", "RC", "IS"
+    );
+    for kind in InfractionKind::ALL {
+        let _ = write!(header, " {:>5}", kind.short());
+    }
+    let rule = "-".repeat(header.len());
+    let _ = writeln!(out, "{header}\n{rule}");
+
+    for r in records {
+        let rep = r.meta.repetition.map_or("-".to_string(), |x| x.to_string());
+        let _ = write!(
+            out,
+            "{:<id_width$} {:>4}  {:<status_width$} {:>7.2} {:>7.2} {:>6.3}",
+            r.route_id,
+            rep,
+            r.status,
+            r.scores.score_composed,
+            r.scores.score_route,
+            r.scores.score_penalty
+        );
+        for kind in InfractionKind::ALL {
+            let _ = write!(out, " {:>5}", r.infractions.count(kind));
+        }
+        out.push('\n');
+    }
+
+    let n = records.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&super::RouteRecord) -> f64| records.iter().map(f).sum::<f64>() / n;
+    let _ = writeln!(out, "{rule}");
+    let label = format!("mean of {}", records.len());
+    let _ = write!(
+        out,
+        "{:<id_width$} {:>4}  {:<status_width$} {:>7.2} {:>7.2} {:>6.3}",
+        label,
+        "",
+        "",
+        mean(&|r| r.scores.score_composed),
+        mean(&|r| r.scores.score_route),
+        mean(&|r| r.scores.score_penalty)
+    );
+    for kind in InfractionKind::ALL {
+        let _ = write!(out, " {:>5.2}", mean(&|r| r.infractions.count(kind) as f64));
+    }
+    out.push('\n');
+    out
+}

@@ -1,0 +1,289 @@
+//! Route scenarios and other non-traffic actors: walkers and cyclists that cross in front of
+//! the ego, red-light runners at signalized junctions, parked cars, and optional background
+//! walkers on the sidewalks.
+//!
+//! Placement (the leaderboard reads trigger points from a scenario file; our towns have none, so
+//! they are drawn along the route from the world seed):
+//! - S3 DynamicObjectCrossing: on straight stretches, about every [`S3_SPACING`] m, a walker
+//!   waits behind a parked van on the right edge [`CROSSING_AHEAD`] m past the trigger and
+//!   crosses when the ego reaches the trigger.
+//! - S4 VehicleTurningRoute: after a LEFT or RIGHT turn, a cyclist crosses the exit road
+//!   [`CROSSING_AHEAD`] m past the junction when the ego enters the junction.
+//! - S7-S9 SignalJunctionCrossingRoute: at a signalized junction the ego crosses, its light is
+//!   held green while a vehicle on a conflicting approach runs its red light.
+//!
+//! Each scenario fires once, when the ego's progress along the route passes its trigger.
+
+use glam::{DVec2, DVec3};
+use rand::{Rng, RngExt as _};
+
+use super::state::{ActorKind, Obb};
+use crate::map::{LaneIdx, LaneKind, Map};
+use crate::route::{DenseRoute, RoadOption};
+
+/// Metres of route between S3 walkers, on average.
+pub const S3_SPACING: f64 = 250.0;
+/// Metres past the trigger where the crossing happens.
+pub const CROSSING_AHEAD: f64 = 22.0;
+/// Walker speed, m/s.
+const WALKER_SPEED: f64 = 1.8;
+/// Cyclist speed, m/s.
+const CYCLIST_SPEED: f64 = 4.0;
+
+/// A walker or cyclist moving in a straight line.
+#[derive(Debug, Clone)]
+pub struct Crosser {
+    /// Actor id.
+    pub id: u32,
+    /// Walker or cyclist.
+    pub kind: ActorKind,
+    /// Position (z on the ground).
+    pub position: DVec3,
+    /// Direction of motion, rad.
+    pub yaw: f64,
+    /// Speed when moving, m/s.
+    pub speed: f64,
+    /// Metres left to walk; it stops (and stays) when 0.
+    pub remaining: f64,
+    /// Whether it has started.
+    pub moving: bool,
+    /// Half length and half width.
+    pub half: DVec2,
+    /// Background walkers turn around at the end instead of stopping.
+    pub patrol: bool,
+}
+
+impl Crosser {
+    /// Ground box.
+    pub fn obb(&self) -> Obb {
+        Obb { centre: self.position.truncate(), yaw: self.yaw, half: self.half }
+    }
+
+    /// Current velocity in plan.
+    pub fn velocity(&self) -> DVec2 {
+        if self.moving && self.remaining > 0.0 { DVec2::from_angle(self.yaw) * self.speed } else { DVec2::ZERO }
+    }
+
+    /// Move for `dt`.
+    pub fn step(&mut self, dt: f64) {
+        if !self.moving {
+            return;
+        }
+        if self.remaining <= 0.0 {
+            if self.patrol {
+                self.yaw += std::f64::consts::PI;
+                self.remaining = 40.0;
+            }
+            return;
+        }
+        let d = (self.speed * dt).min(self.remaining);
+        self.position += (DVec2::from_angle(self.yaw) * d).extend(0.0);
+        self.remaining -= d;
+    }
+}
+
+/// A static obstacle (parked car, scenario van): collisions with it are layout collisions.
+#[derive(Debug, Clone, Copy)]
+pub struct StaticProp {
+    /// Ground box.
+    pub obb: Obb,
+    /// Ground height.
+    pub z: f64,
+}
+
+/// What a scenario does when triggered.
+#[derive(Debug, Clone)]
+pub enum ScenarioAction {
+    /// Start the crosser with this id.
+    StartCrosser(u32),
+    /// Hold `ego_light` green and launch a red-light runner from `lane` at `s`.
+    RedLightRunner { ego_light: usize, lane: LaneIdx, s: f64 },
+}
+
+/// One scenario instance on the route.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// Leaderboard name, e.g. "Scenario3".
+    pub name: &'static str,
+    /// Route index at which it fires.
+    pub trigger: usize,
+    /// What happens.
+    pub action: ScenarioAction,
+    /// Whether it has fired.
+    pub fired: bool,
+}
+
+/// Actors and scenarios placed for one route.
+#[derive(Debug, Default)]
+pub struct Placement {
+    /// Walkers and cyclists (scenario ones start still).
+    pub crossers: Vec<Crosser>,
+    /// Static props.
+    pub statics: Vec<StaticProp>,
+    /// Scenarios in trigger order.
+    pub scenarios: Vec<Scenario>,
+}
+
+/// Ids handed to actors, above the traffic's.
+pub struct IdSource(pub u32);
+
+impl IdSource {
+    fn next(&mut self) -> u32 {
+        self.0 += 1;
+        self.0
+    }
+}
+
+/// Where the right road edge is at a route point: the point on the edge and the outward
+/// (rightward) unit vector.
+fn right_edge(map: &Map, lane: LaneIdx, at: DVec3, yaw: f64) -> (DVec3, DVec2) {
+    let mut l = map.lane(lane);
+    while let Some(r) = l.right.filter(|r| map.lane(*r).kind == LaneKind::Driving) {
+        l = map.lane(r);
+    }
+    let proj = l.project(at.truncate());
+    let centre = l.pose_at(proj.s).position;
+    let right = -DVec2::from_angle(yaw).perp();
+    (centre + (right * (l.width / 2.0)).extend(0.0), right)
+}
+
+/// Place scenarios along `route`.
+pub fn place_route_scenarios(map: &Map, route: &DenseRoute, ids: &mut IdSource, rng: &mut impl Rng) -> Placement {
+    let mut out = Placement::default();
+    let n = route.points.len();
+    let ahead = CROSSING_AHEAD as usize;
+    // S3: straight stretches, away from junctions and lane changes.
+    let mut next_s3 = rng.random_range(80.0..S3_SPACING);
+    let mut i = 0;
+    while i + ahead + 15 < n {
+        let p = route.points[i];
+        let clear = route.points[i..i + ahead + 15].iter().all(|q| q.option == RoadOption::LaneFollow && !map.lane(q.lane).in_junction());
+        if route.cum[i] >= next_s3 && clear {
+            let c = route.points[i + ahead];
+            let (edge, right) = right_edge(map, c.lane, c.position, c.yaw);
+            let forward = DVec2::from_angle(c.yaw);
+            let van_centre = edge.truncate() + right * 1.4 - forward * 3.5;
+            out.statics.push(StaticProp { obb: Obb { centre: van_centre, yaw: c.yaw, half: DVec2::new(2.5, 1.1) }, z: edge.z });
+            let id = ids.next();
+            let start = edge.truncate() + right * 2.5;
+            out.crossers.push(Crosser {
+                id,
+                kind: ActorKind::Walker,
+                position: start.extend(edge.z),
+                yaw: (-right).y.atan2((-right).x),
+                speed: WALKER_SPEED,
+                remaining: 2.5 + 2.0 * map.lane(c.lane).width + 1.0,
+                moving: false,
+                half: DVec2::splat(0.3),
+                patrol: false,
+            });
+            out.scenarios.push(Scenario { name: "Scenario3", trigger: i, action: ScenarioAction::StartCrosser(id), fired: false });
+            next_s3 = route.cum[i] + rng.random_range(0.6..1.4) * S3_SPACING;
+            i += ahead + 15;
+            continue;
+        }
+        let _ = p;
+        i += 1;
+    }
+    // Junction runs: S4 after turns, S7-9 at signalized junctions.
+    let mut i = 0;
+    while i < n {
+        if !map.lane(route.points[i].lane).in_junction() {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < n && map.lane(route.points[i].lane).in_junction() {
+            i += 1;
+        }
+        let option = route.points[start].option;
+        let incoming = route.points[start.saturating_sub(1)].lane;
+        let light = map.lights.iter().find(|l| l.stop_lines.iter().any(|s| s.lane == incoming)).map(|l| l.id);
+        if let (Some(ego_light), true) = (light, rng.random_range(0.0..1.0) < 0.5) {
+            if let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light) {
+                let trigger = start.saturating_sub(30);
+                out.scenarios.push(Scenario { name: "Scenario7", trigger, action: ScenarioAction::RedLightRunner { ego_light, lane, s }, fired: false });
+                continue;
+            }
+        }
+        if matches!(option, RoadOption::Left | RoadOption::Right) && i + ahead < n && rng.random_range(0.0..1.0) < 0.5 {
+            let c = route.points[(i + 10).min(n - 1)];
+            let (edge, right) = right_edge(map, c.lane, c.position, c.yaw);
+            let id = ids.next();
+            let start_pos = edge.truncate() + right * 3.0;
+            out.crossers.push(Crosser {
+                id,
+                kind: ActorKind::Cyclist,
+                position: start_pos.extend(edge.z),
+                yaw: (-right).y.atan2((-right).x),
+                speed: CYCLIST_SPEED,
+                remaining: 3.0 + 2.0 * map.lane(c.lane).width + 2.0,
+                moving: false,
+                half: DVec2::new(0.9, 0.35),
+                patrol: false,
+            });
+            out.scenarios.push(Scenario { name: "Scenario4", trigger: start, action: ScenarioAction::StartCrosser(id), fired: false });
+        }
+    }
+    out.scenarios.sort_by_key(|s| s.trigger);
+    out
+}
+
+/// A place 35 m before the stop line of an approach (of the same junction, not the ego's) whose
+/// connectors conflict with `ego_connector`.
+fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(LaneIdx, f64)> {
+    let junction = map.lane(ego_connector).junction?;
+    let conflicts = super::traffic::conflicts(map);
+    let theirs = conflicts.get(&ego_connector)?;
+    for light in map.lights.iter().filter(|l| l.junction == junction && l.id != ego_light) {
+        for line in &light.stop_lines {
+            let lane = map.lane(line.lane);
+            let crosses = lane.successors.iter().any(|s| theirs.contains(s));
+            if crosses && lane.length() > 40.0 {
+                return Some((line.lane, lane.length() - 35.0));
+            }
+        }
+    }
+    None
+}
+
+/// Parked cars on parking lanes, about one per 12 m with gaps, from the seed.
+pub fn parked_cars(map: &Map, rng: &mut impl Rng) -> Vec<StaticProp> {
+    let mut out = Vec::new();
+    for lane in map.lanes.iter().filter(|l| l.kind == LaneKind::Parking && l.length() > 8.0) {
+        let mut s = rng.random_range(2.0..8.0);
+        while s + 3.0 < lane.length() {
+            if rng.random_range(0.0..1.0) < 0.45 {
+                let pose = lane.pose_at(s);
+                out.push(StaticProp { obb: Obb { centre: pose.position.truncate(), yaw: pose.yaw, half: DVec2::new(2.2, 0.95) }, z: pose.position.z });
+            }
+            s += rng.random_range(6.0..9.0);
+        }
+    }
+    out
+}
+
+/// Background walkers pacing along sidewalks.
+pub fn background_walkers(map: &Map, count: usize, ids: &mut IdSource, rng: &mut impl Rng) -> Vec<Crosser> {
+    let sidewalks: Vec<&crate::map::Lane> = map.lanes.iter().filter(|l| l.kind == LaneKind::Sidewalk && l.length() > 20.0).collect();
+    if sidewalks.is_empty() {
+        return Vec::new();
+    }
+    (0..count)
+        .map(|_| {
+            let lane = sidewalks[rng.random_range(0..sidewalks.len())];
+            let pose = lane.pose_at(rng.random_range(0.0..lane.length()));
+            Crosser {
+                id: ids.next(),
+                kind: ActorKind::Walker,
+                position: pose.position,
+                yaw: pose.yaw,
+                speed: rng.random_range(1.0..1.6),
+                remaining: rng.random_range(10.0..40.0),
+                moving: true,
+                half: DVec2::splat(0.3),
+                patrol: true,
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,472 @@
+//! Background traffic: vehicles that follow lanes with the Intelligent Driver Model, pick a
+//! random successor at each junction, stop for red (and, when they can, yellow) lights and at
+//! stop signs, give way inside junctions, and now and then change lanes.
+//!
+//! Junction rule: a connector lane conflicts with another if their centre lines cross or they
+//! end in the same lane. A vehicle within [`REQUEST_DISTANCE`] of a junction may enter when no
+//! conflicting connector is occupied (by a vehicle or the ego) and no conflicting vehicle that
+//! arrived earlier is waiting to enter; otherwise it holds at the stop line. Vehicles stuck for
+//! [`RESPAWN_AFTER_S`] out of the ego's sight (more than [`RESPAWN_CLEARANCE`] away) are moved
+//! to a free place elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
+
+use std::collections::{BTreeMap, HashMap};
+
+use glam::{DVec2, DVec3};
+use rand::{Rng, RngExt as _};
+
+use super::state::{LightState, Obb};
+use crate::map::{LaneIdx, LaneKind, Map};
+
+/// Comfortable IDM acceleration, m/s^2.
+const IDM_ACCEL: f64 = 2.0;
+/// Comfortable IDM deceleration, m/s^2.
+const IDM_DECEL: f64 = 3.0;
+/// Hardest braking a background vehicle uses, m/s^2.
+const MAX_DECEL: f64 = 8.0;
+/// IDM standstill gap, m.
+const MIN_GAP: f64 = 2.5;
+/// IDM time headway, s.
+const HEADWAY: f64 = 1.2;
+/// How far ahead a vehicle looks for leaders and stop lines, m.
+const LOOKAHEAD: f64 = 60.0;
+/// Distance to a junction at which a vehicle asks to enter it, m.
+pub const REQUEST_DISTANCE: f64 = 10.0;
+/// Lateral acceleration limit that caps speed on curved connectors, m/s^2.
+const LATERAL_ACCEL: f64 = 2.5;
+/// Stuck time before a vehicle is moved elsewhere, s.
+pub const RESPAWN_AFTER_S: f64 = 40.0;
+/// A stuck vehicle is moved only when farther than this from the ego, m.
+pub const RESPAWN_CLEARANCE: f64 = 50.0;
+/// Chance per second that a vehicle on a multi-lane road starts a lane change.
+const LANE_CHANGE_RATE: f64 = 0.01;
+/// Speed at which a lane change moves across, m/s.
+const LATERAL_SPEED: f64 = 1.0;
+
+/// One background vehicle.
+#[derive(Debug, Clone)]
+pub struct Vehicle {
+    /// Actor id (unique in the world).
+    pub id: u32,
+    /// Current lane.
+    pub lane: LaneIdx,
+    /// Arc length along it.
+    pub s: f64,
+    /// Lateral offset from the lane centre (left positive), non-zero during a lane change.
+    pub lateral: f64,
+    /// Forward speed, m/s.
+    pub speed: f64,
+    /// Cruise speed, m/s.
+    pub desired_speed: f64,
+    /// The lanes it will take next (at least one unless at a dead end).
+    pub next: Vec<LaneIdx>,
+    /// Half length and half width, m.
+    pub half: DVec2,
+    /// Seconds spent (nearly) stopped in a row.
+    pub stopped_for: f64,
+    /// When it asked to enter the junction ahead.
+    pub arrival: Option<f64>,
+    /// Whether it already stopped at the stop sign ending its current lane.
+    pub stopped_at_sign: bool,
+    /// Drives through red lights (scenario vehicles S7-S9).
+    pub ignores_lights: bool,
+    /// Paint colour index, for renderers.
+    pub colour: u8,
+}
+
+/// The ego as other traffic sees it.
+#[derive(Debug, Clone, Copy)]
+pub struct EgoPresence {
+    /// Lane and arc length, when the ego is on a driving lane.
+    pub on_lane: Option<(LaneIdx, f64)>,
+    /// Position.
+    pub position: DVec2,
+    /// Half length.
+    pub half_length: f64,
+    /// Speed.
+    pub speed: f64,
+}
+
+/// The background traffic of a world.
+#[derive(Debug, Clone)]
+pub struct Traffic {
+    /// The vehicles.
+    pub vehicles: Vec<Vehicle>,
+    conflicts: HashMap<LaneIdx, Vec<LaneIdx>>,
+    light_at_end: HashMap<LaneIdx, usize>,
+    stop_at_end: HashMap<LaneIdx, usize>,
+}
+
+impl Vehicle {
+    /// World position and heading.
+    pub fn pose(&self, map: &Map) -> (DVec3, f64) {
+        let pose = map.lane(self.lane).pose_at(self.s);
+        let left = DVec2::from_angle(pose.yaw).perp() * self.lateral;
+        (pose.position + left.extend(0.0), pose.yaw)
+    }
+
+    /// Ground box.
+    pub fn obb(&self, map: &Map) -> Obb {
+        let (p, yaw) = self.pose(map);
+        Obb { centre: p.truncate(), yaw, half: self.half }
+    }
+}
+
+impl Traffic {
+    /// Precompute junction conflicts and spawn `count` vehicles on free driving lanes, keeping
+    /// `keep_clear` (the ego's start) free within 25 m.
+    pub fn new(map: &Map, count: usize, keep_clear: DVec2, first_id: u32, rng: &mut impl Rng) -> Self {
+        let mut light_at_end = HashMap::new();
+        for light in &map.lights {
+            for line in &light.stop_lines {
+                light_at_end.insert(line.lane, light.id);
+            }
+        }
+        let mut stop_at_end = HashMap::new();
+        for sign in &map.stop_signs {
+            for line in &sign.stop_lines {
+                stop_at_end.insert(line.lane, sign.id);
+            }
+        }
+        let mut traffic = Traffic { vehicles: Vec::new(), conflicts: conflicts(map), light_at_end, stop_at_end };
+        for k in 0..count {
+            let Some((lane, s)) = traffic.free_spot(map, keep_clear, 25.0, rng) else { break };
+            let v = new_vehicle(map, first_id + k as u32, lane, s, rng);
+            traffic.vehicles.push(v);
+        }
+        traffic
+    }
+
+    /// A random free place on a non-junction driving lane, at least `clearance` from `avoid`.
+    fn free_spot(&self, map: &Map, avoid: DVec2, clearance: f64, rng: &mut impl Rng) -> Option<(LaneIdx, f64)> {
+        let candidates: Vec<&crate::map::Lane> = map
+            .lanes
+            .iter()
+            .filter(|l| l.kind == LaneKind::Driving && !l.in_junction() && l.length() > 12.0 && !l.successors.is_empty())
+            .collect();
+        if candidates.is_empty() {
+            return None;
+        }
+        for _ in 0..200 {
+            let lane = candidates[rng.random_range(0..candidates.len())];
+            let s = rng.random_range(3.0..lane.length() - 3.0);
+            let p = lane.pose_at(s).position.truncate();
+            if (p - avoid).length() < clearance {
+                continue;
+            }
+            let free = self.vehicles.iter().all(|v| (v.pose(map).0.truncate() - p).length() > 9.0);
+            if free {
+                return Some((lane.idx, s));
+            }
+        }
+        None
+    }
+
+    /// Add a scenario vehicle that drives through red lights from `lane` at `s`, at speed.
+    pub fn spawn_runner(&mut self, map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) {
+        let mut v = new_vehicle(map, id, lane, s, rng);
+        v.ignores_lights = true;
+        v.speed = 8.0;
+        v.desired_speed = 9.0;
+        self.vehicles.push(v);
+    }
+
+    /// Advance every vehicle by `dt` at sim time `t`.
+    pub fn step(&mut self, map: &Map, lights: &[LightState], ego: &EgoPresence, t: f64, dt: f64, rng: &mut impl Rng) {
+        let occupancy = self.occupancy(ego);
+        let grants = self.junction_grants(map, lights, ego, t);
+        let mut accels = Vec::with_capacity(self.vehicles.len());
+        for (i, v) in self.vehicles.iter().enumerate() {
+            let gap = self.free_distance(map, lights, &occupancy, i, grants[i]);
+            accels.push(idm(v, gap.0, gap.1, map));
+        }
+        for (i, a) in accels.into_iter().enumerate() {
+            self.advance(map, i, a, t, dt, rng);
+        }
+        self.lane_changes(map, &occupancy, dt, rng);
+        self.respawn_stuck(map, ego, rng);
+    }
+
+    /// Vehicles (and the ego) per lane: (s, half length, speed, id).
+    fn occupancy(&self, ego: &EgoPresence) -> HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> {
+        let mut occ: HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> = HashMap::new();
+        for v in &self.vehicles {
+            occ.entry(v.lane).or_default().push((v.s, v.half.x, v.speed, v.id));
+        }
+        if let Some((lane, s)) = ego.on_lane {
+            occ.entry(lane).or_default().push((s, ego.half_length, ego.speed, 0));
+        }
+        occ
+    }
+
+    /// Distance to the nearest thing to stop behind along the vehicle's path, and its speed.
+    fn free_distance(
+        &self,
+        map: &Map,
+        lights: &[LightState],
+        occ: &HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>,
+        i: usize,
+        granted: bool,
+    ) -> (f64, f64) {
+        let v = &self.vehicles[i];
+        let mut best = (f64::INFINITY, 0.0);
+        let mut offset = -v.s;
+        let path = std::iter::once(v.lane).chain(v.next.iter().copied());
+        for (k, lane) in path.enumerate() {
+            if offset > LOOKAHEAD {
+                break;
+            }
+            let from = if k == 0 { v.s } else { f64::NEG_INFINITY };
+            if let Some(list) = occ.get(&lane) {
+                for &(s, half, speed, id) in list {
+                    if id != v.id && s > from {
+                        let gap = offset + s - half - v.half.x;
+                        if gap < best.0 {
+                            best = (gap, speed);
+                        }
+                    }
+                }
+            }
+            let length = map.lane(lane).length();
+            let to_end = offset + length - v.half.x;
+            if k == 0 && to_end > -0.5 && self.must_stop_at_end(map, lights, v, to_end, granted) {
+                best = best.min_by_gap((to_end.max(0.0), 0.0));
+            }
+            if k == 0 && v.next.is_empty() {
+                best = best.min_by_gap((to_end.max(0.0) + 2.0, 0.0));
+            }
+            offset += length;
+        }
+        best
+    }
+
+    /// Whether the vehicle must hold at the end of its current lane.
+    fn must_stop_at_end(&self, map: &Map, lights: &[LightState], v: &Vehicle, to_end: f64, granted: bool) -> bool {
+        let entering_junction = v.next.first().is_some_and(|n| map.lane(*n).in_junction());
+        if !entering_junction || map.lane(v.lane).in_junction() {
+            return false;
+        }
+        if !v.ignores_lights && let Some(&light) = self.light_at_end.get(&v.lane) {
+            match lights[light] {
+                LightState::Red => return true,
+                LightState::Yellow if to_end > v.speed * v.speed / (2.0 * IDM_DECEL) => return true,
+                _ => {}
+            }
+        }
+        if self.stop_at_end.contains_key(&v.lane) && !v.stopped_at_sign {
+            return true;
+        }
+        to_end < REQUEST_DISTANCE && !granted
+    }
+
+    /// Which vehicles may enter the junction ahead now.
+    fn junction_grants(&self, map: &Map, lights: &[LightState], ego: &EgoPresence, _t: f64) -> Vec<bool> {
+        let mut occupied: Vec<LaneIdx> = self.vehicles.iter().map(|v| v.lane).filter(|l| map.lane(*l).in_junction()).collect();
+        if let Some((lane, _)) = ego.on_lane.filter(|(l, _)| map.lane(*l).in_junction()) {
+            occupied.push(lane);
+        }
+        let requests: Vec<Option<(LaneIdx, f64, u32)>> = self
+            .vehicles
+            .iter()
+            .map(|v| {
+                let connector = *v.next.first()?;
+                let held_by_light = !v.ignores_lights
+                    && self.light_at_end.get(&v.lane).is_some_and(|&l| lights[l] != LightState::Green);
+                (map.lane(connector).in_junction() && !held_by_light && v.arrival.is_some())
+                    .then(|| (connector, v.arrival.unwrap_or(0.0), v.id))
+            })
+            .collect();
+        requests
+            .iter()
+            .map(|req| {
+                let Some((connector, arrival, id)) = *req else { return true };
+                if self.vehicles.iter().any(|v| v.id == id && v.ignores_lights) {
+                    return true;
+                }
+                let conflicts = self.conflicts.get(&connector).map(Vec::as_slice).unwrap_or(&[]);
+                let busy = occupied.iter().any(|o| conflicts.contains(o));
+                let earlier = requests.iter().flatten().any(|&(c, a, other)| {
+                    other != id && conflicts.contains(&c) && (a, other) < (arrival, id)
+                });
+                !busy && !earlier
+            })
+            .collect()
+    }
+
+    /// Integrate one vehicle and move it across lane ends.
+    fn advance(&mut self, map: &Map, i: usize, accel: f64, t: f64, dt: f64, rng: &mut impl Rng) {
+        let v = &mut self.vehicles[i];
+        let v1 = (v.speed + accel * dt).max(0.0);
+        v.s += 0.5 * (v.speed + v1) * dt;
+        v.speed = v1;
+        v.stopped_for = if v.speed < 0.1 { v.stopped_for + dt } else { 0.0 };
+        if v.lateral != 0.0 {
+            let step = LATERAL_SPEED * dt;
+            v.lateral = if v.lateral.abs() <= step { 0.0 } else { v.lateral - step * v.lateral.signum() };
+        }
+        let to_end = map.lane(v.lane).length() - v.s;
+        let approaching = v.next.first().is_some_and(|n| map.lane(*n).in_junction()) && !map.lane(v.lane).in_junction();
+        if approaching && to_end < REQUEST_DISTANCE {
+            v.arrival.get_or_insert(t);
+        }
+        if self.stop_at_end.contains_key(&v.lane) && to_end < 3.0 && v.speed < 0.1 {
+            v.stopped_at_sign = true;
+        }
+        while v.s > map.lane(v.lane).length() {
+            let Some(&next) = v.next.first() else {
+                v.s = map.lane(v.lane).length();
+                v.speed = 0.0;
+                break;
+            };
+            v.s -= map.lane(v.lane).length();
+            v.lane = next;
+            v.next.remove(0);
+            v.arrival = None;
+            v.stopped_at_sign = false;
+            extend_path(map, v, rng);
+        }
+    }
+
+    /// Start a few lane changes where the target lane has room.
+    fn lane_changes(&mut self, map: &Map, occ: &HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>, dt: f64, rng: &mut impl Rng) {
+        for v in &mut self.vehicles {
+            let lane = map.lane(v.lane);
+            if lane.in_junction() || v.lateral != 0.0 || v.speed < 3.0 || lane.length() - v.s < 40.0 {
+                continue;
+            }
+            if rng.random_range(0.0..1.0) > LANE_CHANGE_RATE * dt {
+                continue;
+            }
+            let target = if rng.random_range(0.0..1.0) < 0.5 { lane.left } else { lane.right };
+            let Some(target) = target.filter(|t| map.lane(*t).kind == LaneKind::Driving) else { continue };
+            let (pos, _) = v.pose(map);
+            let proj = map.lane(target).project(pos.truncate());
+            let room = occ.get(&target).is_none_or(|list| list.iter().all(|&(s, _, _, _)| !(proj.s - 12.0..proj.s + 18.0).contains(&s)));
+            if !room || map.lane(target).length() - proj.s < 30.0 {
+                continue;
+            }
+            v.lane = target;
+            v.s = proj.s;
+            v.lateral = proj.offset;
+            v.next.clear();
+            extend_path(map, v, rng);
+        }
+    }
+
+    /// Move vehicles stuck out of the ego's sight.
+    fn respawn_stuck(&mut self, map: &Map, ego: &EgoPresence, rng: &mut impl Rng) {
+        for i in 0..self.vehicles.len() {
+            let v = &self.vehicles[i];
+            let far = (v.pose(map).0.truncate() - ego.position).length() > RESPAWN_CLEARANCE;
+            if v.stopped_for < RESPAWN_AFTER_S || !far {
+                continue;
+            }
+            if let Some((lane, s)) = self.free_spot(map, ego.position, 80.0, rng) {
+                let id = self.vehicles[i].id;
+                self.vehicles[i] = new_vehicle(map, id, lane, s, rng);
+            }
+        }
+    }
+}
+
+trait MinByGap {
+    fn min_by_gap(self, other: (f64, f64)) -> (f64, f64);
+}
+impl MinByGap for (f64, f64) {
+    fn min_by_gap(self, other: (f64, f64)) -> (f64, f64) {
+        if other.0 < self.0 { other } else { self }
+    }
+}
+
+fn new_vehicle(map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) -> Vehicle {
+    let mut v = Vehicle {
+        id,
+        lane,
+        s,
+        lateral: 0.0,
+        speed: 0.0,
+        desired_speed: rng.random_range(7.0..10.0),
+        next: Vec::new(),
+        half: DVec2::new(rng.random_range(2.1..2.6), rng.random_range(0.9..1.05)),
+        stopped_for: 0.0,
+        arrival: None,
+        stopped_at_sign: false,
+        ignores_lights: false,
+        colour: rng.random_range(0..16),
+    };
+    extend_path(map, &mut v, rng);
+    v
+}
+
+/// Keep at least two lanes of path ahead, choosing successors at random.
+pub(crate) fn extend_path(map: &Map, v: &mut Vehicle, rng: &mut impl Rng) {
+    while v.next.len() < 3 {
+        let last = *v.next.last().unwrap_or(&v.lane);
+        let options: Vec<LaneIdx> = map.lane(last).successors.iter().copied().filter(|s| map.lane(*s).kind == LaneKind::Driving).collect();
+        if options.is_empty() {
+            break;
+        }
+        v.next.push(options[rng.random_range(0..options.len())]);
+    }
+}
+
+/// IDM acceleration towards a leader `gap` metres ahead moving at `lead_speed`.
+fn idm(v: &Vehicle, gap: f64, lead_speed: f64, map: &Map) -> f64 {
+    let v0 = curve_limited_speed(map, v).min(v.desired_speed).max(0.5);
+    let free = 1.0 - (v.speed / v0).powi(4);
+    let interaction = if gap.is_finite() {
+        let dv = v.speed - lead_speed;
+        let s_star = MIN_GAP + (v.speed * HEADWAY + v.speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
+        (s_star / gap.max(0.1)).powi(2)
+    } else {
+        0.0
+    };
+    (IDM_ACCEL * (free - interaction)).clamp(-MAX_DECEL, IDM_ACCEL)
+}
+
+/// Speed that keeps lateral acceleration under the limit on the current and next lane.
+fn curve_limited_speed(map: &Map, v: &Vehicle) -> f64 {
+    let mut limit = f64::INFINITY;
+    for lane in std::iter::once(v.lane).chain(v.next.first().copied()) {
+        let l = map.lane(lane);
+        if l.in_junction() {
+            let turn = crate::map::angle_diff(l.pose_at(l.length()).yaw, l.pose_at(0.0).yaw).abs();
+            if turn > 0.3 {
+                let radius = l.length() / turn;
+                limit = limit.min((LATERAL_ACCEL * radius).sqrt());
+            }
+        }
+    }
+    limit
+}
+
+/// Connector lanes that conflict: centre lines cross or end in the same lane.
+pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
+    let mut out: BTreeMap<LaneIdx, Vec<LaneIdx>> = BTreeMap::new();
+    for j in &map.junctions {
+        for (a_i, &a) in j.lanes.iter().enumerate() {
+            for &b in &j.lanes[a_i + 1..] {
+                let (la, lb) = (map.lane(a), map.lane(b));
+                let same_start = la.predecessors.iter().any(|p| lb.predecessors.contains(p));
+                let merge = la.successors.iter().any(|s| lb.successors.contains(s));
+                if merge || (!same_start && polylines_cross(&la.points, &lb.points)) {
+                    out.entry(a).or_default().push(b);
+                    out.entry(b).or_default().push(a);
+                }
+            }
+        }
+    }
+    out.into_iter().collect()
+}
+
+fn polylines_cross(a: &[DVec3], b: &[DVec3]) -> bool {
+    a.windows(2).any(|sa| b.windows(2).any(|sb| segments_cross(sa[0].truncate(), sa[1].truncate(), sb[0].truncate(), sb[1].truncate())))
+}
+
+/// Proper intersection of two plan segments.
+pub fn segments_cross(p1: DVec2, p2: DVec2, q1: DVec2, q2: DVec2) -> bool {
+    let d1 = (p2 - p1).perp_dot(q1 - p1);
+    let d2 = (p2 - p1).perp_dot(q2 - p1);
+    let d3 = (q2 - q1).perp_dot(p1 - q1);
+    let d4 = (q2 - q1).perp_dot(p2 - q1);
+    d1 * d2 < 0.0 && d3 * d4 < 0.0
+}
