@@ -11,8 +11,8 @@ use glam::{DVec2, DVec3};
 use crate::map::Map;
 use crate::route::plan::PlanNode;
 use crate::route::{DenseRoute, RoadOption};
-pub use crate::world::ego::Control;
 use crate::world::World;
+pub use crate::world::ego::Control;
 
 /// One camera image (filled once the renderer exists; empty until then).
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -7,8 +7,8 @@
 //! lockstep world), [`scoring`] (the leaderboard criteria and results).
 
 pub mod agent;
-pub mod expert;
 pub mod eval;
+pub mod expert;
 pub mod map;
 pub mod render;
 pub mod route;

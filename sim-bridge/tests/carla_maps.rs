@@ -23,7 +23,11 @@ fn carla_towns_load_with_lights_and_a_connected_lane_graph() {
         let t0 = std::time::Instant::now();
         let map = Map::load_file(&dir.join(format!("{town}.xodr")), MapOptions::default())
             .unwrap_or_else(|e| panic!("{town}: {e}"));
-        let driving = map.lanes.iter().filter(|l| l.kind == LaneKind::Driving).count();
+        let driving = map
+            .lanes
+            .iter()
+            .filter(|l| l.kind == LaneKind::Driving)
+            .count();
         let signalized = map.junctions.iter().filter(|j| j.signalized).count();
         let dead_ends = map
             .lanes
@@ -39,6 +43,9 @@ fn carla_towns_load_with_lights_and_a_connected_lane_graph() {
         );
         assert!(driving > 50, "{town}: only {driving} driving lanes");
         assert!(signalized > 0, "{town}: no signalized junction");
-        assert!(dead_ends * 20 < driving, "{town}: {dead_ends} dead-end driving lanes");
+        assert!(
+            dead_ends * 20 < driving,
+            "{town}: {dead_ends} dead-end driving lanes"
+        );
     }
 }

@@ -10,7 +10,10 @@ fn carla_dir() -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!("SKIP: {} not found; CARLA route tests skipped", dir.display());
+        eprintln!(
+            "SKIP: {} not found; CARLA route tests skipped",
+            dir.display()
+        );
         None
     }
 }
@@ -21,25 +24,44 @@ fn tcp_training_routes_plan_on_carla_towns() {
     for town in ["town01", "town03", "town04", "town06"] {
         let map_name = format!("Town{}.xodr", &town[4..]);
         let map = Map::load_file(&dir.join(map_name), MapOptions::default()).unwrap();
-        let routes = xml::read_file(&dir.join(format!("training_routes/tcp/routes_{town}.xml")))
-            .unwrap();
+        let routes =
+            xml::read_file(&dir.join(format!("training_routes/tcp/routes_{town}.xml"))).unwrap();
         let (mut ok, mut failed) = (0, Vec::new());
         let t0 = std::time::Instant::now();
         for spec in routes.iter().take(60) {
             match planner::plan_route(&map, spec) {
                 Ok(route) => {
                     let ratio = route.length() / spec.keypoint_length();
-                    assert!(ratio > 0.95, "{town} route {}: dense {:.0} m vs keypoints {:.0} m", spec.id, route.length(), spec.keypoint_length());
+                    assert!(
+                        ratio > 0.95,
+                        "{town} route {}: dense {:.0} m vs keypoints {:.0} m",
+                        spec.id,
+                        route.length(),
+                        spec.keypoint_length()
+                    );
                     for w in route.points.windows(2) {
                         let d = (w[1].position - w[0].position).length();
-                        assert!(d < 1.6, "{town} route {}: gap {d:.2} m between {:?} and {:?} ({:?} / {:?})", spec.id, w[0], w[1], map.lane(w[0].lane), map.lane(w[1].lane).points.first());
+                        assert!(
+                            d < 1.6,
+                            "{town} route {}: gap {d:.2} m between {:?} and {:?} ({:?} / {:?})",
+                            spec.id,
+                            w[0],
+                            w[1],
+                            map.lane(w[0].lane),
+                            map.lane(w[1].lane).points.first()
+                        );
                     }
                     ok += 1;
                 }
                 Err(e) => failed.push(e.to_string()),
             }
         }
-        eprintln!("{town}: {ok} planned, {} failed, {:.0?}: {:?}", failed.len(), t0.elapsed(), failed.iter().take(3).collect::<Vec<_>>());
+        eprintln!(
+            "{town}: {ok} planned, {} failed, {:.0?}: {:?}",
+            failed.len(),
+            t0.elapsed(),
+            failed.iter().take(3).collect::<Vec<_>>()
+        );
         // CARLA's 2019 Town03 export predates the routes; a few of its links differ.
         assert!(failed.len() * 8 <= ok, "{town}: too many failures");
     }

@@ -29,7 +29,11 @@ pub enum BenchCommand {
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
-        BenchCommand::Sim { seconds, repeats, vehicles } => {
+        BenchCommand::Sim {
+            seconds,
+            repeats,
+            vehicles,
+        } => {
             let set = RouteSet::find("town05-long-style").expect("bundled set");
             let map = super::load_map(set.town.name(), MapOptions::default())?;
             let spec = &sim_bridge::route::xml::parse(set.name, set.bundled_xml())?[0];
@@ -37,18 +41,33 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             let ticks = (seconds / DT).round() as usize;
             let mut rates = Vec::new();
             for r in 0..repeats.max(1) {
-                let config = WorldConfig { vehicles, seed: r as u64, ..WorldConfig::default() };
+                let config = WorldConfig {
+                    vehicles,
+                    seed: r as u64,
+                    ..WorldConfig::default()
+                };
                 let mut world = World::new(&map, &dense, config);
                 let start = Instant::now();
                 for _ in 0..ticks {
-                    world.step(Control { steer: 0.0, throttle: 0.0, brake: 1.0 });
+                    world.step(Control {
+                        steer: 0.0,
+                        throttle: 0.0,
+                        brake: 1.0,
+                    });
                 }
                 let rate = seconds / start.elapsed().as_secs_f64();
-                println!("repeat {r}: {rate:.0}x real time ({} vehicles, {seconds:.0} s simulated)", world.traffic.vehicles.len());
+                println!(
+                    "repeat {r}: {rate:.0}x real time ({} vehicles, {seconds:.0} s simulated)",
+                    world.traffic.vehicles.len()
+                );
                 rates.push(rate);
             }
             rates.sort_by(f64::total_cmp);
-            println!("bench sim: median {:.0} simulated s per wall s on {} ({vehicles} vehicles, 1 thread)", rates[rates.len() / 2], map.name);
+            println!(
+                "bench sim: median {:.0} simulated s per wall s on {} ({vehicles} vehicles, 1 thread)",
+                rates[rates.len() / 2],
+                map.name
+            );
             Ok(())
         }
     }

@@ -77,12 +77,18 @@ pub fn default_vehicles(map: &Map) -> usize {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
-    let options = MapOptions { place_missing_lights: !args.no_placed_lights };
+    let options = MapOptions {
+        place_missing_lights: !args.no_placed_lights,
+    };
     let (map, mut specs) = super::load_routes(&args.routes, args.map.as_ref(), options)?;
     if !args.route_ids.is_empty() {
         specs.retain(|s| args.route_ids.contains(&s.id));
         if specs.is_empty() {
-            bail!("none of --route-ids {:?} is in {}", args.route_ids, args.routes);
+            bail!(
+                "none of --route-ids {:?} is in {}",
+                args.route_ids,
+                args.routes
+            );
         }
     }
     if let Some(limit) = args.limit {
@@ -113,23 +119,45 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             };
             let bar = progress_bar(args.quiet, &format!("route {} rep {repetition}", spec.id));
             let index = records.len();
-            let run = run_route(&map, spec, &dense, agent.as_mut(), world, ScoringConfig::default(), index, repetition, |rc| {
-                bar.set_position(rc.round() as u64)
-            });
+            let run = run_route(
+                &map,
+                spec,
+                &dense,
+                agent.as_mut(),
+                world,
+                ScoringConfig::default(),
+                index,
+                repetition,
+                |rc| bar.set_position(rc.round() as u64),
+            );
             bar.finish_and_clear();
             let s = run.record.scores;
             eprintln!(
                 "route {:>4} rep {repetition}: DS {:6.2} RC {:6.2} IS {:.3}  {}  ({:.0} s sim in {:.1} s)",
-                spec.id, s.score_composed, s.score_route, s.score_penalty, run.record.status, run.record.meta.duration_game, run.wall_seconds
+                spec.id,
+                s.score_composed,
+                s.score_route,
+                s.score_penalty,
+                run.record.status,
+                run.record.meta.duration_game,
+                run.wall_seconds
             );
             if let Some(dir) = &args.pictures {
                 let path = dir.join(format!("route_{}_rep{repetition}.png", spec.id));
-                write_run_png(&map, &dense, &run.trace, &run.final_actors, &run.infractions, &path)
-                    .with_context(|| format!("writing {}", path.display()))?;
+                write_run_png(
+                    &map,
+                    &dense,
+                    &run.trace,
+                    &run.final_actors,
+                    &run.infractions,
+                    &path,
+                )
+                .with_context(|| format!("writing {}", path.display()))?;
             }
             records.push(run.record);
             let results = Results::new(records.clone(), total, Vec::new());
-            std::fs::write(&args.out, results.to_json()).with_context(|| format!("writing {}", args.out.display()))?;
+            std::fs::write(&args.out, results.to_json())
+                .with_context(|| format!("writing {}", args.out.display()))?;
         }
     }
     let results = Results::new(records, total, Vec::new());
@@ -143,7 +171,8 @@ fn progress_bar(quiet: bool, label: &str) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(100);
-    let style = ProgressStyle::with_template("{msg:>18} [{bar:40}] RC {pos:>3}% {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar());
+    let style = ProgressStyle::with_template("{msg:>18} [{bar:40}] RC {pos:>3}% {elapsed}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
     bar.set_style(style.progress_chars("=> "));
     bar.set_message(label.to_string());
     bar

@@ -51,8 +51,12 @@ pub fn init_logging(verbose: u8) {
         1 => "info",
         _ => "debug",
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
 }
 
 /// Run a parsed command line.
@@ -67,7 +71,11 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 
 /// Routes and their map from `--routes` (a bundled set name or a route XML file) and `--map`
 /// (an .xodr file or a bundled town name; for a bundled set it defaults to the set's town).
-pub fn load_routes(routes: &str, map: Option<&PathBuf>, options: MapOptions) -> anyhow::Result<(Map, Vec<RouteSpec>)> {
+pub fn load_routes(
+    routes: &str,
+    map: Option<&PathBuf>,
+    options: MapOptions,
+) -> anyhow::Result<(Map, Vec<RouteSpec>)> {
     let map_arg = map.map(|m| m.to_string_lossy().into_owned());
     if let Some(set) = RouteSet::find(routes) {
         let specs = xml::parse(set.name, set.bundled_xml())?;
@@ -79,12 +87,20 @@ pub fn load_routes(routes: &str, map: Option<&PathBuf>, options: MapOptions) -> 
     }
     let path = PathBuf::from(routes);
     if !path.exists() {
-        let names: Vec<&str> = sim_bridge::route::sets::SETS.iter().map(|s| s.name).collect();
-        bail!("--routes {routes}: no such file and no bundled set of that name (bundled: {})", names.join(", "));
+        let names: Vec<&str> = sim_bridge::route::sets::SETS
+            .iter()
+            .map(|s| s.name)
+            .collect();
+        bail!(
+            "--routes {routes}: no such file and no bundled set of that name (bundled: {})",
+            names.join(", ")
+        );
     }
     let specs = xml::read_file(&path)?;
     let Some(map_arg) = map_arg else {
-        bail!("--routes {routes} is a route file: give its map with --map <file.xodr | bundled town>");
+        bail!(
+            "--routes {routes} is a route file: give its map with --map <file.xodr | bundled town>"
+        );
     };
     Ok((load_map(&map_arg, options)?, specs))
 }
@@ -92,7 +108,8 @@ pub fn load_routes(routes: &str, map: Option<&PathBuf>, options: MapOptions) -> 
 /// A map from an .xodr path or a bundled town name.
 pub fn load_map(arg: &str, options: MapOptions) -> anyhow::Result<Map> {
     if let Some(style) = TownStyle::from_name(arg) {
-        return Map::from_str(style.name(), sim_bridge::towngen::bundled(style), options).with_context(|| format!("bundled town {arg}"));
+        return Map::from_str(style.name(), sim_bridge::towngen::bundled(style), options)
+            .with_context(|| format!("bundled town {arg}"));
     }
     Ok(Map::load_file(&PathBuf::from(arg), options)?)
 }

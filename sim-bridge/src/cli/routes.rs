@@ -36,19 +36,29 @@ pub fn run(cmd: RoutesCommand) -> anyhow::Result<()> {
             println!("{:<20} {:<20} {:>6}  description", "set", "town", "routes");
             for set in SETS {
                 let n = sim_bridge::route::xml::parse(set.name, set.bundled_xml())?.len();
-                println!("{:<20} {:<20} {:>6}  {}", set.name, set.town.name(), n, set.description);
+                println!(
+                    "{:<20} {:<20} {:>6}  {}",
+                    set.name,
+                    set.town.name(),
+                    n,
+                    set.description
+                );
             }
             Ok(())
         }
         RoutesCommand::Show { set, map } => {
             let (map, specs) = super::load_routes(&set, map.as_ref(), MapOptions::default())?;
-            println!("{:<8} {:>9} {:>9} {:>5} {:>5} {:>5} {:>5} {:>5} {:>9}", "route", "kp len m", "dense m", "kps", "plan", "left", "right", "chg", "timeout s");
+            println!(
+                "{:<8} {:>9} {:>9} {:>5} {:>5} {:>5} {:>5} {:>5} {:>9}",
+                "route", "kp len m", "dense m", "kps", "plan", "left", "right", "chg", "timeout s"
+            );
             let mut total = 0.0;
             for spec in &specs {
                 let dense = plan_route(&map, spec)?;
                 let (left, right, changes) = manoeuvres(&dense);
                 total += dense.length();
-                let timeout = sim_bridge::scoring::route_timeout(dense.length(), &Default::default());
+                let timeout =
+                    sim_bridge::scoring::route_timeout(dense.length(), &Default::default());
                 println!(
                     "{:<8} {:>9.1} {:>9.1} {:>5} {:>5} {:>5} {:>5} {:>5} {:>9.0}",
                     spec.id,

@@ -54,7 +54,11 @@ pub fn run_route(
     let started = Instant::now();
     let plan = global_plan(dense);
     let mut follower = RouteFollower::new(plan.clone());
-    agent.start_route(&RouteContext { map, route: dense, plan: &plan });
+    agent.start_route(&RouteContext {
+        map,
+        route: dense,
+        plan: &plan,
+    });
     let mut world = World::new(map, dense, world_config);
     let mut scorer = RouteScorer::new(map, dense, scoring);
     let mut contacts = Vec::new();
@@ -98,6 +102,12 @@ pub fn run_route(
     let mut record = scorer.finish(Some(end), &spec.id, index, world.time, wall_seconds);
     record.meta.repetition = Some(repetition);
     record.meta.seed = Some(world_config.seed);
-    RouteRun { record, infractions, trace, final_actors, ticks: frame, wall_seconds }
+    RouteRun {
+        record,
+        infractions,
+        trace,
+        final_actors,
+        ticks: frame,
+        wall_seconds,
+    }
 }
-

@@ -45,7 +45,12 @@ impl HazardView {
 }
 
 /// Scan the world from route index `index`.
-pub fn scan(world: &World<'_>, route: &DenseRoute, index: usize, memory: &mut HazardMemory) -> HazardView {
+pub fn scan(
+    world: &World<'_>,
+    route: &DenseRoute,
+    index: usize,
+    memory: &mut HazardMemory,
+) -> HazardView {
     let ego = world.ego_state();
     let mut view = HazardView::default();
     let end = ahead_end(route, index, SCAN_AHEAD);
@@ -56,14 +61,21 @@ pub fn scan(world: &World<'_>, route: &DenseRoute, index: usize, memory: &mut Ha
         if rel.length() > SCAN_AHEAD + 10.0 || (a.z - ego.position.z).abs() > 3.0 {
             continue;
         }
-        if let Some(j) = (index..=end).find(|&j| distance_to_box(route.points[j].position.truncate(), &a.obb) < corridor) {
+        if let Some(j) = (index..=end)
+            .find(|&j| distance_to_box(route.points[j].position.truncate(), &a.obb) < corridor)
+        {
             let gap = along(route, index, j) - ego.half_extent.x;
             let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
             view.obstacle(gap, speed);
         }
         let local = DVec2::new(rel.dot(ego.forward()), rel.perp_dot(ego.forward()).abs());
         let vulnerable = matches!(a.kind, ActorKind::Walker | ActorKind::Cyclist);
-        if vulnerable && a.velocity.length() > 0.1 && local.x > -2.0 && local.x < 20.0 && local.y < 10.0 {
+        if vulnerable
+            && a.velocity.length() > 0.1
+            && local.x > -2.0
+            && local.x < 20.0
+            && local.y < 10.0
+        {
             view.walker_near = true;
         }
     }
@@ -76,7 +88,11 @@ pub fn scan(world: &World<'_>, route: &DenseRoute, index: usize, memory: &mut Ha
 /// Index of the last route point within `distance` of `index`.
 fn ahead_end(route: &DenseRoute, index: usize, distance: f64) -> usize {
     let limit = route.cum[index] + distance;
-    route.cum.partition_point(|&c| c <= limit).saturating_sub(1).max(index)
+    route
+        .cum
+        .partition_point(|&c| c <= limit)
+        .saturating_sub(1)
+        .max(index)
 }
 
 /// For each lane on the route between `from` and `to`, the last route index on it.
@@ -104,25 +120,36 @@ fn stop_lines(
     let ego = world.ego_state();
     let map = world.map;
     // The last lane ahead may continue past the scan window: its end is not in reach yet.
-    let ends_in_window = |j: usize| j + 1 < route.points.len() && route.points[j + 1].lane != route.points[j].lane;
+    let ends_in_window =
+        |j: usize| j + 1 < route.points.len() && route.points[j + 1].lane != route.points[j].lane;
     let gap_to = |j: usize| along(route, index, j) - ego.half_extent.x - STOP_LINE_MARGIN;
     for &(lane, j) in lanes_ahead {
         if !ends_in_window(j) {
             continue;
         }
         let gap = gap_to(j);
-        for light in map.lights.iter().filter(|l| l.stop_lines.iter().any(|s| s.lane == lane)) {
+        for light in map
+            .lights
+            .iter()
+            .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
+        {
             match world.light_states()[light.id] {
                 LightState::Red => view.obstacle(gap, 0.0),
-                LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => view.obstacle(gap, 0.0),
+                LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => {
+                    view.obstacle(gap, 0.0)
+                }
                 _ => {}
             }
         }
-        for sign in map.stop_signs.iter().filter(|s| s.stop_lines.iter().any(|l| l.lane == lane)) {
+        for sign in map
+            .stop_signs
+            .iter()
+            .filter(|s| s.stop_lines.iter().any(|l| l.lane == lane))
+        {
             if memory.served_signs.contains(&sign.id) {
                 continue;
             }
-            if ego.speed < 0.1 && gap < 3.0 {
+            if ego.speed < 0.1 && gap < super::IDM_GAP + 1.5 {
                 memory.served_signs.push(sign.id);
             } else {
                 view.obstacle(gap.max(0.0), 0.0);
@@ -143,14 +170,18 @@ fn distance_to_box(p: DVec2, obb: &Obb) -> f64 {
 /// constant velocity across or against its path, within 2 s (4 s near junctions).
 fn forecast(world: &World<'_>, route: &DenseRoute, index: usize, actors: &[ActorView]) -> bool {
     let ego = world.ego_state();
-    let junction_ahead = (index..=ahead_end(route, index, 20.0)).any(|j| world.map.lane(route.points[j].lane).in_junction());
+    let junction_ahead = (index..=ahead_end(route, index, 20.0))
+        .any(|j| world.map.lane(route.points[j].lane).in_junction());
     let horizon = if junction_ahead { 4.0 } else { 2.0 };
     let speed = ego.speed.max(if junction_ahead { 4.0 } else { 2.0 });
     let relevant: Vec<&ActorView> = actors
         .iter()
-        .filter(|a| a.velocity.length() > 0.3 && (a.obb.centre - ego.position.truncate()).length() < 45.0)
         .filter(|a| {
-            let ahead = (a.obb.centre - ego.position.truncate()).dot(ego.forward()) > -ego.half_extent.x;
+            a.velocity.length() > 0.3 && (a.obb.centre - ego.position.truncate()).length() < 45.0
+        })
+        .filter(|a| {
+            let ahead =
+                (a.obb.centre - ego.position.truncate()).dot(ego.forward()) > -ego.half_extent.x;
             let crossing = a.velocity.normalize_or_zero().dot(ego.forward()) < 0.85;
             ahead && (crossing || matches!(a.kind, ActorKind::Walker | ActorKind::Cyclist))
         })
@@ -161,7 +192,10 @@ fn forecast(world: &World<'_>, route: &DenseRoute, index: usize, actors: &[Actor
     let mut t = 0.25;
     while t <= horizon + 1e-9 {
         let s = route.cum[index] + speed * t;
-        let j = route.cum.partition_point(|&c| c < s).min(route.points.len() - 1);
+        let j = route
+            .cum
+            .partition_point(|&c| c < s)
+            .min(route.points.len() - 1);
         let p = route.points[j];
         // The front half of the ego, slightly widened.
         let front = Obb {
@@ -170,7 +204,10 @@ fn forecast(world: &World<'_>, route: &DenseRoute, index: usize, actors: &[Actor
             half: DVec2::new(ego.half_extent.x * 0.75, ego.half_extent.y + 0.3),
         };
         for a in &relevant {
-            let moved = Obb { centre: a.obb.centre + a.velocity * t, ..a.obb };
+            let moved = Obb {
+                centre: a.obb.centre + a.velocity * t,
+                ..a.obb
+            };
             if moved.overlaps(&front) {
                 return true;
             }

@@ -32,7 +32,7 @@ const LATERAL_ACCEL: f64 = 2.0;
 /// time headway (s).
 const IDM_ACCEL: f64 = 2.0;
 const IDM_DECEL: f64 = 3.5;
-const IDM_GAP: f64 = 4.0;
+pub(crate) const IDM_GAP: f64 = 4.0;
 const IDM_HEADWAY: f64 = 0.8;
 
 /// The expert.
@@ -52,6 +52,16 @@ impl Expert {
     }
 }
 
+impl Expert {
+    /// The hazard scan the expert would act on now (for debugging and tests).
+    pub fn debug_view(&mut self, world: &World<'_>) -> hazards::HazardView {
+        match self.route.as_ref() {
+            Some(route) => hazards::scan(world, route, self.index, &mut self.hazards),
+            None => hazards::HazardView::default(),
+        }
+    }
+}
+
 impl Agent for Expert {
     fn name(&self) -> String {
         "expert".into()
@@ -66,7 +76,11 @@ impl Agent for Expert {
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
         let Some(route) = self.route.as_ref() else {
-            return Control { steer: 0.0, throttle: 0.0, brake: 1.0 };
+            return Control {
+                steer: 0.0,
+                throttle: 0.0,
+                brake: 1.0,
+            };
         };
         let map = world.map;
         let ego = world.ego_state();
@@ -86,7 +100,11 @@ impl Agent for Expert {
             accel = -self.params.max_brake;
         }
         let control = to_pedals(accel, obs.speed, &self.params);
-        let steer = if control.brake > 0.5 { steer * 0.5 } else { steer };
+        let steer = if control.brake > 0.5 {
+            steer * 0.5
+        } else {
+            steer
+        };
         Control { steer, ..control }
     }
 }
@@ -96,7 +114,8 @@ fn idm(speed: f64, target: f64, obstacle: Option<(f64, f64)>) -> f64 {
     let free = 1.0 - (speed / target.max(0.1)).powi(4);
     let interaction = obstacle.map_or(0.0, |(gap, lead)| {
         let dv = speed - lead;
-        let s_star = IDM_GAP + (speed * IDM_HEADWAY + speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
+        let s_star = IDM_GAP
+            + (speed * IDM_HEADWAY + speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
         (s_star / gap.max(0.05)).powi(2)
     });
     IDM_ACCEL * (free - interaction)
@@ -104,23 +123,42 @@ fn idm(speed: f64, target: f64, obstacle: Option<(f64, f64)>) -> f64 {
 
 /// Throttle and brake that produce acceleration `accel` at `speed`.
 fn to_pedals(accel: f64, speed: f64, p: &EgoParams) -> Control {
-    let resist = if speed > 0.0 { p.rolling + p.drag * speed * speed } else { 0.0 };
+    let resist = if speed > 0.0 {
+        p.rolling + p.drag * speed * speed
+    } else {
+        0.0
+    };
     if accel >= -resist {
         let drive = p.max_accel * (1.0 - speed / p.top_speed).max(0.05);
-        Control { steer: 0.0, throttle: ((accel + resist) / drive).clamp(0.0, 0.75), brake: 0.0 }
+        Control {
+            steer: 0.0,
+            throttle: ((accel + resist) / drive).clamp(0.0, 0.75),
+            brake: 0.0,
+        }
     } else if accel > -resist - 0.3 {
         Control::default()
     } else {
-        Control { steer: 0.0, throttle: 0.0, brake: ((-accel - resist) / p.max_brake).clamp(0.0, 1.0) }
+        Control {
+            steer: 0.0,
+            throttle: 0.0,
+            brake: ((-accel - resist) / p.max_brake).clamp(0.0, 1.0),
+        }
     }
 }
 
 /// Pure pursuit towards the route point one look-ahead distance past the ego.
-fn pure_pursuit(route: &DenseRoute, index: usize, ego: &crate::world::state::EgoState, p: &EgoParams) -> f64 {
+fn pure_pursuit(
+    route: &DenseRoute,
+    index: usize,
+    ego: &crate::world::state::EgoState,
+    p: &EgoParams,
+) -> f64 {
     let lookahead = (4.0 + 0.6 * ego.speed).clamp(4.0, 10.0);
     let rear = ego.position.truncate() - ego.forward() * (p.wheelbase / 2.0);
     let mut j = index;
-    while j + 1 < route.points.len() && (route.points[j].position.truncate() - rear).length() < lookahead + p.wheelbase / 2.0 {
+    while j + 1 < route.points.len()
+        && (route.points[j].position.truncate() - rear).length() < lookahead + p.wheelbase / 2.0
+    {
         j += 1;
     }
     let d = route.points[j].position.truncate() - rear;

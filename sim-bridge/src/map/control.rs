@@ -6,8 +6,8 @@
 //!   successors are inside it), grouped by incoming road and side.
 //! - A junction is signalized when the file has a traffic-light `<signal>` (dynamic, type
 //!   1000001 as CARLA writes them) that applies to one of its incoming or connector lanes, or,
-//!   with [`MapOptions::place_missing_lights`], when it has four or more approaches and one of
-//!   them has two or more lanes. Every approach of a signalized junction gets one light.
+//!   with [`MapOptions::place_missing_lights`] and a map that has no traffic-light signal at
+//!   all, when it has four or more approaches and one of them has two or more lanes. Every approach of a signalized junction gets one light.
 //! - A stop sign is a `<signal>` of type 206 (stop); its stop lines are the ends of the lanes it
 //!   applies to.
 //! - A stop line lies across the end of an incoming lane, where the lane enters the junction.
@@ -40,7 +40,12 @@ impl StopLine {
     fn at_end_of(map: &Map, lane: LaneIdx) -> StopLine {
         let l = map.lane(lane);
         let pose = l.pose_at(l.length());
-        StopLine { lane, position: pose.position, yaw: pose.yaw, half_width: l.width / 2.0 }
+        StopLine {
+            lane,
+            position: pose.position,
+            yaw: pose.yaw,
+            half_width: l.width / 2.0,
+        }
     }
 
     /// The line's two end points at `fraction` of the half width (the leaderboard uses 0.4 of
@@ -143,7 +148,9 @@ pub(super) fn derive(
             }
         }
     }
-    if options.place_missing_lights {
+    // Only a map without any traffic-light signal (CARLA's old Town03) gets placed lights: in a
+    // map that has some, a junction without them is unsignalized on purpose.
+    if options.place_missing_lights && file_lights.is_empty() {
         for j in &mut map.junctions {
             let multi_lane = j.approaches.iter().any(|a| a.lanes.len() >= 2);
             if !j.signalized && j.approaches.len() >= 4 && multi_lane {
@@ -212,7 +219,10 @@ fn file_signals<'a>(
     kind: &str,
     dynamic: bool,
 ) -> Vec<&'a xodr::Signal> {
-    net.signals().iter().filter(|s| s.kind == kind && (s.dynamic || !dynamic)).collect()
+    net.signals()
+        .iter()
+        .filter(|s| s.kind == kind && (s.dynamic || !dynamic))
+        .collect()
 }
 
 /// Map an xodr lane id to ours through (road, section, lane id).
@@ -227,7 +237,9 @@ fn lane_lookup<'a>(
     move |id| {
         let rl = net.road_lane(id)?;
         let road = net.road(rl.road)?;
-        by_key.get(&(road.od_id().to_string(), rl.section, rl.od_id)).copied()
+        by_key
+            .get(&(road.od_id().to_string(), rl.section, rl.od_id))
+            .copied()
     }
 }
 
@@ -236,7 +248,11 @@ fn lane_lookup<'a>(
 fn approach_of(map: &Map, lane: LaneIdx) -> Option<(usize, usize)> {
     let find = |l: LaneIdx| {
         map.junctions.iter().enumerate().find_map(|(j, junction)| {
-            junction.approaches.iter().position(|a| a.lanes.contains(&l)).map(|a| (j, a))
+            junction
+                .approaches
+                .iter()
+                .position(|a| a.lanes.contains(&l))
+                .map(|a| (j, a))
         })
     };
     let l = map.lane(lane);
@@ -281,11 +297,19 @@ fn build_junctions(map: &Map, junction_ids: Vec<String>) -> Vec<Junction> {
     for ((j, road_id, _), lanes) in incoming {
         let first = map.lane(lanes[0]);
         let yaw = first.pose_at(first.length()).yaw;
-        junctions[j as usize].approaches.push(Approach { road_id, lanes, yaw, light: None });
+        junctions[j as usize].approaches.push(Approach {
+            road_id,
+            lanes,
+            yaw,
+            light: None,
+        });
     }
     for j in &mut junctions {
-        let pts: Vec<DVec2> =
-            j.lanes.iter().flat_map(|l| map.lane(*l).points.iter().map(|p| p.truncate())).collect();
+        let pts: Vec<DVec2> = j
+            .lanes
+            .iter()
+            .flat_map(|l| map.lane(*l).points.iter().map(|p| p.truncate()))
+            .collect();
         if !pts.is_empty() {
             j.centre = pts.iter().sum::<DVec2>() / pts.len() as f64;
         }

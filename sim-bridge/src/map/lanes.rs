@@ -123,7 +123,11 @@ impl Lane {
             Err(i) => i.saturating_sub(1).min(self.points.len() - 2),
         };
         let seg = self.cum[i + 1] - self.cum[i];
-        let t = if seg > 0.0 { (s - self.cum[i]) / seg } else { 0.0 };
+        let t = if seg > 0.0 {
+            (s - self.cum[i]) / seg
+        } else {
+            0.0
+        };
         (i, t)
     }
 
@@ -132,13 +136,20 @@ impl Lane {
         let (i, t) = self.locate(s);
         let (a, b) = (self.points[i], self.points[i + 1]);
         let d = b - a;
-        LanePose { position: a + d * t, yaw: d.y.atan2(d.x) }
+        LanePose {
+            position: a + d * t,
+            yaw: d.y.atan2(d.x),
+        }
     }
 
     /// Project a plan point onto the centre line: (arc length, signed lateral offset with
     /// positive to the left of travel, plan distance).
     pub fn project(&self, p: DVec2) -> Projection {
-        let mut best = Projection { s: 0.0, offset: f64::INFINITY, distance: f64::INFINITY };
+        let mut best = Projection {
+            s: 0.0,
+            offset: f64::INFINITY,
+            distance: f64::INFINITY,
+        };
         for i in 0..self.points.len() - 1 {
             best = best.min(self.project_segment(i, p));
         }
@@ -151,12 +162,24 @@ impl Lane {
         let b = self.points[i + 1].truncate();
         let d = b - a;
         let len2 = d.length_squared();
-        let t = if len2 > 0.0 { ((p - a).dot(d) / len2).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if len2 > 0.0 {
+            ((p - a).dot(d) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let foot = a + d * t;
         let distance = (p - foot).length();
-        let side = if len2 > 0.0 { d.perp_dot(p - a).signum() } else { 1.0 };
+        let side = if len2 > 0.0 {
+            d.perp_dot(p - a).signum()
+        } else {
+            1.0
+        };
         let seg = self.cum[i + 1] - self.cum[i];
-        Projection { s: self.cum[i] + seg * t, offset: side * distance, distance }
+        Projection {
+            s: self.cum[i] + seg * t,
+            offset: side * distance,
+            distance,
+        }
     }
 }
 
@@ -173,7 +196,11 @@ pub struct Projection {
 
 impl Projection {
     fn min(self, other: Projection) -> Projection {
-        if other.distance < self.distance { other } else { self }
+        if other.distance < self.distance {
+            other
+        } else {
+            self
+        }
     }
 }
 

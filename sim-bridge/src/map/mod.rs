@@ -27,7 +27,10 @@ pub const MAX_MAP_BYTES: u64 = 64 * 1024 * 1024;
 pub enum MapError {
     /// The file could not be read.
     #[error("cannot read map {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     /// The file is larger than [`MAX_MAP_BYTES`].
     #[error("map {path} is {bytes} bytes, over the {MAX_MAP_BYTES}-byte limit")]
     TooLarge { path: String, bytes: u64 },
@@ -49,7 +52,9 @@ pub struct MapOptions {
 
 impl Default for MapOptions {
     fn default() -> Self {
-        Self { place_missing_lights: true }
+        Self {
+            place_missing_lights: true,
+        }
     }
 }
 
@@ -75,21 +80,32 @@ impl Map {
     /// Load an OpenDRIVE file.
     pub fn load_file(path: &Path, options: MapOptions) -> Result<Self, MapError> {
         let shown = path.display().to_string();
-        let io = |source| MapError::Io { path: shown.clone(), source };
+        let io = |source| MapError::Io {
+            path: shown.clone(),
+            source,
+        };
         let bytes = std::fs::metadata(path).map_err(io)?.len();
         if bytes > MAX_MAP_BYTES {
             return Err(MapError::TooLarge { path: shown, bytes });
         }
         let text = std::fs::read_to_string(path).map_err(io)?;
-        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(shown);
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or(shown);
         Self::from_str(&name, &text, options)
     }
 
     /// Load an OpenDRIVE document held in memory; `name` labels errors and results.
     pub fn from_str(name: &str, xml: &str, options: MapOptions) -> Result<Self, MapError> {
-        let invalid = |message: String| MapError::Invalid { origin: name.to_string(), message };
+        let invalid = |message: String| MapError::Invalid {
+            origin: name.to_string(),
+            message,
+        };
         if xml.len() as u64 > MAX_MAP_BYTES {
-            return Err(invalid(format!("document is over the {MAX_MAP_BYTES}-byte limit")));
+            return Err(invalid(format!(
+                "document is over the {MAX_MAP_BYTES}-byte limit"
+            )));
         }
         let net = xodr::load_str(xml).map_err(|e| invalid(e.to_string()))?;
         Self::from_network(name, &net, options)
@@ -103,7 +119,9 @@ impl Map {
     ) -> Result<Self, MapError> {
         let (lanes, junction_ids) = bake_lanes(net);
         if !lanes.iter().any(|l| l.kind == LaneKind::Driving) {
-            return Err(MapError::NoDrivingLanes { origin: name.to_string() });
+            return Err(MapError::NoDrivingLanes {
+                origin: name.to_string(),
+            });
         }
         let grid = SegmentGrid::build(&lanes);
         let mut lo = DVec2::splat(f64::INFINITY);
@@ -191,8 +209,12 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         if src.center.points().len() < 2 || src.direction == xodr::Direction::Both {
             continue;
         }
-        let Some(road_lane) = net.road_lane(src.id) else { continue };
-        let Some(road) = net.road(road_lane.road) else { continue };
+        let Some(road_lane) = net.road_lane(src.id) else {
+            continue;
+        };
+        let Some(road) = net.road(road_lane.road) else {
+            continue;
+        };
         let mut points: Vec<DVec3> = src
             .center
             .points()
@@ -237,7 +259,9 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         out
     };
     for src in net.lanes() {
-        let Some(&idx) = index.get(&src.id) else { continue };
+        let Some(&idx) = index.get(&src.id) else {
+            continue;
+        };
         let successors = map_ids(&src.successors);
         let predecessors = map_ids(&src.predecessors);
         let neighbours = map_ids(&src.neighbors);
@@ -245,7 +269,10 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         let mid = lane.pose_at(lane.length() / 2.0);
         let (mut left, mut right) = (None, None);
         for n in neighbours {
-            let offset = lanes[n.get()].pose_at(lanes[n.get()].length() / 2.0).position - mid.position;
+            let offset = lanes[n.get()]
+                .pose_at(lanes[n.get()].length() / 2.0)
+                .position
+                - mid.position;
             let forward = DVec2::from_angle(mid.yaw);
             if forward.perp_dot(offset.truncate()) > 0.0 {
                 left = left.or(Some(n));

@@ -36,14 +36,21 @@ impl SegmentGrid {
                 let (c0, c1) = (cell_of(a.min(b)), cell_of(a.max(b)));
                 for cx in c0.0..=c1.0 {
                     for cy in c0.1..=c1.1 {
-                        cells.entry((cx, cy)).or_default().push((lane.idx, i as u32));
+                        cells
+                            .entry((cx, cy))
+                            .or_default()
+                            .push((lane.idx, i as u32));
                     }
                 }
                 lo = (lo.0.min(c0.0), lo.1.min(c0.1));
                 hi = (hi.0.max(c1.0), hi.1.max(c1.1));
             }
         }
-        let max_ring = if cells.is_empty() { 0 } else { (hi.0 - lo.0).max(hi.1 - lo.1) + 1 };
+        let max_ring = if cells.is_empty() {
+            0
+        } else {
+            (hi.0 - lo.0).max(hi.1 - lo.1) + 1
+        };
         Self { cells, max_ring }
     }
 
@@ -69,7 +76,9 @@ impl SegmentGrid {
                 break;
             }
             for (cx, cy) in ring_cells(centre, ring) {
-                let Some(items) = self.cells.get(&(cx, cy)) else { continue };
+                let Some(items) = self.cells.get(&(cx, cy)) else {
+                    continue;
+                };
                 for &(lane, seg) in items {
                     let l = &lanes[lane.get()];
                     if !keep(l) {
@@ -99,10 +108,15 @@ impl SegmentGrid {
         keep: impl Fn(&Lane) -> bool,
     ) -> Vec<(LaneIdx, Projection)> {
         let mut found: Vec<(LaneIdx, Projection)> = Vec::new();
-        let (c0, c1) = (cell_of(p - DVec2::splat(radius)), cell_of(p + DVec2::splat(radius)));
+        let (c0, c1) = (
+            cell_of(p - DVec2::splat(radius)),
+            cell_of(p + DVec2::splat(radius)),
+        );
         for cx in c0.0..=c1.0 {
             for cy in c0.1..=c1.1 {
-                let Some(items) = self.cells.get(&(cx, cy)) else { continue };
+                let Some(items) = self.cells.get(&(cx, cy)) else {
+                    continue;
+                };
                 for &(lane, seg) in items {
                     let l = &lanes[lane.get()];
                     if !keep(l) {
@@ -129,8 +143,7 @@ impl SegmentGrid {
 fn ring_cells(c: (i32, i32), ring: i32) -> impl Iterator<Item = (i32, i32)> {
     let r = ring;
     (-r..=r).flat_map(move |dx| {
-        (-r..=r).filter_map(move |dy| {
-            (dx.abs() == r || dy.abs() == r).then_some((c.0 + dx, c.1 + dy))
-        })
+        (-r..=r)
+            .filter_map(move |dy| (dx.abs() == r || dy.abs() == r).then_some((c.0 + dx, c.1 + dy)))
     })
 }

@@ -25,8 +25,19 @@ impl Canvas {
         let scale = max_side as f64 / size.x.max(size.y);
         let width = ((size.x * scale).ceil() as u32).max(1);
         let height = ((size.y * scale).ceil() as u32).max(1);
-        let pixels = background.iter().copied().cycle().take((width * height * 3) as usize).collect();
-        Self { width, height, pixels, origin: lo, scale }
+        let pixels = background
+            .iter()
+            .copied()
+            .cycle()
+            .take((width * height * 3) as usize)
+            .collect();
+        Self {
+            width,
+            height,
+            pixels,
+            origin: lo,
+            scale,
+        }
     }
 
     /// Pixels per metre.
@@ -35,7 +46,10 @@ impl Canvas {
     }
 
     fn to_px(&self, p: DVec2) -> DVec2 {
-        DVec2::new((p.x - self.origin.x) * self.scale, self.height as f64 - (p.y - self.origin.y) * self.scale)
+        DVec2::new(
+            (p.x - self.origin.x) * self.scale,
+            self.height as f64 - (p.y - self.origin.y) * self.scale,
+        )
     }
 
     fn put(&mut self, x: i64, y: i64, c: [u8; 3]) {
@@ -48,9 +62,18 @@ impl Canvas {
     /// Fill a convex polygon given in world coordinates.
     pub fn polygon(&mut self, corners: &[DVec2], c: [u8; 3]) {
         let px: Vec<DVec2> = corners.iter().map(|p| self.to_px(*p)).collect();
-        let (lo, hi) = px.iter().fold((DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-        let (x0, x1) = (lo.x.floor().max(0.0) as i64, hi.x.ceil().min(self.width as f64) as i64);
-        let (y0, y1) = (lo.y.floor().max(0.0) as i64, hi.y.ceil().min(self.height as f64) as i64);
+        let (lo, hi) = px.iter().fold(
+            (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        let (x0, x1) = (
+            lo.x.floor().max(0.0) as i64,
+            hi.x.ceil().min(self.width as f64) as i64,
+        );
+        let (y0, y1) = (
+            lo.y.floor().max(0.0) as i64,
+            hi.y.ceil().min(self.height as f64) as i64,
+        );
         let n = px.len();
         for y in y0..y1 {
             for x in x0..x1 {
@@ -82,7 +105,9 @@ impl Canvas {
 
     /// A disc of `radius` metres.
     pub fn disc(&mut self, centre: DVec2, radius: f64, c: [u8; 3]) {
-        let corners: Vec<DVec2> = (0..12).map(|k| centre + DVec2::from_angle(k as f64 * std::f64::consts::TAU / 12.0) * radius).collect();
+        let corners: Vec<DVec2> = (0..12)
+            .map(|k| centre + DVec2::from_angle(k as f64 * std::f64::consts::TAU / 12.0) * radius)
+            .collect();
         self.polygon(&corners, c);
     }
 

@@ -61,7 +61,10 @@ pub fn write_run_png(
         let (f, l) = a.obb.axes();
         let (hx, hy) = (f * a.obb.half.x, l * a.obb.half.y);
         let o = a.obb.centre;
-        c.polygon(&[o + hx + hy, o - hx + hy, o - hx - hy, o + hx - hy], colour);
+        c.polygon(
+            &[o + hx + hy, o - hx + hy, o - hx - hy, o + hx - hy],
+            colour,
+        );
     }
     if let Some(last) = trace.last() {
         c.disc(last.truncate(), 2.5, [240, 40, 40]);
@@ -71,7 +74,9 @@ pub fn write_run_png(
     }
     for inf in infractions {
         let colour = match inf.kind {
-            InfractionKind::CollisionPedestrian | InfractionKind::CollisionVehicle | InfractionKind::CollisionLayout => [255, 0, 0],
+            InfractionKind::CollisionPedestrian
+            | InfractionKind::CollisionVehicle
+            | InfractionKind::CollisionLayout => [255, 0, 0],
             InfractionKind::RedLight | InfractionKind::StopSign => [255, 0, 255],
             _ => [255, 255, 0],
         };
@@ -79,5 +84,6 @@ pub fn write_run_png(
         c.disc(inf.location.truncate(), 3.0, colour);
     }
     let file = std::fs::File::create(path)?;
-    c.write_png(std::io::BufWriter::new(file)).map_err(std::io::Error::other)
+    c.write_png(std::io::BufWriter::new(file))
+        .map_err(std::io::Error::other)
 }

@@ -4,8 +4,8 @@
 //! the bundled route sets ([`sets`]).
 
 pub mod option;
-pub mod planner;
 pub mod plan;
+pub mod planner;
 pub mod sets;
 pub mod xml;
 
@@ -50,7 +50,11 @@ impl DenseRoute {
     pub fn new(points: Vec<RoutePoint>, keypoint_length: f64) -> Self {
         let positions: Vec<DVec3> = points.iter().map(|p| p.position).collect();
         let cum = crate::map::lanes::cumulative_length(&positions);
-        Self { points, cum, keypoint_length }
+        Self {
+            points,
+            cum,
+            keypoint_length,
+        }
     }
 
     /// Dense length in metres.

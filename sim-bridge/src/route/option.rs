@@ -64,11 +64,17 @@ impl RoadOption {
 
     /// Whether it is a lane change.
     pub fn is_lane_change(self) -> bool {
-        matches!(self, RoadOption::ChangeLaneLeft | RoadOption::ChangeLaneRight)
+        matches!(
+            self,
+            RoadOption::ChangeLaneLeft | RoadOption::ChangeLaneRight
+        )
     }
 
     /// Whether it is a junction manoeuvre (left, right or straight).
     pub fn is_junction(self) -> bool {
-        matches!(self, RoadOption::Left | RoadOption::Right | RoadOption::Straight)
+        matches!(
+            self,
+            RoadOption::Left | RoadOption::Right | RoadOption::Straight
+        )
     }
 }

@@ -51,7 +51,10 @@ pub fn downsample(route: &DenseRoute, spacing: f64) -> Vec<usize> {
 pub fn global_plan(route: &DenseRoute) -> Vec<PlanNode> {
     downsample(route, PLAN_SPACING)
         .into_iter()
-        .map(|i| PlanNode { position: route.points[i].position, option: route.points[i].option })
+        .map(|i| PlanNode {
+            position: route.points[i].position,
+            option: route.points[i].option,
+        })
         .collect()
 }
 
@@ -86,7 +89,11 @@ impl RouteFollower {
 
     /// Follow `plan` with other thresholds.
     pub fn with_thresholds(plan: Vec<PlanNode>, min_distance: f64, max_distance: f64) -> Self {
-        Self { nodes: plan.into(), min_distance, max_distance }
+        Self {
+            nodes: plan.into(),
+            min_distance,
+            max_distance,
+        }
     }
 
     /// Advance with the ego's position and return the next target node (its position and
@@ -104,7 +111,9 @@ impl RouteFollower {
             if along > self.max_distance {
                 break;
             }
-            along += (self.nodes[i].position - self.nodes[i - 1].position).truncate().length();
+            along += (self.nodes[i].position - self.nodes[i - 1].position)
+                .truncate()
+                .length();
             let d = (self.nodes[i].position.truncate() - ego).length();
             if d <= self.min_distance && d > farthest {
                 farthest = d;

@@ -35,11 +35,22 @@ const STRAIGHT_LIMIT: f64 = 33.0 * std::f64::consts::PI / 180.0;
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
     /// A keypoint is not near any driving lane.
-    #[error("route {route}: keypoint {index} at ({x:.1}, {y:.1}) is not within 50 m of a driving lane")]
-    OffMap { route: String, index: usize, x: f64, y: f64 },
+    #[error(
+        "route {route}: keypoint {index} at ({x:.1}, {y:.1}) is not within 50 m of a driving lane"
+    )]
+    OffMap {
+        route: String,
+        index: usize,
+        x: f64,
+        y: f64,
+    },
     /// No path over the lane graph.
     #[error("route {route}: no path over the lane graph from keypoint {from} to keypoint {to}")]
-    NoPath { route: String, from: usize, to: usize },
+    NoPath {
+        route: String,
+        from: usize,
+        to: usize,
+    },
 }
 
 /// A place on a lane.
@@ -55,7 +66,13 @@ enum Leg {
     /// Drive along `lane` from `from` to `to`.
     Drive { lane: LaneIdx, from: f64, to: f64 },
     /// Move from `from` at `s0` to `to` at `s1` over [`LANE_CHANGE_LENGTH`].
-    Change { from: LaneIdx, s0: f64, to: LaneIdx, s1: f64, left: bool },
+    Change {
+        from: LaneIdx,
+        s0: f64,
+        to: LaneIdx,
+        s1: f64,
+        left: bool,
+    },
 }
 
 /// Plan the dense route of a route file entry.
@@ -75,8 +92,11 @@ pub fn plan_route(map: &Map, spec: &RouteSpec) -> Result<DenseRoute, PlanError> 
         .collect::<Result<Vec<_>, _>>()?;
     let mut legs: Vec<Leg> = Vec::new();
     for (i, pair) in spots.windows(2).enumerate() {
-        let found = search(map, pair[0], pair[1])
-            .ok_or(PlanError::NoPath { route: spec.id.clone(), from: i, to: i + 1 })?;
+        let found = search(map, pair[0], pair[1]).ok_or(PlanError::NoPath {
+            route: spec.id.clone(),
+            from: i,
+            to: i + 1,
+        })?;
         legs.extend(found);
     }
     Ok(DenseRoute::new(densify(map, &legs), spec.keypoint_length()))
@@ -121,7 +141,12 @@ fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
     let mut arena: Vec<(LaneSpot, Option<usize>, Option<Leg>)> = vec![(start, None, None)];
     let mut best: HashMap<(LaneIdx, i64), f64> = HashMap::new();
     let mut heap = BinaryHeap::new();
-    heap.push(Open { f: h(start), g: 0.0, spot: start, id: 0 });
+    heap.push(Open {
+        f: h(start),
+        g: 0.0,
+        spot: start,
+        id: 0,
+    });
     let mut expansions = 0;
     while let Some(Open { g, spot, id, .. }) = heap.pop() {
         expansions += 1;
@@ -130,7 +155,11 @@ fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
         }
         let lane = map.lane(spot.lane);
         if spot.lane == goal.lane && spot.s <= goal.s + 1e-6 {
-            let mut legs = vec![Leg::Drive { lane: spot.lane, from: spot.s, to: goal.s }];
+            let mut legs = vec![Leg::Drive {
+                lane: spot.lane,
+                from: spot.s,
+                to: goal.s,
+            }];
             let mut at = id;
             while let (_, Some(parent), Some(leg)) = arena[at] {
                 legs.push(leg);
@@ -147,15 +176,29 @@ fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
             }
             best.insert(key, g2);
             arena.push((next, Some(id), Some(leg)));
-            heap.push(Open { f: g2 + h(next), g: g2, spot: next, id: arena.len() - 1 });
+            heap.push(Open {
+                f: g2 + h(next),
+                g: g2,
+                spot: next,
+                id: arena.len() - 1,
+            });
         };
         let rest = lane.length() - spot.s;
         for &succ in &lane.successors {
             if map.lane(succ).kind != LaneKind::Driving {
                 continue;
             }
-            let leg = Leg::Drive { lane: spot.lane, from: spot.s, to: lane.length() };
-            push(LaneSpot { lane: succ, s: 0.0 }, rest.max(0.0), leg, &mut arena);
+            let leg = Leg::Drive {
+                lane: spot.lane,
+                from: spot.s,
+                to: lane.length(),
+            };
+            push(
+                LaneSpot { lane: succ, s: 0.0 },
+                rest.max(0.0),
+                leg,
+                &mut arena,
+            );
         }
         if lane.in_junction() {
             continue;
@@ -175,9 +218,20 @@ fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
             if proj.s >= map.lane(n).length() - 1.0 {
                 continue;
             }
-            let leg = Leg::Change { from: spot.lane, s0: spot.s, to: n, s1: proj.s, left };
+            let leg = Leg::Change {
+                from: spot.lane,
+                s0: spot.s,
+                to: n,
+                s1: proj.s,
+                left,
+            };
             let next = LaneSpot { lane: n, s: proj.s };
-            push(next, LANE_CHANGE_LENGTH + LANE_CHANGE_PENALTY, leg, &mut arena);
+            push(
+                next,
+                LANE_CHANGE_LENGTH + LANE_CHANGE_PENALTY,
+                leg,
+                &mut arena,
+            );
         }
     }
     None
@@ -195,6 +249,10 @@ fn densify(map: &Map, legs: &[Leg]) -> Vec<RoutePoint> {
         };
         let gap = (p.position - q.position).length();
         if gap <= 0.05 {
+            // A lane change starts where the previous leg ended: keep its label.
+            if p.option.is_lane_change() {
+                points.last_mut().expect("checked above").option = p.option;
+            }
             return;
         }
         let steps = (gap / RESOLUTION).ceil() as usize;
@@ -212,12 +270,30 @@ fn densify(map: &Map, legs: &[Leg]) -> Vec<RoutePoint> {
                 for i in 0..=n {
                     let pose = l.pose_at(from + (to - from) * i as f64 / n as f64);
                     let option = RoadOption::LaneFollow;
-                    push(RoutePoint { position: pose.position, yaw: pose.yaw, option, lane }, &mut points);
+                    push(
+                        RoutePoint {
+                            position: pose.position,
+                            yaw: pose.yaw,
+                            option,
+                            lane,
+                        },
+                        &mut points,
+                    );
                 }
             }
-            Leg::Change { from, s0, to, s1, left } => {
+            Leg::Change {
+                from,
+                s0,
+                to,
+                s1,
+                left,
+            } => {
                 let (a, b) = (map.lane(from), map.lane(to));
-                let change = if left { RoadOption::ChangeLaneLeft } else { RoadOption::ChangeLaneRight };
+                let change = if left {
+                    RoadOption::ChangeLaneLeft
+                } else {
+                    RoadOption::ChangeLaneRight
+                };
                 let n = (LANE_CHANGE_LENGTH / RESOLUTION).round() as usize;
                 for i in 0..=n {
                     let t = i as f64 / n as f64;
@@ -228,9 +304,20 @@ fn densify(map: &Map, legs: &[Leg]) -> Vec<RoutePoint> {
                     let lane = if w < 0.5 { from } else { to };
                     let yaw = pa.yaw + angle_diff(pb.yaw, pa.yaw) * w;
                     // Like CARLA: the point where the change starts and one a few metres in.
-                    let option =
-                        if i == 0 || i == n / 2 { change } else { RoadOption::LaneFollow };
-                    push(RoutePoint { position, yaw, option, lane }, &mut points);
+                    let option = if i == 0 || i == n / 2 {
+                        change
+                    } else {
+                        RoadOption::LaneFollow
+                    };
+                    push(
+                        RoutePoint {
+                            position,
+                            yaw,
+                            option,
+                            lane,
+                        },
+                        &mut points,
+                    );
                 }
             }
         }

@@ -25,7 +25,9 @@ use crate::towngen::TownStyle;
 pub const KEYPOINT_SPACING: f64 = 40.0;
 
 /// Lengths of CARLA's Town05 Long routes 16-25, metres (keypoint lengths from the notes).
-const TOWN05_LONG_LENGTHS: [f64; 10] = [1071.0, 862.4, 1018.2, 1651.1, 1247.5, 531.1, 991.8, 1271.9, 2101.2, 1554.6];
+const TOWN05_LONG_LENGTHS: [f64; 10] = [
+    1071.0, 862.4, 1018.2, 1651.1, 1247.5, 531.1, 991.8, 1271.9, 2101.2, 1554.6,
+];
 
 /// A bundled route set.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,11 +43,36 @@ pub struct RouteSet {
 
 /// Every bundled set.
 pub const SETS: [RouteSet; 5] = [
-    RouteSet { name: "town05-long-style", town: TownStyle::Town05Style, description: "10 long routes (0.5-2.1 km, 12.3 km) on the evaluation town", seed: 16 },
-    RouteSet { name: "town05-short-style", town: TownStyle::Town05Style, description: "20 short routes (100-400 m) on the evaluation town", seed: 5 },
-    RouteSet { name: "train-small", town: TownStyle::SmallTJunctions, description: "200 short training routes on the small T-junction town", seed: 101 },
-    RouteSet { name: "train-highway", town: TownStyle::Highway, description: "200 short training routes on the highway town", seed: 102 },
-    RouteSet { name: "train-dense", town: TownStyle::DenseMultiLane, description: "200 short training routes on the dense multi-lane town", seed: 103 },
+    RouteSet {
+        name: "town05-long-style",
+        town: TownStyle::Town05Style,
+        description: "10 long routes (0.5-2.1 km, 12.3 km) on the evaluation town",
+        seed: 16,
+    },
+    RouteSet {
+        name: "town05-short-style",
+        town: TownStyle::Town05Style,
+        description: "20 short routes (100-400 m) on the evaluation town",
+        seed: 5,
+    },
+    RouteSet {
+        name: "train-small",
+        town: TownStyle::SmallTJunctions,
+        description: "200 short training routes on the small T-junction town",
+        seed: 101,
+    },
+    RouteSet {
+        name: "train-highway",
+        town: TownStyle::Highway,
+        description: "200 short training routes on the highway town",
+        seed: 102,
+    },
+    RouteSet {
+        name: "train-dense",
+        town: TownStyle::DenseMultiLane,
+        description: "200 short training routes on the dense multi-lane town",
+        seed: 103,
+    },
 ];
 
 impl RouteSet {
@@ -81,20 +108,37 @@ impl RouteSet {
         let lengths = self.lengths(&mut rng);
         let mut routes = Vec::new();
         for (i, &length) in lengths.iter().enumerate() {
-            let id = if long { (16 + i).to_string() } else { i.to_string() };
+            let id = if long {
+                (16 + i).to_string()
+            } else {
+                i.to_string()
+            };
             // Long routes must show the ring road (every other one) and lane changes.
             let wants_ring = long && i % 2 == 1;
             for _attempt in 0..500 {
-                let Some(walk) = random_walk(map, &mut rng, length, if long { 0.45 } else { 0.35 }, if long { 0.5 } else { 0.15 }) else { continue };
+                let Some(walk) = random_walk(
+                    map,
+                    &mut rng,
+                    length,
+                    if long { 0.45 } else { 0.35 },
+                    if long { 0.5 } else { 0.15 },
+                ) else {
+                    continue;
+                };
                 if wants_ring && !walk.lanes.iter().any(|l| is_three_lane(map, *l)) {
                     continue;
                 }
                 if long && !walk.changed_lanes {
                     continue;
                 }
-                let spec = RouteSpec { id: id.clone(), town: self.town.name().to_string(), keypoints: keypoints(map, &walk) };
+                let spec = RouteSpec {
+                    id: id.clone(),
+                    town: self.town.name().to_string(),
+                    keypoints: keypoints(map, &walk),
+                };
                 // The keypoints must plan back into a route of about the walked length.
-                let ok = plan_route(map, &spec).is_ok_and(|d| (d.length() - walk.length).abs() < 0.1 * walk.length + 20.0);
+                let ok = plan_route(map, &spec)
+                    .is_ok_and(|d| (d.length() - walk.length).abs() < 0.1 * walk.length + 20.0);
                 if ok {
                     routes.push(spec);
                     break;
@@ -109,8 +153,15 @@ impl RouteSet {
 pub fn write_bundled(dir: &std::path::Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     for set in SETS {
-        let map = Map::from_str(set.town.name(), crate::towngen::bundled(set.town), Default::default())?;
-        std::fs::write(dir.join(format!("{}.xml", set.name)), write(&set.generate(&map)))?;
+        let map = Map::from_str(
+            set.town.name(),
+            crate::towngen::bundled(set.town),
+            Default::default(),
+        )?;
+        std::fs::write(
+            dir.join(format!("{}.xml", set.name)),
+            write(&set.generate(&map)),
+        )?;
     }
     Ok(())
 }
@@ -130,31 +181,62 @@ fn is_three_lane(map: &Map, lane: LaneIdx) -> bool {
         let mut n = 0;
         while let Some(x) = at {
             n += 1;
-            at = if left { map.lane(x).left } else { map.lane(x).right };
+            at = if left {
+                map.lane(x).left
+            } else {
+                map.lane(x).right
+            };
         }
         n
     };
     1 + count(l.left, true) + count(l.right, false) >= 3
 }
 
-fn random_walk(map: &Map, rng: &mut impl Rng, length: f64, turn_bias: f64, change_rate: f64) -> Option<Walk> {
-    let starts: Vec<&crate::map::Lane> = map.lanes.iter().filter(|l| l.kind == LaneKind::Driving && !l.in_junction() && l.length() > 30.0).collect();
+fn random_walk(
+    map: &Map,
+    rng: &mut impl Rng,
+    length: f64,
+    turn_bias: f64,
+    change_rate: f64,
+) -> Option<Walk> {
+    let starts: Vec<&crate::map::Lane> = map
+        .lanes
+        .iter()
+        .filter(|l| l.kind == LaneKind::Driving && !l.in_junction() && l.length() > 30.0)
+        .collect();
     let start = starts.get(rng.random_range(0..starts.len().max(1)))?;
     let mut lane = start.idx;
     let mut s = rng.random_range(2.0..start.length() / 2.0);
-    let mut walk = Walk { lanes: vec![lane], pieces: Vec::new(), length: 0.0, changed_lanes: false };
+    let mut walk = Walk {
+        lanes: vec![lane],
+        pieces: Vec::new(),
+        length: 0.0,
+        changed_lanes: false,
+    };
     let mut last_junction_turned = false;
     while walk.length < length {
         let l = map.lane(lane);
         let remaining = length - walk.length;
         // A lane change in the first half of a long enough lane.
-        let neighbour = if rng.random_range(0.0..1.0) < 0.5 { l.left } else { l.right };
-        if !l.in_junction() && l.length() - s > 70.0 && remaining > 80.0 && rng.random_range(0.0..1.0) < change_rate {
+        let neighbour = if rng.random_range(0.0..1.0) < 0.5 {
+            l.left
+        } else {
+            l.right
+        };
+        if !l.in_junction()
+            && l.length() - s > 70.0
+            && remaining > 80.0
+            && rng.random_range(0.0..1.0) < change_rate
+        {
             if let Some(n) = neighbour.filter(|n| map.lane(*n).kind == LaneKind::Driving) {
                 let at = s + 20.0;
                 walk.pieces.push((lane, s, at));
                 walk.length += at - s;
-                let proj = map.lane(n).project(l.pose_at(at + super::planner::LANE_CHANGE_LENGTH).position.truncate());
+                let proj = map.lane(n).project(
+                    l.pose_at(at + super::planner::LANE_CHANGE_LENGTH)
+                        .position
+                        .truncate(),
+                );
                 lane = n;
                 s = proj.s;
                 walk.lanes.push(lane);
@@ -168,16 +250,27 @@ fn random_walk(map: &Map, rng: &mut impl Rng, length: f64, turn_bias: f64, chang
         if end < l.length() {
             break;
         }
-        let options: Vec<LaneIdx> = l.successors.iter().copied().filter(|x| map.lane(*x).kind == LaneKind::Driving).collect();
+        let options: Vec<LaneIdx> = l
+            .successors
+            .iter()
+            .copied()
+            .filter(|x| map.lane(*x).kind == LaneKind::Driving)
+            .collect();
         if options.is_empty() {
             return None;
         }
-        let turns: Vec<LaneIdx> = options.iter().copied().filter(|x| is_turn(map, *x)).collect();
-        let pick = if !turns.is_empty() && !last_junction_turned && rng.random_range(0.0..1.0) < turn_bias {
-            turns[rng.random_range(0..turns.len())]
-        } else {
-            options[rng.random_range(0..options.len())]
-        };
+        let turns: Vec<LaneIdx> = options
+            .iter()
+            .copied()
+            .filter(|x| is_turn(map, *x))
+            .collect();
+        let pick =
+            if !turns.is_empty() && !last_junction_turned && rng.random_range(0.0..1.0) < turn_bias
+            {
+                turns[rng.random_range(0..turns.len())]
+            } else {
+                options[rng.random_range(0..options.len())]
+            };
         if map.lane(pick).in_junction() {
             last_junction_turned = is_turn(map, pick);
         }
@@ -190,7 +283,8 @@ fn random_walk(map: &Map, rng: &mut impl Rng, length: f64, turn_bias: f64, chang
 
 fn is_turn(map: &Map, lane: LaneIdx) -> bool {
     let l = map.lane(lane);
-    l.in_junction() && crate::map::angle_diff(l.pose_at(l.length()).yaw, l.pose_at(0.0).yaw).abs() > 0.6
+    l.in_junction()
+        && crate::map::angle_diff(l.pose_at(l.length()).yaw, l.pose_at(0.0).yaw).abs() > 0.6
 }
 
 /// Keypoints for a walk: its start, every [`KEYPOINT_SPACING`] m, the middle of each junction
@@ -200,11 +294,16 @@ fn keypoints(map: &Map, walk: &Walk) -> Vec<Keypoint> {
     let mut since = 0.0;
     let at = |lane: LaneIdx, s: f64| {
         let p = map.lane(lane).pose_at(s);
-        Keypoint { position: p.position, yaw: p.yaw }
+        Keypoint {
+            position: p.position,
+            yaw: p.yaw,
+        }
     };
     for (k, &(lane, from, to)) in walk.pieces.iter().enumerate() {
         let l = map.lane(lane);
-        let changed_into = k > 0 && walk.pieces[k - 1].0 != lane && !map.lane(walk.pieces[k - 1].0).successors.contains(&lane);
+        let changed_into = k > 0
+            && walk.pieces[k - 1].0 != lane
+            && !map.lane(walk.pieces[k - 1].0).successors.contains(&lane);
         if k == 0 || changed_into {
             out.push(at(lane, from));
             since = 0.0;
@@ -221,7 +320,10 @@ fn keypoints(map: &Map, walk: &Walk) -> Vec<Keypoint> {
             out.push(at(lane, s));
         }
         since += to - s;
-        let next_is_change = walk.pieces.get(k + 1).is_some_and(|n| !l.successors.contains(&n.0) && n.0 != lane);
+        let next_is_change = walk
+            .pieces
+            .get(k + 1)
+            .is_some_and(|n| !l.successors.contains(&n.0) && n.0 != lane);
         if next_is_change || k + 1 == walk.pieces.len() {
             out.push(at(lane, to));
             since = 0.0;

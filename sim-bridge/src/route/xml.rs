@@ -41,7 +41,10 @@ pub struct RouteSpec {
 impl RouteSpec {
     /// 3-D polyline length over the keypoints (the leaderboard's `route_length`).
     pub fn keypoint_length(&self) -> f64 {
-        self.keypoints.windows(2).map(|w| (w[1].position - w[0].position).length()).sum()
+        self.keypoints
+            .windows(2)
+            .map(|w| (w[1].position - w[0].position).length())
+            .sum()
     }
 }
 
@@ -50,7 +53,10 @@ impl RouteSpec {
 pub enum RouteFileError {
     /// The file could not be read.
     #[error("cannot read route file {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     /// Over a cap on untrusted input.
     #[error("route file {origin}: {what}")]
     TooLarge { origin: String, what: String },
@@ -65,11 +71,17 @@ pub enum RouteFileError {
 /// Read a route file.
 pub fn read_file(path: &Path) -> Result<Vec<RouteSpec>, RouteFileError> {
     let shown = path.display().to_string();
-    let io = |source| RouteFileError::Io { path: shown.clone(), source };
+    let io = |source| RouteFileError::Io {
+        path: shown.clone(),
+        source,
+    };
     let bytes = std::fs::metadata(path).map_err(io)?.len();
     if bytes > MAX_ROUTE_FILE_BYTES {
         let what = format!("{bytes} bytes is over the {MAX_ROUTE_FILE_BYTES}-byte limit");
-        return Err(RouteFileError::TooLarge { origin: shown, what });
+        return Err(RouteFileError::TooLarge {
+            origin: shown,
+            what,
+        });
     }
     let text = std::fs::read_to_string(path).map_err(io)?;
     parse(&shown, &text)
@@ -77,28 +89,45 @@ pub fn read_file(path: &Path) -> Result<Vec<RouteSpec>, RouteFileError> {
 
 /// Parse a route file held in memory; `origin` names it in errors.
 pub fn parse(origin: &str, text: &str) -> Result<Vec<RouteSpec>, RouteFileError> {
-    let invalid = |message: String| RouteFileError::Invalid { origin: origin.into(), message };
-    let doc = roxmltree::Document::parse(text)
-        .map_err(|e| RouteFileError::Xml { origin: origin.into(), message: e.to_string() })?;
+    let invalid = |message: String| RouteFileError::Invalid {
+        origin: origin.into(),
+        message,
+    };
+    let doc = roxmltree::Document::parse(text).map_err(|e| RouteFileError::Xml {
+        origin: origin.into(),
+        message: e.to_string(),
+    })?;
     let root = doc.root_element();
     if root.tag_name().name() != "routes" {
-        return Err(invalid(format!("root element is <{}>, expected <routes>", root.tag_name().name())));
+        return Err(invalid(format!(
+            "root element is <{}>, expected <routes>",
+            root.tag_name().name()
+        )));
     }
     let mut routes = Vec::new();
     for node in root.children().filter(|n| n.has_tag_name("route")) {
         if routes.len() == MAX_ROUTES {
             let what = format!("more than {MAX_ROUTES} routes");
-            return Err(RouteFileError::TooLarge { origin: origin.into(), what });
+            return Err(RouteFileError::TooLarge {
+                origin: origin.into(),
+                what,
+            });
         }
-        let id = node
-            .attribute("id")
-            .ok_or_else(|| invalid(format!("a <route> at byte {} has no id", node.range().start)))?;
+        let id = node.attribute("id").ok_or_else(|| {
+            invalid(format!(
+                "a <route> at byte {} has no id",
+                node.range().start
+            ))
+        })?;
         let town = node.attribute("town").unwrap_or("").to_string();
         let mut keypoints = Vec::new();
         for wp in node.descendants().filter(|n| n.has_tag_name("waypoint")) {
             if keypoints.len() == MAX_KEYPOINTS {
                 let what = format!("route {id} has more than {MAX_KEYPOINTS} waypoints");
-                return Err(RouteFileError::TooLarge { origin: origin.into(), what });
+                return Err(RouteFileError::TooLarge {
+                    origin: origin.into(),
+                    what,
+                });
             }
             let num = |name: &str, required: bool| -> Result<f64, RouteFileError> {
                 match wp.attribute(name) {
@@ -106,19 +135,36 @@ pub fn parse(origin: &str, text: &str) -> Result<Vec<RouteSpec>, RouteFileError>
                         Err(invalid(format!("route {id}: a <waypoint> has no '{name}'")))
                     }
                     None => Ok(0.0),
-                    Some(v) => v.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(
-                        || invalid(format!("route {id}: waypoint {name}='{v}' is not a finite number")),
-                    ),
+                    Some(v) => v
+                        .trim()
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| {
+                            invalid(format!(
+                                "route {id}: waypoint {name}='{v}' is not a finite number"
+                            ))
+                        }),
                 }
             };
             let (x, y, z) = (num("x", true)?, num("y", true)?, num("z", false)?);
             let yaw = num("yaw", false)?;
-            keypoints.push(Keypoint { position: DVec3::new(x, -y, z), yaw: -yaw.to_radians() });
+            keypoints.push(Keypoint {
+                position: DVec3::new(x, -y, z),
+                yaw: -yaw.to_radians(),
+            });
         }
         if keypoints.len() < 2 {
-            return Err(invalid(format!("route {id} has {} waypoints; a route needs at least 2", keypoints.len())));
+            return Err(invalid(format!(
+                "route {id} has {} waypoints; a route needs at least 2",
+                keypoints.len()
+            )));
         }
-        routes.push(RouteSpec { id: id.to_string(), town, keypoints });
+        routes.push(RouteSpec {
+            id: id.to_string(),
+            town,
+            keypoints,
+        });
     }
     if routes.is_empty() {
         return Err(invalid("no <route> element".into()));
@@ -130,7 +176,12 @@ pub fn parse(origin: &str, text: &str) -> Result<Vec<RouteSpec>, RouteFileError>
 pub fn write(routes: &[RouteSpec]) -> String {
     let mut out = String::from("<?xml version='1.0' encoding='UTF-8'?>\n<routes>\n");
     for r in routes {
-        let _ = writeln!(out, "  <route id=\"{}\" town=\"{}\">", escape(&r.id), escape(&r.town));
+        let _ = writeln!(
+            out,
+            "  <route id=\"{}\" town=\"{}\">",
+            escape(&r.id),
+            escape(&r.town)
+        );
         for k in &r.keypoints {
             let p = k.position;
             let yaw = clean(-k.yaw.to_degrees());
@@ -154,5 +205,8 @@ fn clean(v: f64) -> f64 {
 }
 
 fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('"', "&quot;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }

@@ -26,12 +26,30 @@ impl Control {
     /// The same control with every field clamped to its range; NaN becomes 0 (and brake 1, so
     /// a broken agent stops rather than drives off).
     pub fn sanitized(self) -> Control {
-        let clamp = |v: f64, lo: f64| if v.is_nan() { f64::NAN } else { v.clamp(lo, 1.0) };
-        let (steer, throttle, brake) = (clamp(self.steer, -1.0), clamp(self.throttle, 0.0), clamp(self.brake, 0.0));
+        let clamp = |v: f64, lo: f64| {
+            if v.is_nan() {
+                f64::NAN
+            } else {
+                v.clamp(lo, 1.0)
+            }
+        };
+        let (steer, throttle, brake) = (
+            clamp(self.steer, -1.0),
+            clamp(self.throttle, 0.0),
+            clamp(self.brake, 0.0),
+        );
         if steer.is_nan() || throttle.is_nan() || brake.is_nan() {
-            return Control { steer: 0.0, throttle: 0.0, brake: 1.0 };
+            return Control {
+                steer: 0.0,
+                throttle: 0.0,
+                brake: 1.0,
+            };
         }
-        Control { steer, throttle, brake }
+        Control {
+            steer,
+            throttle,
+            brake,
+        }
     }
 }
 
@@ -94,7 +112,14 @@ pub struct Ego {
 impl Ego {
     /// An ego at rest.
     pub fn new(params: EgoParams, position: DVec3, yaw: f64) -> Self {
-        Self { params, position, yaw, speed: 0.0, steer: 0.0, control: Control::default() }
+        Self {
+            params,
+            position,
+            yaw,
+            speed: 0.0,
+            steer: 0.0,
+            control: Control::default(),
+        }
     }
 
     /// Integrate one step of `dt` seconds under `control`.
@@ -105,7 +130,11 @@ impl Ego {
         let max_delta = dt / p.steer_time;
         self.steer += (c.steer - self.steer).clamp(-max_delta, max_delta);
         let drive = c.throttle * p.max_accel * (1.0 - self.speed / p.top_speed).max(0.0);
-        let resist = if self.speed > 0.0 { p.rolling + p.drag * self.speed * self.speed } else { 0.0 };
+        let resist = if self.speed > 0.0 {
+            p.rolling + p.drag * self.speed * self.speed
+        } else {
+            0.0
+        };
         let accel = drive - c.brake * p.max_brake - resist;
         let v0 = self.speed;
         let v1 = (v0 + accel * dt).max(0.0);
@@ -123,7 +152,12 @@ impl Ego {
 
     /// The published state.
     pub fn state(&self) -> EgoState {
-        EgoState { position: self.position, yaw: self.yaw, speed: self.speed, half_extent: self.params.half_extent }
+        EgoState {
+            position: self.position,
+            yaw: self.yaw,
+            speed: self.speed,
+            half_extent: self.params.half_extent,
+        }
     }
 }
 

@@ -40,7 +40,11 @@ impl LightController {
             groups.push((lights, rng.random_range(0.0..cycle)));
         }
         let n = map.lights.len();
-        let mut c = Self { groups, states: vec![LightState::Red; n], forced: vec![None; n] };
+        let mut c = Self {
+            groups,
+            states: vec![LightState::Red; n],
+            forced: vec![None; n],
+        };
         c.update(0.0);
         c
     }

@@ -44,7 +44,13 @@ pub struct WorldConfig {
 
 impl Default for WorldConfig {
     fn default() -> Self {
-        Self { vehicles: 120, walkers: 0, scenarios: true, parked_cars: true, seed: 0 }
+        Self {
+            vehicles: 120,
+            walkers: 0,
+            scenarios: true,
+            parked_cars: true,
+            seed: 0,
+        }
     }
 }
 
@@ -93,9 +99,19 @@ impl<'m> World<'m> {
         let start = route.points[0];
         let ego = Ego::new(EgoParams::default(), start.position, start.yaw);
         let lights = LightController::new(map, &mut rng);
-        let traffic = Traffic::new(map, config.vehicles, start.position.truncate(), 1000, &mut rng);
+        let traffic = Traffic::new(
+            map,
+            config.vehicles,
+            start.position.truncate(),
+            1000,
+            &mut rng,
+        );
         let mut ids = IdSource(100_000);
-        let mut statics = if config.parked_cars { scenarios::parked_cars(map, &mut rng) } else { Vec::new() };
+        let mut statics = if config.parked_cars {
+            scenarios::parked_cars(map, &mut rng)
+        } else {
+            Vec::new()
+        };
         let mut crossers = scenarios::background_walkers(map, config.walkers, &mut ids, &mut rng);
         let mut scenario_list = Vec::new();
         if config.scenarios {
@@ -107,7 +123,19 @@ impl<'m> World<'m> {
         // Nothing may start on top of the ego.
         let ego_box = ego.state().obb();
         statics.retain(|s| !s.obb.overlaps(&ego_box));
-        let mut world = World { map, time: 0.0, ego, traffic, crossers, statics, lights, scenarios: scenario_list, route_progress: 0, rng, ids };
+        let mut world = World {
+            map,
+            time: 0.0,
+            ego,
+            traffic,
+            crossers,
+            statics,
+            lights,
+            scenarios: scenario_list,
+            route_progress: 0,
+            rng,
+            ids,
+        };
         world.settle_ego_height();
         world
     }
@@ -124,17 +152,41 @@ impl<'m> World<'m> {
 
     /// Every other actor.
     pub fn actors(&self) -> Vec<ActorView> {
-        let mut out = Vec::with_capacity(self.traffic.vehicles.len() + self.crossers.len() + self.statics.len());
+        let mut out = Vec::with_capacity(
+            self.traffic.vehicles.len() + self.crossers.len() + self.statics.len(),
+        );
         for v in &self.traffic.vehicles {
             let (p, yaw) = v.pose(self.map);
-            let obb = Obb { centre: p.truncate(), yaw, half: v.half };
-            out.push(ActorView { id: v.id, kind: ActorKind::Vehicle, obb, z: p.z, velocity: DVec2::from_angle(yaw) * v.speed });
+            let obb = Obb {
+                centre: p.truncate(),
+                yaw,
+                half: v.half,
+            };
+            out.push(ActorView {
+                id: v.id,
+                kind: ActorKind::Vehicle,
+                obb,
+                z: p.z,
+                velocity: DVec2::from_angle(yaw) * v.speed,
+            });
         }
-        for c in &self.crossers {
-            out.push(ActorView { id: c.id, kind: c.kind, obb: c.obb(), z: c.position.z, velocity: c.velocity() });
+        for c in self.crossers.iter().filter(|c| !c.gone) {
+            out.push(ActorView {
+                id: c.id,
+                kind: c.kind,
+                obb: c.obb(),
+                z: c.position.z,
+                velocity: c.velocity(),
+            });
         }
         for s in &self.statics {
-            out.push(ActorView { id: 0, kind: ActorKind::Static, obb: s.obb, z: s.z, velocity: DVec2::ZERO });
+            out.push(ActorView {
+                id: 0,
+                kind: ActorKind::Static,
+                obb: s.obb,
+                z: s.z,
+                velocity: DVec2::ZERO,
+            });
         }
         out
     }
@@ -155,10 +207,12 @@ impl<'m> World<'m> {
                     }
                 }
                 ScenarioAction::RedLightRunner { ego_light, lane, s } => {
-                    self.lights.force(ego_light, LightState::Green, self.time + 15.0);
+                    self.lights
+                        .force(ego_light, LightState::Green, self.time + 15.0);
                     let id = self.ids.0 + 1;
                     self.ids.0 += 1;
-                    self.traffic.spawn_runner(self.map, id, lane, s, &mut self.rng);
+                    self.traffic
+                        .spawn_runner(self.map, id, lane, s, &mut self.rng);
                 }
             }
         }
@@ -169,35 +223,57 @@ impl<'m> World<'m> {
         self.ego.step(control, DT);
         self.settle_ego_height();
         let ego = self.ego.state();
-        let on_lane = self.map.lane_for_pose(ego.position, ego.yaw).filter(|(_, p)| p.distance < 2.0).map(|(l, p)| (l, p.s));
-        let presence = EgoPresence { on_lane, position: ego.position.truncate(), half_length: ego.half_extent.x, speed: ego.speed };
+        let on_lane = self
+            .map
+            .lane_for_pose(ego.position, ego.yaw)
+            .filter(|(_, p)| p.distance < 2.0)
+            .map(|(l, p)| (l, p.s));
+        let presence = EgoPresence {
+            on_lane,
+            position: ego.position.truncate(),
+            half_length: ego.half_extent.x,
+            speed: ego.speed,
+        };
         self.time += DT;
         self.lights.update(self.time);
-        self.traffic.step(self.map, self.lights.states(), &presence, self.time, DT, &mut self.rng);
+        self.traffic.step(
+            self.map,
+            self.lights.states(),
+            &presence,
+            self.time,
+            DT,
+            &mut self.rng,
+        );
         for c in &mut self.crossers {
             c.step(DT);
         }
         self.collisions()
     }
 
-    /// Contacts of the ego box with every other actor; a crash stops the ego.
+    /// Contacts of the ego box with every other actor; a crash stops the ego and takes a hit
+    /// walker or cyclist out of the scene.
     fn collisions(&mut self) -> Vec<CollisionEvent> {
         let ego = self.ego.state();
         let ego_box = ego.obb();
         let mut events = Vec::new();
         for a in self.actors() {
-            if (a.z - ego.position.z).abs() > 3.0 || (a.obb.centre - ego_box.centre).length() > 8.0 {
+            if (a.z - ego.position.z).abs() > 3.0 || (a.obb.centre - ego_box.centre).length() > 8.0
+            {
                 continue;
             }
             if a.obb.overlaps(&ego_box) {
-                events.push(CollisionEvent { other_id: a.id, class: a.kind.collision_class(), location: ego.position });
+                events.push(CollisionEvent {
+                    other_id: a.id,
+                    class: a.kind.collision_class(),
+                    location: ego.position,
+                });
             }
         }
         if !events.is_empty() {
             self.ego.speed = 0.0;
             let hit: Vec<u32> = events.iter().map(|e| e.other_id).collect();
             for c in self.crossers.iter_mut().filter(|c| hit.contains(&c.id)) {
-                c.moving = false;
+                c.gone = true;
             }
         }
         events

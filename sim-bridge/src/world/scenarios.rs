@@ -51,17 +51,27 @@ pub struct Crosser {
     pub half: DVec2,
     /// Background walkers turn around at the end instead of stopping.
     pub patrol: bool,
+    /// Left the scene: crossed the road (scenario crossers leave like CARLA's), or was hit.
+    pub gone: bool,
 }
 
 impl Crosser {
     /// Ground box.
     pub fn obb(&self) -> Obb {
-        Obb { centre: self.position.truncate(), yaw: self.yaw, half: self.half }
+        Obb {
+            centre: self.position.truncate(),
+            yaw: self.yaw,
+            half: self.half,
+        }
     }
 
     /// Current velocity in plan.
     pub fn velocity(&self) -> DVec2 {
-        if self.moving && self.remaining > 0.0 { DVec2::from_angle(self.yaw) * self.speed } else { DVec2::ZERO }
+        if self.moving && self.remaining > 0.0 {
+            DVec2::from_angle(self.yaw) * self.speed
+        } else {
+            DVec2::ZERO
+        }
     }
 
     /// Move for `dt`.
@@ -73,6 +83,8 @@ impl Crosser {
             if self.patrol {
                 self.yaw += std::f64::consts::PI;
                 self.remaining = 40.0;
+            } else {
+                self.gone = true;
             }
             return;
         }
@@ -97,7 +109,11 @@ pub enum ScenarioAction {
     /// Start the crosser with this id.
     StartCrosser(u32),
     /// Hold `ego_light` green and launch a red-light runner from `lane` at `s`.
-    RedLightRunner { ego_light: usize, lane: LaneIdx, s: f64 },
+    RedLightRunner {
+        ego_light: usize,
+        lane: LaneIdx,
+        s: f64,
+    },
 }
 
 /// One scenario instance on the route.
@@ -134,9 +150,10 @@ impl IdSource {
     }
 }
 
-/// Where the right road edge is at a route point: the point on the edge and the outward
-/// (rightward) unit vector.
-fn right_edge(map: &Map, lane: LaneIdx, at: DVec3, yaw: f64) -> (DVec3, DVec2) {
+/// The carriageway across a route point: the point on its right edge, the outward (rightward)
+/// unit vector, and the distance from that edge to the far (left) edge of the whole road,
+/// opposite lanes included.
+fn carriageway(map: &Map, lane: LaneIdx, at: DVec3, yaw: f64) -> (DVec3, DVec2, f64) {
     let mut l = map.lane(lane);
     while let Some(r) = l.right.filter(|r| map.lane(*r).kind == LaneKind::Driving) {
         l = map.lane(r);
@@ -144,11 +161,28 @@ fn right_edge(map: &Map, lane: LaneIdx, at: DVec3, yaw: f64) -> (DVec3, DVec2) {
     let proj = l.project(at.truncate());
     let centre = l.pose_at(proj.s).position;
     let right = -DVec2::from_angle(yaw).perp();
-    (centre + (right * (l.width / 2.0)).extend(0.0), right)
+    let edge = centre + (right * (l.width / 2.0)).extend(0.0);
+    let across = map
+        .lanes_near(edge.truncate(), 25.0, |x| {
+            x.kind == LaneKind::Driving && !x.in_junction()
+        })
+        .into_iter()
+        .map(|(x, p)| {
+            let point = map.lane(x).pose_at(p.s).position.truncate();
+            (point - edge.truncate()).dot(-right) + map.lane(x).width / 2.0
+        })
+        .filter(|w| *w < 25.0)
+        .fold(l.width, f64::max);
+    (edge, right, across)
 }
 
 /// Place scenarios along `route`.
-pub fn place_route_scenarios(map: &Map, route: &DenseRoute, ids: &mut IdSource, rng: &mut impl Rng) -> Placement {
+pub fn place_route_scenarios(
+    map: &Map,
+    route: &DenseRoute,
+    ids: &mut IdSource,
+    rng: &mut impl Rng,
+) -> Placement {
     let mut out = Placement::default();
     let n = route.points.len();
     let ahead = CROSSING_AHEAD as usize;
@@ -157,13 +191,27 @@ pub fn place_route_scenarios(map: &Map, route: &DenseRoute, ids: &mut IdSource, 
     let mut i = 0;
     while i + ahead + 15 < n {
         let p = route.points[i];
-        let clear = route.points[i..i + ahead + 15].iter().all(|q| q.option == RoadOption::LaneFollow && !map.lane(q.lane).in_junction());
+        let window = &route.points[i..i + ahead + 15];
+        let straight = window
+            .iter()
+            .all(|q| crate::map::angle_diff(q.yaw, p.yaw).abs() < 0.1);
+        let clear = straight
+            && window
+                .iter()
+                .all(|q| q.option == RoadOption::LaneFollow && !map.lane(q.lane).in_junction());
         if route.cum[i] >= next_s3 && clear {
             let c = route.points[i + ahead];
-            let (edge, right) = right_edge(map, c.lane, c.position, c.yaw);
+            let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
             let forward = DVec2::from_angle(c.yaw);
             let van_centre = edge.truncate() + right * 1.4 - forward * 3.5;
-            out.statics.push(StaticProp { obb: Obb { centre: van_centre, yaw: c.yaw, half: DVec2::new(2.5, 1.1) }, z: edge.z });
+            out.statics.push(StaticProp {
+                obb: Obb {
+                    centre: van_centre,
+                    yaw: c.yaw,
+                    half: DVec2::new(2.5, 1.1),
+                },
+                z: edge.z,
+            });
             let id = ids.next();
             let start = edge.truncate() + right * 2.5;
             out.crossers.push(Crosser {
@@ -172,17 +220,22 @@ pub fn place_route_scenarios(map: &Map, route: &DenseRoute, ids: &mut IdSource, 
                 position: start.extend(edge.z),
                 yaw: (-right).y.atan2((-right).x),
                 speed: WALKER_SPEED,
-                remaining: 2.5 + 2.0 * map.lane(c.lane).width + 1.0,
+                remaining: 2.5 + across + 2.5,
                 moving: false,
                 half: DVec2::splat(0.3),
                 patrol: false,
+                gone: false,
             });
-            out.scenarios.push(Scenario { name: "Scenario3", trigger: i, action: ScenarioAction::StartCrosser(id), fired: false });
+            out.scenarios.push(Scenario {
+                name: "Scenario3",
+                trigger: i,
+                action: ScenarioAction::StartCrosser(id),
+                fired: false,
+            });
             next_s3 = route.cum[i] + rng.random_range(0.6..1.4) * S3_SPACING;
             i += ahead + 15;
             continue;
         }
-        let _ = p;
         i += 1;
     }
     // Junction runs: S4 after turns, S7-9 at signalized junctions.
@@ -198,17 +251,29 @@ pub fn place_route_scenarios(map: &Map, route: &DenseRoute, ids: &mut IdSource, 
         }
         let option = route.points[start].option;
         let incoming = route.points[start.saturating_sub(1)].lane;
-        let light = map.lights.iter().find(|l| l.stop_lines.iter().any(|s| s.lane == incoming)).map(|l| l.id);
+        let light = map
+            .lights
+            .iter()
+            .find(|l| l.stop_lines.iter().any(|s| s.lane == incoming))
+            .map(|l| l.id);
         if let (Some(ego_light), true) = (light, rng.random_range(0.0..1.0) < 0.5) {
             if let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light) {
                 let trigger = start.saturating_sub(30);
-                out.scenarios.push(Scenario { name: "Scenario7", trigger, action: ScenarioAction::RedLightRunner { ego_light, lane, s }, fired: false });
+                out.scenarios.push(Scenario {
+                    name: "Scenario7",
+                    trigger,
+                    action: ScenarioAction::RedLightRunner { ego_light, lane, s },
+                    fired: false,
+                });
                 continue;
             }
         }
-        if matches!(option, RoadOption::Left | RoadOption::Right) && i + ahead < n && rng.random_range(0.0..1.0) < 0.5 {
+        if matches!(option, RoadOption::Left | RoadOption::Right)
+            && i + ahead < n
+            && rng.random_range(0.0..1.0) < 0.5
+        {
             let c = route.points[(i + 10).min(n - 1)];
-            let (edge, right) = right_edge(map, c.lane, c.position, c.yaw);
+            let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
             let id = ids.next();
             let start_pos = edge.truncate() + right * 3.0;
             out.crossers.push(Crosser {
@@ -217,12 +282,18 @@ pub fn place_route_scenarios(map: &Map, route: &DenseRoute, ids: &mut IdSource, 
                 position: start_pos.extend(edge.z),
                 yaw: (-right).y.atan2((-right).x),
                 speed: CYCLIST_SPEED,
-                remaining: 3.0 + 2.0 * map.lane(c.lane).width + 2.0,
+                remaining: 3.0 + across + 3.0,
                 moving: false,
                 half: DVec2::new(0.9, 0.35),
                 patrol: false,
+                gone: false,
             });
-            out.scenarios.push(Scenario { name: "Scenario4", trigger: start, action: ScenarioAction::StartCrosser(id), fired: false });
+            out.scenarios.push(Scenario {
+                name: "Scenario4",
+                trigger: start,
+                action: ScenarioAction::StartCrosser(id),
+                fired: false,
+            });
         }
     }
     out.scenarios.sort_by_key(|s| s.trigger);
@@ -235,7 +306,11 @@ fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(
     let junction = map.lane(ego_connector).junction?;
     let conflicts = super::traffic::conflicts(map);
     let theirs = conflicts.get(&ego_connector)?;
-    for light in map.lights.iter().filter(|l| l.junction == junction && l.id != ego_light) {
+    for light in map
+        .lights
+        .iter()
+        .filter(|l| l.junction == junction && l.id != ego_light)
+    {
         for line in &light.stop_lines {
             let lane = map.lane(line.lane);
             let crosses = lane.successors.iter().any(|s| theirs.contains(s));
@@ -250,12 +325,23 @@ fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(
 /// Parked cars on parking lanes, about one per 12 m with gaps, from the seed.
 pub fn parked_cars(map: &Map, rng: &mut impl Rng) -> Vec<StaticProp> {
     let mut out = Vec::new();
-    for lane in map.lanes.iter().filter(|l| l.kind == LaneKind::Parking && l.length() > 8.0) {
+    for lane in map
+        .lanes
+        .iter()
+        .filter(|l| l.kind == LaneKind::Parking && l.length() > 8.0)
+    {
         let mut s = rng.random_range(2.0..8.0);
         while s + 3.0 < lane.length() {
             if rng.random_range(0.0..1.0) < 0.45 {
                 let pose = lane.pose_at(s);
-                out.push(StaticProp { obb: Obb { centre: pose.position.truncate(), yaw: pose.yaw, half: DVec2::new(2.2, 0.95) }, z: pose.position.z });
+                out.push(StaticProp {
+                    obb: Obb {
+                        centre: pose.position.truncate(),
+                        yaw: pose.yaw,
+                        half: DVec2::new(2.2, 0.95),
+                    },
+                    z: pose.position.z,
+                });
             }
             s += rng.random_range(6.0..9.0);
         }
@@ -264,8 +350,17 @@ pub fn parked_cars(map: &Map, rng: &mut impl Rng) -> Vec<StaticProp> {
 }
 
 /// Background walkers pacing along sidewalks.
-pub fn background_walkers(map: &Map, count: usize, ids: &mut IdSource, rng: &mut impl Rng) -> Vec<Crosser> {
-    let sidewalks: Vec<&crate::map::Lane> = map.lanes.iter().filter(|l| l.kind == LaneKind::Sidewalk && l.length() > 20.0).collect();
+pub fn background_walkers(
+    map: &Map,
+    count: usize,
+    ids: &mut IdSource,
+    rng: &mut impl Rng,
+) -> Vec<Crosser> {
+    let sidewalks: Vec<&crate::map::Lane> = map
+        .lanes
+        .iter()
+        .filter(|l| l.kind == LaneKind::Sidewalk && l.length() > 20.0)
+        .collect();
     if sidewalks.is_empty() {
         return Vec::new();
     }
@@ -283,6 +378,7 @@ pub fn background_walkers(map: &Map, count: usize, ids: &mut IdSource, rng: &mut
                 moving: true,
                 half: DVec2::splat(0.3),
                 patrol: true,
+                gone: false,
             }
         })
         .collect()

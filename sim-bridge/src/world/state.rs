@@ -61,7 +61,11 @@ pub struct EgoState {
 impl EgoState {
     /// The ego's ground box.
     pub fn obb(&self) -> Obb {
-        Obb { centre: self.position.truncate(), yaw: self.yaw, half: self.half_extent }
+        Obb {
+            centre: self.position.truncate(),
+            yaw: self.yaw,
+            half: self.half_extent,
+        }
     }
 
     /// Unit forward vector in plan.

@@ -107,14 +107,24 @@ impl Vehicle {
     /// Ground box.
     pub fn obb(&self, map: &Map) -> Obb {
         let (p, yaw) = self.pose(map);
-        Obb { centre: p.truncate(), yaw, half: self.half }
+        Obb {
+            centre: p.truncate(),
+            yaw,
+            half: self.half,
+        }
     }
 }
 
 impl Traffic {
     /// Precompute junction conflicts and spawn `count` vehicles on free driving lanes, keeping
     /// `keep_clear` (the ego's start) free within 25 m.
-    pub fn new(map: &Map, count: usize, keep_clear: DVec2, first_id: u32, rng: &mut impl Rng) -> Self {
+    pub fn new(
+        map: &Map,
+        count: usize,
+        keep_clear: DVec2,
+        first_id: u32,
+        rng: &mut impl Rng,
+    ) -> Self {
         let mut light_at_end = HashMap::new();
         for light in &map.lights {
             for line in &light.stop_lines {
@@ -127,9 +137,16 @@ impl Traffic {
                 stop_at_end.insert(line.lane, sign.id);
             }
         }
-        let mut traffic = Traffic { vehicles: Vec::new(), conflicts: conflicts(map), light_at_end, stop_at_end };
+        let mut traffic = Traffic {
+            vehicles: Vec::new(),
+            conflicts: conflicts(map),
+            light_at_end,
+            stop_at_end,
+        };
         for k in 0..count {
-            let Some((lane, s)) = traffic.free_spot(map, keep_clear, 25.0, rng) else { break };
+            let Some((lane, s)) = traffic.free_spot(map, keep_clear, 25.0, rng) else {
+                break;
+            };
             let v = new_vehicle(map, first_id + k as u32, lane, s, rng);
             traffic.vehicles.push(v);
         }
@@ -137,11 +154,22 @@ impl Traffic {
     }
 
     /// A random free place on a non-junction driving lane, at least `clearance` from `avoid`.
-    fn free_spot(&self, map: &Map, avoid: DVec2, clearance: f64, rng: &mut impl Rng) -> Option<(LaneIdx, f64)> {
+    fn free_spot(
+        &self,
+        map: &Map,
+        avoid: DVec2,
+        clearance: f64,
+        rng: &mut impl Rng,
+    ) -> Option<(LaneIdx, f64)> {
         let candidates: Vec<&crate::map::Lane> = map
             .lanes
             .iter()
-            .filter(|l| l.kind == LaneKind::Driving && !l.in_junction() && l.length() > 12.0 && !l.successors.is_empty())
+            .filter(|l| {
+                l.kind == LaneKind::Driving
+                    && !l.in_junction()
+                    && l.length() > 12.0
+                    && !l.successors.is_empty()
+            })
             .collect();
         if candidates.is_empty() {
             return None;
@@ -153,7 +181,10 @@ impl Traffic {
             if (p - avoid).length() < clearance {
                 continue;
             }
-            let free = self.vehicles.iter().all(|v| (v.pose(map).0.truncate() - p).length() > 9.0);
+            let free = self
+                .vehicles
+                .iter()
+                .all(|v| (v.pose(map).0.truncate() - p).length() > 9.0);
             if free {
                 return Some((lane.idx, s));
             }
@@ -171,7 +202,15 @@ impl Traffic {
     }
 
     /// Advance every vehicle by `dt` at sim time `t`.
-    pub fn step(&mut self, map: &Map, lights: &[LightState], ego: &EgoPresence, t: f64, dt: f64, rng: &mut impl Rng) {
+    pub fn step(
+        &mut self,
+        map: &Map,
+        lights: &[LightState],
+        ego: &EgoPresence,
+        t: f64,
+        dt: f64,
+        rng: &mut impl Rng,
+    ) {
         let occupancy = self.occupancy(ego);
         let grants = self.junction_grants(map, lights, ego, t);
         let mut accels = Vec::with_capacity(self.vehicles.len());
@@ -190,10 +229,14 @@ impl Traffic {
     fn occupancy(&self, ego: &EgoPresence) -> HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> {
         let mut occ: HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> = HashMap::new();
         for v in &self.vehicles {
-            occ.entry(v.lane).or_default().push((v.s, v.half.x, v.speed, v.id));
+            occ.entry(v.lane)
+                .or_default()
+                .push((v.s, v.half.x, v.speed, v.id));
         }
         if let Some((lane, s)) = ego.on_lane {
-            occ.entry(lane).or_default().push((s, ego.half_length, ego.speed, 0));
+            occ.entry(lane)
+                .or_default()
+                .push((s, ego.half_length, ego.speed, 0));
         }
         occ
     }
@@ -240,15 +283,26 @@ impl Traffic {
     }
 
     /// Whether the vehicle must hold at the end of its current lane.
-    fn must_stop_at_end(&self, map: &Map, lights: &[LightState], v: &Vehicle, to_end: f64, granted: bool) -> bool {
+    fn must_stop_at_end(
+        &self,
+        map: &Map,
+        lights: &[LightState],
+        v: &Vehicle,
+        to_end: f64,
+        granted: bool,
+    ) -> bool {
         let entering_junction = v.next.first().is_some_and(|n| map.lane(*n).in_junction());
         if !entering_junction || map.lane(v.lane).in_junction() {
             return false;
         }
-        if !v.ignores_lights && let Some(&light) = self.light_at_end.get(&v.lane) {
+        if !v.ignores_lights
+            && let Some(&light) = self.light_at_end.get(&v.lane)
+        {
             match lights[light] {
                 LightState::Red => return true,
-                LightState::Yellow if to_end > v.speed * v.speed / (2.0 * IDM_DECEL) => return true,
+                LightState::Yellow if to_end > v.speed * v.speed / (2.0 * IDM_DECEL) => {
+                    return true;
+                }
                 _ => {}
             }
         }
@@ -259,8 +313,19 @@ impl Traffic {
     }
 
     /// Which vehicles may enter the junction ahead now.
-    fn junction_grants(&self, map: &Map, lights: &[LightState], ego: &EgoPresence, _t: f64) -> Vec<bool> {
-        let mut occupied: Vec<LaneIdx> = self.vehicles.iter().map(|v| v.lane).filter(|l| map.lane(*l).in_junction()).collect();
+    fn junction_grants(
+        &self,
+        map: &Map,
+        lights: &[LightState],
+        ego: &EgoPresence,
+        _t: f64,
+    ) -> Vec<bool> {
+        let mut occupied: Vec<LaneIdx> = self
+            .vehicles
+            .iter()
+            .map(|v| v.lane)
+            .filter(|l| map.lane(*l).in_junction())
+            .collect();
         if let Some((lane, _)) = ego.on_lane.filter(|(l, _)| map.lane(*l).in_junction()) {
             occupied.push(lane);
         }
@@ -270,7 +335,10 @@ impl Traffic {
             .map(|v| {
                 let connector = *v.next.first()?;
                 let held_by_light = !v.ignores_lights
-                    && self.light_at_end.get(&v.lane).is_some_and(|&l| lights[l] != LightState::Green);
+                    && self
+                        .light_at_end
+                        .get(&v.lane)
+                        .is_some_and(|&l| lights[l] != LightState::Green);
                 (map.lane(connector).in_junction() && !held_by_light && v.arrival.is_some())
                     .then(|| (connector, v.arrival.unwrap_or(0.0), v.id))
             })
@@ -278,11 +346,17 @@ impl Traffic {
         requests
             .iter()
             .map(|req| {
-                let Some((connector, arrival, id)) = *req else { return true };
+                let Some((connector, arrival, id)) = *req else {
+                    return true;
+                };
                 if self.vehicles.iter().any(|v| v.id == id && v.ignores_lights) {
                     return true;
                 }
-                let conflicts = self.conflicts.get(&connector).map(Vec::as_slice).unwrap_or(&[]);
+                let conflicts = self
+                    .conflicts
+                    .get(&connector)
+                    .map(Vec::as_slice)
+                    .unwrap_or(&[]);
                 let busy = occupied.iter().any(|o| conflicts.contains(o));
                 let earlier = requests.iter().flatten().any(|&(c, a, other)| {
                     other != id && conflicts.contains(&c) && (a, other) < (arrival, id)
@@ -298,17 +372,29 @@ impl Traffic {
         let v1 = (v.speed + accel * dt).max(0.0);
         v.s += 0.5 * (v.speed + v1) * dt;
         v.speed = v1;
-        v.stopped_for = if v.speed < 0.1 { v.stopped_for + dt } else { 0.0 };
+        v.stopped_for = if v.speed < 0.1 {
+            v.stopped_for + dt
+        } else {
+            0.0
+        };
         if v.lateral != 0.0 {
             let step = LATERAL_SPEED * dt;
-            v.lateral = if v.lateral.abs() <= step { 0.0 } else { v.lateral - step * v.lateral.signum() };
+            v.lateral = if v.lateral.abs() <= step {
+                0.0
+            } else {
+                v.lateral - step * v.lateral.signum()
+            };
         }
         let to_end = map.lane(v.lane).length() - v.s;
-        let approaching = v.next.first().is_some_and(|n| map.lane(*n).in_junction()) && !map.lane(v.lane).in_junction();
+        let approaching = v.next.first().is_some_and(|n| map.lane(*n).in_junction())
+            && !map.lane(v.lane).in_junction();
         if approaching && to_end < REQUEST_DISTANCE {
             v.arrival.get_or_insert(t);
         }
-        if self.stop_at_end.contains_key(&v.lane) && to_end < 3.0 && v.speed < 0.1 {
+        if self.stop_at_end.contains_key(&v.lane)
+            && to_end < v.half.x + MIN_GAP + 1.5
+            && v.speed < 0.1
+        {
             v.stopped_at_sign = true;
         }
         while v.s > map.lane(v.lane).length() {
@@ -327,20 +413,36 @@ impl Traffic {
     }
 
     /// Start a few lane changes where the target lane has room.
-    fn lane_changes(&mut self, map: &Map, occ: &HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>, dt: f64, rng: &mut impl Rng) {
+    fn lane_changes(
+        &mut self,
+        map: &Map,
+        occ: &HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>,
+        dt: f64,
+        rng: &mut impl Rng,
+    ) {
         for v in &mut self.vehicles {
             let lane = map.lane(v.lane);
-            if lane.in_junction() || v.lateral != 0.0 || v.speed < 3.0 || lane.length() - v.s < 40.0 {
+            if lane.in_junction() || v.lateral != 0.0 || v.speed < 3.0 || lane.length() - v.s < 40.0
+            {
                 continue;
             }
             if rng.random_range(0.0..1.0) > LANE_CHANGE_RATE * dt {
                 continue;
             }
-            let target = if rng.random_range(0.0..1.0) < 0.5 { lane.left } else { lane.right };
-            let Some(target) = target.filter(|t| map.lane(*t).kind == LaneKind::Driving) else { continue };
+            let target = if rng.random_range(0.0..1.0) < 0.5 {
+                lane.left
+            } else {
+                lane.right
+            };
+            let Some(target) = target.filter(|t| map.lane(*t).kind == LaneKind::Driving) else {
+                continue;
+            };
             let (pos, _) = v.pose(map);
             let proj = map.lane(target).project(pos.truncate());
-            let room = occ.get(&target).is_none_or(|list| list.iter().all(|&(s, _, _, _)| !(proj.s - 12.0..proj.s + 18.0).contains(&s)));
+            let room = occ.get(&target).is_none_or(|list| {
+                list.iter()
+                    .all(|&(s, _, _, _)| !(proj.s - 12.0..proj.s + 18.0).contains(&s))
+            });
             if !room || map.lane(target).length() - proj.s < 30.0 {
                 continue;
             }
@@ -401,7 +503,13 @@ fn new_vehicle(map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) ->
 pub(crate) fn extend_path(map: &Map, v: &mut Vehicle, rng: &mut impl Rng) {
     while v.next.len() < 3 {
         let last = *v.next.last().unwrap_or(&v.lane);
-        let options: Vec<LaneIdx> = map.lane(last).successors.iter().copied().filter(|s| map.lane(*s).kind == LaneKind::Driving).collect();
+        let options: Vec<LaneIdx> = map
+            .lane(last)
+            .successors
+            .iter()
+            .copied()
+            .filter(|s| map.lane(*s).kind == LaneKind::Driving)
+            .collect();
         if options.is_empty() {
             break;
         }
@@ -415,7 +523,8 @@ fn idm(v: &Vehicle, gap: f64, lead_speed: f64, map: &Map) -> f64 {
     let free = 1.0 - (v.speed / v0).powi(4);
     let interaction = if gap.is_finite() {
         let dv = v.speed - lead_speed;
-        let s_star = MIN_GAP + (v.speed * HEADWAY + v.speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
+        let s_star = MIN_GAP
+            + (v.speed * HEADWAY + v.speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
         (s_star / gap.max(0.1)).powi(2)
     } else {
         0.0
@@ -459,7 +568,16 @@ pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
 }
 
 fn polylines_cross(a: &[DVec3], b: &[DVec3]) -> bool {
-    a.windows(2).any(|sa| b.windows(2).any(|sb| segments_cross(sa[0].truncate(), sa[1].truncate(), sb[0].truncate(), sb[1].truncate())))
+    a.windows(2).any(|sa| {
+        b.windows(2).any(|sb| {
+            segments_cross(
+                sa[0].truncate(),
+                sa[1].truncate(),
+                sb[0].truncate(),
+                sb[1].truncate(),
+            )
+        })
+    })
 }
 
 /// Proper intersection of two plan segments.
