@@ -97,6 +97,12 @@ fn main() {
             }
             break;
         }
-        w.step(c);
+        let hits = w.step(c);
+        if let Some(h) = hits.first() {
+            println!("t={:.2} HIT id {} ego {:?} yaw {:.2} v {:.2} ctrl {:?} view {:?}", w.time, h.other_id, e.position, e.yaw, e.speed, c, ex.debug_view(&w));
+            for v in &w.traffic.vehicles { if v.id == h.other_id { println!("  other lane {:?} junc {:?} s {:.1} speed {:.2} lat {:.2} next {:?} pose {:?} runner {}", v.lane, map.lane(v.lane).junction, v.s, v.speed, v.lateral, v.next, v.pose(&map), v.ignores_lights); } }
+            println!("  ego lane {:?}", map.lane_for_pose(e.position, e.yaw).map(|(l,p)| (l, map.lane(l).junction, p.s)));
+            break;
+        }
     }
 }

@@ -79,10 +79,38 @@ pub fn scan(
             view.walker_near = true;
         }
     }
+    lane_change_gap(world, route, index, end, &mut view);
     let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
     stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
     view
+}
+
+/// Before a lane change on the path, wait at its start while a vehicle on the target lane is
+/// alongside or closing in from behind (15 m back to 5 m ahead of the ego).
+fn lane_change_gap(world: &World<'_>, route: &DenseRoute, index: usize, end: usize, view: &mut HazardView) {
+    let map = world.map;
+    let Some(switch) = (index.max(1)..=end).find(|&j| {
+        let (a, b) = (map.lane(route.points[j - 1].lane), route.points[j].lane);
+        a.left == Some(b) || a.right == Some(b)
+    }) else {
+        return;
+    };
+    let start = (index..=switch).find(|&j| route.points[j].option.is_lane_change()).unwrap_or(switch);
+    if start <= index {
+        return; // already changing: carry on
+    }
+    let ego = world.ego_state();
+    let target = map.lane(route.points[switch].lane);
+    let ego_s = target.project(ego.position.truncate()).s;
+    let busy = world.traffic.vehicles.iter().any(|v| {
+        let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
+        let s = if v.lane == target.idx { v.s } else { v.s - map.lane(v.lane).length() };
+        on_target && (ego_s - 15.0..ego_s + 5.0).contains(&s)
+    });
+    if busy {
+        view.obstacle(along(route, index, start) - ego.half_extent.x, 0.0);
+    }
 }
 
 /// Index of the last route point within `distance` of `index`.

@@ -326,8 +326,15 @@ impl Traffic {
             .map(|v| v.lane)
             .filter(|l| map.lane(*l).in_junction())
             .collect();
-        if let Some((lane, _)) = ego.on_lane.filter(|(l, _)| map.lane(*l).in_junction()) {
-            occupied.push(lane);
+        // The ego blocks the connector it is on, and, while it approaches a junction at speed,
+        // every connector it could take: traffic gives way to an ego about to enter.
+        if let Some((lane, s)) = ego.on_lane {
+            let l = map.lane(lane);
+            if l.in_junction() {
+                occupied.push(lane);
+            } else if l.length() - s < REQUEST_DISTANCE + 2.0 * ego.speed && ego.speed > 1.0 {
+                occupied.extend(l.successors.iter().filter(|c| map.lane(**c).in_junction()));
+            }
         }
         let requests: Vec<Option<(LaneIdx, f64, u32)>> = self
             .vehicles
