@@ -23,7 +23,18 @@ fn main() {
         route: &dense,
         plan: &plan,
     });
-    let mut w = World::new(&map, &dense, WorldConfig::default());
+    let seed: u64 = std::env::args()
+        .nth(2)
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(0);
+    let mut w = World::new(
+        &map,
+        &dense,
+        WorldConfig {
+            seed,
+            ..WorldConfig::default()
+        },
+    );
     let mut still = 0;
     let mut prog = 0;
     for frame in 0..20000u64 {
@@ -99,9 +110,36 @@ fn main() {
         }
         let hits = w.step(c);
         if let Some(h) = hits.first() {
-            println!("t={:.2} HIT id {} ego {:?} yaw {:.2} v {:.2} ctrl {:?} view {:?}", w.time, h.other_id, e.position, e.yaw, e.speed, c, ex.debug_view(&w));
-            for v in &w.traffic.vehicles { if v.id == h.other_id { println!("  other lane {:?} junc {:?} s {:.1} speed {:.2} lat {:.2} next {:?} pose {:?} runner {}", v.lane, map.lane(v.lane).junction, v.s, v.speed, v.lateral, v.next, v.pose(&map), v.ignores_lights); } }
-            println!("  ego lane {:?}", map.lane_for_pose(e.position, e.yaw).map(|(l,p)| (l, map.lane(l).junction, p.s)));
+            println!(
+                "t={:.2} HIT id {} ego {:?} yaw {:.2} v {:.2} ctrl {:?} view {:?}",
+                w.time,
+                h.other_id,
+                e.position,
+                e.yaw,
+                e.speed,
+                c,
+                ex.debug_view(&w)
+            );
+            for v in &w.traffic.vehicles {
+                if v.id == h.other_id {
+                    println!(
+                        "  other lane {:?} junc {:?} s {:.1} speed {:.2} lat {:.2} next {:?} pose {:?} runner {}",
+                        v.lane,
+                        map.lane(v.lane).junction,
+                        v.s,
+                        v.speed,
+                        v.lateral,
+                        v.next,
+                        v.pose(&map),
+                        v.ignores_lights
+                    );
+                }
+            }
+            println!(
+                "  ego lane {:?}",
+                map.lane_for_pose(e.position, e.yaw)
+                    .map(|(l, p)| (l, map.lane(l).junction, p.s))
+            );
             break;
         }
     }

@@ -88,7 +88,13 @@ pub fn scan(
 
 /// Before a lane change on the path, wait at its start while a vehicle on the target lane is
 /// alongside or closing in from behind (15 m back to 5 m ahead of the ego).
-fn lane_change_gap(world: &World<'_>, route: &DenseRoute, index: usize, end: usize, view: &mut HazardView) {
+fn lane_change_gap(
+    world: &World<'_>,
+    route: &DenseRoute,
+    index: usize,
+    end: usize,
+    view: &mut HazardView,
+) {
     let map = world.map;
     let Some(switch) = (index.max(1)..=end).find(|&j| {
         let (a, b) = (map.lane(route.points[j - 1].lane), route.points[j].lane);
@@ -96,7 +102,9 @@ fn lane_change_gap(world: &World<'_>, route: &DenseRoute, index: usize, end: usi
     }) else {
         return;
     };
-    let start = (index..=switch).find(|&j| route.points[j].option.is_lane_change()).unwrap_or(switch);
+    let start = (index..=switch)
+        .find(|&j| route.points[j].option.is_lane_change())
+        .unwrap_or(switch);
     if start <= index {
         return; // already changing: carry on
     }
@@ -105,7 +113,11 @@ fn lane_change_gap(world: &World<'_>, route: &DenseRoute, index: usize, end: usi
     let ego_s = target.project(ego.position.truncate()).s;
     let busy = world.traffic.vehicles.iter().any(|v| {
         let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
-        let s = if v.lane == target.idx { v.s } else { v.s - map.lane(v.lane).length() };
+        let s = if v.lane == target.idx {
+            v.s
+        } else {
+            v.s - map.lane(v.lane).length()
+        };
         on_target && (ego_s - 15.0..ego_s + 5.0).contains(&s)
     });
     if busy {

@@ -39,6 +39,8 @@ pub const RESPAWN_AFTER_S: f64 = 40.0;
 pub const RESPAWN_CLEARANCE: f64 = 50.0;
 /// Chance per second that a vehicle on a multi-lane road starts a lane change.
 const LANE_CHANGE_RATE: f64 = 0.01;
+/// Length over which connectors leaving the same lane still overlap, m.
+const DIVERGE_LENGTH: f64 = 12.0;
 /// Speed at which a lane change moves across, m/s.
 const LATERAL_SPEED: f64 = 1.0;
 
@@ -211,7 +213,7 @@ impl Traffic {
         dt: f64,
         rng: &mut impl Rng,
     ) {
-        let occupancy = self.occupancy(ego);
+        let occupancy = self.occupancy(map, ego);
         let grants = self.junction_grants(map, lights, ego, t);
         let mut accels = Vec::with_capacity(self.vehicles.len());
         for (i, v) in self.vehicles.iter().enumerate() {
@@ -225,18 +227,36 @@ impl Traffic {
         self.respawn_stuck(map, ego, rng);
     }
 
-    /// Vehicles (and the ego) per lane: (s, half length, speed, id).
-    fn occupancy(&self, ego: &EgoPresence) -> HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> {
+    /// Vehicles (and the ego) per lane: (s, half length, speed, id). Near the start of a
+    /// junction connector, where connectors from one lane still overlap before they diverge,
+    /// an occupant is listed on every sibling connector too, so followers keep their distance.
+    fn occupancy(
+        &self,
+        map: &Map,
+        ego: &EgoPresence,
+    ) -> HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> {
         let mut occ: HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> = HashMap::new();
-        for v in &self.vehicles {
-            occ.entry(v.lane)
-                .or_default()
-                .push((v.s, v.half.x, v.speed, v.id));
-        }
-        if let Some((lane, s)) = ego.on_lane {
-            occ.entry(lane)
-                .or_default()
-                .push((s, ego.half_length, ego.speed, 0));
+        let ego_entry = ego
+            .on_lane
+            .map(|(lane, s)| (lane, s, ego.half_length, ego.speed, 0));
+        let entries = self
+            .vehicles
+            .iter()
+            .map(|v| (v.lane, v.s, v.half.x, v.speed, v.id))
+            .chain(ego_entry);
+        for (lane, s, half, speed, id) in entries {
+            occ.entry(lane).or_default().push((s, half, speed, id));
+            let l = map.lane(lane);
+            if l.in_junction() && s < DIVERGE_LENGTH {
+                let siblings = l
+                    .predecessors
+                    .iter()
+                    .flat_map(|p| map.lane(*p).successors.iter())
+                    .filter(|x| **x != lane);
+                for &sibling in siblings {
+                    occ.entry(sibling).or_default().push((s, half, speed, id));
+                }
+            }
         }
         occ
     }
