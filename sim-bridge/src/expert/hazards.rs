@@ -17,7 +17,7 @@ const CORRIDOR_MARGIN: f64 = 0.6;
 /// Stop this far before a stop line, m.
 const STOP_LINE_MARGIN: f64 = 1.0;
 /// Comfortable braking used to decide whether to stop at yellow, m/s^2.
-const YELLOW_DECEL: f64 = 3.5;
+const YELLOW_DECEL: f64 = 6.0;
 
 /// Stop signs already served on this route.
 #[derive(Debug, Default)]

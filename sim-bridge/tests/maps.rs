@@ -1,0 +1,83 @@
+//! Map loading errors and the bundled towns' traffic control, through the public API.
+
+use sim_bridge::map::{Map, MapError, MapOptions};
+use sim_bridge::towngen::{self, TownStyle};
+
+#[test]
+fn malformed_opendrive_is_a_clear_error() {
+    let not_xml = Map::from_str("broken", "<OpenDRIVE><road", MapOptions::default()).unwrap_err();
+    assert!(matches!(not_xml, MapError::Invalid { .. }), "{not_xml}");
+    assert!(not_xml.to_string().contains("broken"));
+    let empty = Map::from_str(
+        "empty",
+        "<OpenDRIVE><header revMajor='1' revMinor='4'/></OpenDRIVE>",
+        MapOptions::default(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(
+            empty,
+            MapError::NoDrivingLanes { .. } | MapError::Invalid { .. }
+        ),
+        "{empty}"
+    );
+    let missing = Map::load_file(
+        std::path::Path::new("/nonexistent/town.xodr"),
+        MapOptions::default(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(missing, MapError::Io { .. })
+            && missing.to_string().contains("/nonexistent/town.xodr")
+    );
+}
+
+#[test]
+fn bundled_towns_have_lights_stop_signs_and_a_test_town_of_town05_size() {
+    for style in TownStyle::ALL {
+        let map =
+            Map::from_str(style.name(), towngen::bundled(style), MapOptions::default()).unwrap();
+        assert!(!map.lights.is_empty(), "{}: no lights", style.name());
+        for light in &map.lights {
+            assert!(!light.stop_lines.is_empty());
+            assert!(map.junctions[light.junction.0 as usize].signalized);
+        }
+        if style.is_test_town() {
+            let size = map.bounds.1 - map.bounds.0;
+            assert!(
+                (430.0..530.0).contains(&size.x) && (360.0..440.0).contains(&size.y),
+                "{size:?}"
+            );
+            assert!(!map.stop_signs.is_empty());
+            let unsignalized = map.junctions.iter().filter(|j| !j.signalized).count();
+            assert!(unsignalized >= 8, "{unsignalized} unsignalized junctions");
+        }
+    }
+}
+
+#[test]
+fn placing_lights_is_only_for_maps_without_any() {
+    let style = TownStyle::Town05Style;
+    let with = Map::from_str(
+        "a",
+        towngen::bundled(style),
+        MapOptions {
+            place_missing_lights: true,
+        },
+    )
+    .unwrap();
+    let without = Map::from_str(
+        "b",
+        towngen::bundled(style),
+        MapOptions {
+            place_missing_lights: false,
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        with.lights.len(),
+        without.lights.len(),
+        "a map with signals keeps its own"
+    );
+    assert!(with.lights.iter().all(|l| l.from_map));
+}

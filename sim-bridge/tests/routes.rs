@@ -1,0 +1,263 @@
+//! Route files, dense routes, RoadOption labels, the global plan and the route follower,
+//! through the public API on the bundled evaluation town.
+
+use glam::{DVec2, DVec3};
+use sim_bridge::map::{LaneKind, Map, MapOptions, angle_diff};
+use sim_bridge::route::RoadOption;
+use sim_bridge::route::plan::{PlanNode, RouteFollower, downsample, global_plan, to_ego_frame};
+use sim_bridge::route::planner::plan_route;
+use sim_bridge::route::sets::{RouteSet, SETS};
+use sim_bridge::route::xml::{self, Keypoint, RouteFileError, RouteSpec};
+use sim_bridge::towngen::{self, TownStyle};
+
+fn town05() -> Map {
+    Map::from_str(
+        "ssr_town05",
+        towngen::bundled(TownStyle::Town05Style),
+        MapOptions::default(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn route_xml_round_trips_and_flips_carla_y() {
+    let text = r#"<routes><route id="7" town="Town05">
+        <waypoint x="10.5" y="-20.25" z="0.5" pitch="0" roll="0" yaw="90.0"/>
+        <weather id="x"><waypoint x="30" y="-20.25" z="0" yaw="-45"/></weather>
+    </route></routes>"#;
+    let routes = xml::parse("inline", text).unwrap();
+    assert_eq!(routes.len(), 1);
+    let k = routes[0].keypoints[0];
+    // CARLA (x, y, yaw) = OpenDRIVE (x, -y, -yaw).
+    assert_eq!(k.position, DVec3::new(10.5, 20.25, 0.5));
+    assert!((k.yaw + std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    assert_eq!(
+        routes[0].keypoints.len(),
+        2,
+        "waypoints nested in <weather> are read"
+    );
+    let again = xml::parse("written", &xml::write(&routes)).unwrap();
+    assert_eq!(again[0].id, "7");
+    assert_eq!(again[0].town, "Town05");
+    for (a, b) in routes[0].keypoints.iter().zip(&again[0].keypoints) {
+        assert!((a.position - b.position).length() < 1e-5);
+        assert!(angle_diff(a.yaw, b.yaw).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn malformed_route_files_name_the_problem() {
+    let cases = [
+        ("<routes><route id='1'>", "not well-formed"),
+        ("<trips/>", "expected <routes>"),
+        ("<routes/>", "no <route>"),
+        (
+            "<routes><route><waypoint x='1' y='2'/><waypoint x='1' y='2'/></route></routes>",
+            "has no id",
+        ),
+        (
+            "<routes><route id='3'><waypoint y='2'/><waypoint x='1' y='2'/></route></routes>",
+            "has no 'x'",
+        ),
+        (
+            "<routes><route id='4'><waypoint x='NaN' y='2'/><waypoint x='1' y='2'/></route></routes>",
+            "not a finite number",
+        ),
+        (
+            "<routes><route id='5'><waypoint x='1' y='2'/></route></routes>",
+            "at least 2",
+        ),
+    ];
+    for (text, needle) in cases {
+        let err = xml::parse("bad.xml", text).expect_err(text).to_string();
+        assert!(
+            err.contains(needle) && err.contains("bad.xml"),
+            "{text}: {err}"
+        );
+    }
+    let missing = xml::read_file(std::path::Path::new("/nonexistent/routes.xml")).unwrap_err();
+    assert!(matches!(missing, RouteFileError::Io { .. }));
+}
+
+#[test]
+fn junction_connectors_get_left_right_straight_labels() {
+    let map = town05();
+    let (mut seen_left, mut seen_right, mut seen_straight) = (false, false, false);
+    for connector in map
+        .lanes
+        .iter()
+        .filter(|l| l.in_junction() && l.kind == LaneKind::Driving)
+    {
+        let (Some(&from), Some(&to)) =
+            (connector.predecessors.first(), connector.successors.first())
+        else {
+            continue;
+        };
+        let (a, b) = (map.lane(from), map.lane(to));
+        if a.in_junction() || b.in_junction() || a.length() < 20.0 || b.length() < 20.0 {
+            continue;
+        }
+        let at = |l: &sim_bridge::map::Lane, s: f64| {
+            let p = l.pose_at(s);
+            Keypoint {
+                position: p.position,
+                yaw: p.yaw,
+            }
+        };
+        // Keypoints before, inside and after the junction pin the route to this connector.
+        let spec = RouteSpec {
+            id: "j".into(),
+            town: map.name.clone(),
+            keypoints: vec![
+                at(a, a.length() - 15.0),
+                at(connector, connector.length() / 2.0),
+                at(b, 15.0),
+            ],
+        };
+        let route = plan_route(&map, &spec).unwrap();
+        let turn = angle_diff(b.pose_at(0.0).yaw, a.pose_at(a.length()).yaw);
+        let expected = if turn.abs() < 33f64.to_radians() {
+            RoadOption::Straight
+        } else if turn > 0.0 {
+            RoadOption::Left
+        } else {
+            RoadOption::Right
+        };
+        for p in &route.points {
+            if p.lane == connector.idx {
+                assert_eq!(
+                    p.option,
+                    expected,
+                    "connector {:?} turning {:.0} deg",
+                    connector.idx,
+                    turn.to_degrees()
+                );
+            } else if !map.lane(p.lane).in_junction() {
+                assert_eq!(p.option, RoadOption::LaneFollow);
+            }
+        }
+        seen_left |= expected == RoadOption::Left;
+        seen_right |= expected == RoadOption::Right;
+        seen_straight |= expected == RoadOption::Straight;
+    }
+    assert!(
+        seen_left && seen_right && seen_straight,
+        "the town has every kind of junction move"
+    );
+}
+
+#[test]
+fn dense_routes_are_continuous_and_plans_follow_the_50_m_rule() {
+    let map = town05();
+    let set = RouteSet::find("town05-long-style").unwrap();
+    let specs = xml::parse(set.name, set.bundled_xml()).unwrap();
+    let mut changes = 0;
+    for spec in &specs {
+        let route = plan_route(&map, spec).unwrap();
+        for w in route.points.windows(2) {
+            assert!(
+                (w[1].position - w[0].position).length() < 1.5,
+                "route {} has a gap",
+                spec.id
+            );
+        }
+        let kept = downsample(&route, 50.0);
+        assert_eq!(kept[0], 0);
+        assert_eq!(*kept.last().unwrap(), route.points.len() - 1);
+        for w in kept.windows(2) {
+            assert!(
+                route.cum[w[1]] - route.cum[w[0]] <= 52.0,
+                "route {}: plan nodes too far apart",
+                spec.id
+            );
+        }
+        for (i, p) in route.points.iter().enumerate() {
+            if p.option.is_lane_change() {
+                changes += 1;
+                assert!(kept.contains(&i), "every lane-change point is a plan node");
+            }
+        }
+    }
+    assert!(changes > 0, "the long routes change lanes");
+}
+
+#[test]
+fn route_follower_passes_nodes_within_4_m_and_keeps_two() {
+    let node = |x: f64, option| PlanNode {
+        position: DVec3::new(x, 0.0, 0.0),
+        option,
+    };
+    let plan = vec![
+        node(0.0, RoadOption::LaneFollow),
+        node(3.0, RoadOption::LaneFollow),
+        node(20.0, RoadOption::Left),
+        node(70.0, RoadOption::LaneFollow),
+    ];
+    let mut f = RouteFollower::new(plan);
+    // At x = 0 the node at 3 m is within 4 m: it is passed, the target is the node at 20 m.
+    let target = f.step(DVec2::new(0.0, 0.0));
+    assert_eq!(target.position.x, 20.0);
+    assert_eq!(target.option, RoadOption::Left);
+    // Far from everything: no change.
+    assert_eq!(f.step(DVec2::new(-50.0, 0.0)).position.x, 20.0);
+    // Past the end: two nodes are always kept, so the target is the last node.
+    assert_eq!(f.step(DVec2::new(69.0, 0.0)).position.x, 70.0);
+    assert_eq!(f.remaining(), 2);
+    // Ego frame: x forward, y left.
+    let p = to_ego_frame(
+        DVec3::new(0.0, 10.0, 0.0),
+        DVec3::ZERO,
+        std::f64::consts::FRAC_PI_2,
+    );
+    assert!((p.x - 10.0).abs() < 1e-9 && p.y.abs() < 1e-9);
+    let left = to_ego_frame(
+        DVec3::new(-3.0, 0.0, 0.0),
+        DVec3::ZERO,
+        std::f64::consts::FRAC_PI_2,
+    );
+    assert!(
+        (left.y - 3.0).abs() < 1e-9,
+        "a point to the west is on the left of a north-facing ego"
+    );
+}
+
+#[test]
+fn bundled_route_sets_are_current_and_fit_their_specs() {
+    for set in SETS {
+        let map = Map::from_str(
+            set.town.name(),
+            towngen::bundled(set.town),
+            MapOptions::default(),
+        )
+        .unwrap();
+        let generated = xml::write(&set.generate(&map));
+        assert_eq!(
+            generated,
+            set.bundled_xml(),
+            "{}: run `sim-bridge routes generate`",
+            set.name
+        );
+    }
+    let map = town05();
+    let long = xml::parse(
+        "long",
+        RouteSet::find("town05-long-style").unwrap().bundled_xml(),
+    )
+    .unwrap();
+    assert_eq!(long.len(), 10);
+    let lengths: Vec<f64> = long
+        .iter()
+        .map(|s| plan_route(&map, s).unwrap().length())
+        .collect();
+    let total: f64 = lengths.iter().sum();
+    assert!(
+        lengths.iter().all(|l| (480.0..2300.0).contains(l)),
+        "{lengths:?}"
+    );
+    assert!((11_000.0..13_500.0).contains(&total), "total {total}");
+    let plans: Vec<_> = long
+        .iter()
+        .map(|s| global_plan(&plan_route(&map, s).unwrap()))
+        .collect();
+    assert!(plans.iter().all(|p| p.len() >= 2));
+}
