@@ -104,12 +104,27 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if let Some(dir) = &args.pictures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    // Plan every route first: one that cannot be planned on this map is reported and left out,
+    // and the rest still run.
+    let mut planned = Vec::with_capacity(specs.len());
+    for spec in &specs {
+        match plan_route(&map, spec) {
+            Ok(dense) => planned.push((spec, dense)),
+            Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
+        }
+    }
+    if planned.is_empty() {
+        bail!(
+            "no route of {} could be planned on map {}",
+            args.routes,
+            map.name
+        );
+    }
     let vehicles = args.vehicles.unwrap_or_else(|| default_vehicles(&map));
-    let total = specs.len() * args.repetitions;
+    let total = planned.len() * args.repetitions;
     let mut records = Vec::with_capacity(total);
     for repetition in 0..args.repetitions {
-        for spec in &specs {
-            let dense = plan_route(&map, spec)?;
+        for (spec, dense) in &planned {
             let world = WorldConfig {
                 vehicles,
                 walkers: args.walkers,
@@ -122,7 +137,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             let run = run_route(
                 &map,
                 spec,
-                &dense,
+                dense,
                 agent.as_mut(),
                 world,
                 ScoringConfig::default(),
@@ -146,7 +161,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 let path = dir.join(format!("route_{}_rep{repetition}.png", spec.id));
                 write_run_png(
                     &map,
-                    &dense,
+                    dense,
                     &run.trace,
                     &run.final_actors,
                     &run.infractions,
