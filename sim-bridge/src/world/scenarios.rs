@@ -56,6 +56,31 @@ pub struct Crosser {
 }
 
 impl Crosser {
+    /// A scenario crosser waiting `offset` metres outside the road's right edge `edge`, facing
+    /// across the `across`-metre carriageway, which it crosses completely once started.
+    fn waiting_to_cross(
+        id: u32,
+        (kind, speed, half): (ActorKind, f64, DVec2),
+        edge: DVec3,
+        right: DVec2,
+        offset: f64,
+        across: f64,
+    ) -> Self {
+        let start = edge.truncate() + right * offset;
+        Crosser {
+            id,
+            kind,
+            position: start.extend(edge.z),
+            yaw: (-right).y.atan2(-right.x),
+            speed,
+            remaining: offset + across + offset,
+            moving: false,
+            half,
+            patrol: false,
+            gone: false,
+        }
+    }
+
     /// Ground box.
     pub fn obb(&self) -> Obb {
         Obb {
@@ -213,19 +238,10 @@ pub fn place_route_scenarios(
                 z: edge.z,
             });
             let id = ids.next();
-            let start = edge.truncate() + right * 2.5;
-            out.crossers.push(Crosser {
-                id,
-                kind: ActorKind::Walker,
-                position: start.extend(edge.z),
-                yaw: (-right).y.atan2((-right).x),
-                speed: WALKER_SPEED,
-                remaining: 2.5 + across + 2.5,
-                moving: false,
-                half: DVec2::splat(0.3),
-                patrol: false,
-                gone: false,
-            });
+            let walker = (ActorKind::Walker, WALKER_SPEED, DVec2::splat(0.3));
+            out.crossers.push(Crosser::waiting_to_cross(
+                id, walker, edge, right, 2.5, across,
+            ));
             out.scenarios.push(Scenario {
                 name: "Scenario3",
                 trigger: i,
@@ -275,19 +291,10 @@ pub fn place_route_scenarios(
             let c = route.points[(i + 10).min(n - 1)];
             let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
             let id = ids.next();
-            let start_pos = edge.truncate() + right * 3.0;
-            out.crossers.push(Crosser {
-                id,
-                kind: ActorKind::Cyclist,
-                position: start_pos.extend(edge.z),
-                yaw: (-right).y.atan2((-right).x),
-                speed: CYCLIST_SPEED,
-                remaining: 3.0 + across + 3.0,
-                moving: false,
-                half: DVec2::new(0.9, 0.35),
-                patrol: false,
-                gone: false,
-            });
+            let cyclist = (ActorKind::Cyclist, CYCLIST_SPEED, DVec2::new(0.9, 0.35));
+            out.crossers.push(Crosser::waiting_to_cross(
+                id, cyclist, edge, right, 3.0, across,
+            ));
             out.scenarios.push(Scenario {
                 name: "Scenario4",
                 trigger: start,
