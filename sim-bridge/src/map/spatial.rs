@@ -75,16 +75,8 @@ impl SegmentGrid {
             if best.is_some_and(|(_, b)| b.distance < reach) {
                 break;
             }
-            for (cx, cy) in ring_cells(centre, ring) {
-                let Some(items) = self.cells.get(&(cx, cy)) else {
-                    continue;
-                };
-                for &(lane, seg) in items {
-                    let l = &lanes[lane.get()];
-                    if !keep(l) {
-                        continue;
-                    }
-                    let proj = l.project_segment(seg as usize, p);
+            for cell in ring_cells(centre, ring) {
+                for (lane, proj) in self.projections(lanes, cell, p, &keep) {
                     if proj.distance <= max_distance
                         && best.is_none_or(|(bl, b)| {
                             proj.distance < b.distance || (proj.distance == b.distance && lane < bl)
@@ -96,6 +88,24 @@ impl SegmentGrid {
             }
         }
         best
+    }
+
+    /// Projections of `p` onto the segments indexed in `cell` whose lane `keep` accepts.
+    fn projections<'a>(
+        &'a self,
+        lanes: &'a [Lane],
+        cell: (i32, i32),
+        p: DVec2,
+        keep: &'a impl Fn(&Lane) -> bool,
+    ) -> impl Iterator<Item = (LaneIdx, Projection)> + 'a {
+        self.cells
+            .get(&cell)
+            .into_iter()
+            .flatten()
+            .filter_map(move |&(lane, seg)| {
+                let l = &lanes[lane.get()];
+                keep(l).then(|| (lane, l.project_segment(seg as usize, p)))
+            })
     }
 
     /// Every lane accepted by `keep` with a segment within `radius` of `p`, each once with its
@@ -114,15 +124,7 @@ impl SegmentGrid {
         );
         for cx in c0.0..=c1.0 {
             for cy in c0.1..=c1.1 {
-                let Some(items) = self.cells.get(&(cx, cy)) else {
-                    continue;
-                };
-                for &(lane, seg) in items {
-                    let l = &lanes[lane.get()];
-                    if !keep(l) {
-                        continue;
-                    }
-                    let proj = l.project_segment(seg as usize, p);
+                for (lane, proj) in self.projections(lanes, (cx, cy), p, &keep) {
                     if proj.distance > radius {
                         continue;
                     }
