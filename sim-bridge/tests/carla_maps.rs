@@ -1,20 +1,10 @@
 //! The real CARLA maps in ../shared/carla load and are drivable. Skips, with a notice, where that
 //! folder is absent (it is never copied into the repository).
 
-use std::path::PathBuf;
+mod common;
 
+use common::carla_dir;
 use sim_bridge::map::{LaneKind, Map, MapOptions};
-
-/// ../shared/carla beside the checkout, if present.
-pub fn carla_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/carla");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("SKIP: {} not found; CARLA map tests skipped", dir.display());
-        None
-    }
-}
 
 #[test]
 fn carla_towns_load_with_lights_and_a_connected_lane_graph() {

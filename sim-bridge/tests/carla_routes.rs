@@ -1,22 +1,10 @@
 //! CARLA training routes from ../shared/carla plan into dense routes on the real maps.
 
-use std::path::PathBuf;
+mod common;
 
+use common::carla_dir;
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::{planner, xml};
-
-fn carla_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/carla");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "SKIP: {} not found; CARLA route tests skipped",
-            dir.display()
-        );
-        None
-    }
-}
 
 #[test]
 fn tcp_training_routes_plan_on_carla_towns() {

@@ -579,37 +579,27 @@ mod scoring {
         let green = light_states(&map, LightState::Green);
         let red = light_states(&map, LightState::Red);
         // The tail probe (3.45 m behind the centre) clears the line at x = 103.45.
-        let mut d = Drive::new(&map, &route);
-        d.cruise(
-            0.0,
-            300.0,
-            10.0,
-            |_| -1.75,
-            |x| {
-                if x < 103.5 {
-                    green.clone()
-                } else {
-                    red.clone()
-                }
-            },
-        );
-        assert_eq!(d.count(InfractionKind::RedLight), 0);
+        // Drive through with the light turning red once the ego centre passes `x_red`.
+        let red_lights_when_red_from = |x_red: f64| {
+            let mut d = Drive::new(&map, &route);
+            d.cruise(
+                0.0,
+                300.0,
+                10.0,
+                |_| -1.75,
+                |x| {
+                    if x < x_red {
+                        green.clone()
+                    } else {
+                        red.clone()
+                    }
+                },
+            );
+            d.count(InfractionKind::RedLight)
+        };
+        assert_eq!(red_lights_when_red_from(103.5), 0);
         // Turning red just before the tail crossed: penalised.
-        let mut d = Drive::new(&map, &route);
-        d.cruise(
-            0.0,
-            300.0,
-            10.0,
-            |_| -1.75,
-            |x| {
-                if x < 101.0 {
-                    green.clone()
-                } else {
-                    red.clone()
-                }
-            },
-        );
-        assert_eq!(d.count(InfractionKind::RedLight), 1);
+        assert_eq!(red_lights_when_red_from(101.0), 1);
     }
 
     #[test]

@@ -52,16 +52,6 @@ impl Expert {
     }
 }
 
-impl Expert {
-    /// The hazard scan the expert would act on now (for debugging and tests).
-    pub fn debug_view(&mut self, world: &World<'_>) -> hazards::HazardView {
-        match self.route.as_ref() {
-            Some(route) => hazards::scan(world, route, self.index, &mut self.hazards),
-            None => hazards::HazardView::default(),
-        }
-    }
-}
-
 impl Agent for Expert {
     fn name(&self) -> String {
         "expert".into()

@@ -12,7 +12,7 @@ pub mod scenarios;
 pub mod state;
 pub mod traffic;
 
-use glam::{DVec2, DVec3};
+use glam::DVec2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -285,10 +285,5 @@ impl<'m> World<'m> {
         if let Some((lane, proj)) = self.map.lane_for_pose(p, self.ego.yaw) {
             self.ego.position.z = self.map.lane(lane).pose_at(proj.s).position.z;
         }
-    }
-
-    /// The ego's position, for convenience.
-    pub fn ego_position(&self) -> DVec3 {
-        self.ego.position
     }
 }

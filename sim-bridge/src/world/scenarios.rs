@@ -165,6 +165,20 @@ pub struct Placement {
     pub scenarios: Vec<Scenario>,
 }
 
+impl Placement {
+    /// A crosser that starts when the ego reaches route index `trigger`.
+    fn add_crossing(&mut self, name: &'static str, trigger: usize, crosser: Crosser) {
+        let action = ScenarioAction::StartCrosser(crosser.id);
+        self.scenarios.push(Scenario {
+            name,
+            trigger,
+            action,
+            fired: false,
+        });
+        self.crossers.push(crosser);
+    }
+}
+
 /// Ids handed to actors, above the traffic's.
 pub struct IdSource(pub u32);
 
@@ -237,17 +251,9 @@ pub fn place_route_scenarios(
                 },
                 z: edge.z,
             });
-            let id = ids.next();
             let walker = (ActorKind::Walker, WALKER_SPEED, DVec2::splat(0.3));
-            out.crossers.push(Crosser::waiting_to_cross(
-                id, walker, edge, right, 2.5, across,
-            ));
-            out.scenarios.push(Scenario {
-                name: "Scenario3",
-                trigger: i,
-                action: ScenarioAction::StartCrosser(id),
-                fired: false,
-            });
+            let crosser = Crosser::waiting_to_cross(ids.next(), walker, edge, right, 2.5, across);
+            out.add_crossing("Scenario3", i, crosser);
             next_s3 = route.cum[i] + rng.random_range(0.6..1.4) * S3_SPACING;
             i += ahead + 15;
             continue;
@@ -290,17 +296,9 @@ pub fn place_route_scenarios(
         {
             let c = route.points[(i + 10).min(n - 1)];
             let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
-            let id = ids.next();
             let cyclist = (ActorKind::Cyclist, CYCLIST_SPEED, DVec2::new(0.9, 0.35));
-            out.crossers.push(Crosser::waiting_to_cross(
-                id, cyclist, edge, right, 3.0, across,
-            ));
-            out.scenarios.push(Scenario {
-                name: "Scenario4",
-                trigger: start,
-                action: ScenarioAction::StartCrosser(id),
-                fired: false,
-            });
+            let crosser = Crosser::waiting_to_cross(ids.next(), cyclist, edge, right, 3.0, across);
+            out.add_crossing("Scenario4", start, crosser);
         }
     }
     out.scenarios.sort_by_key(|s| s.trigger);

@@ -214,7 +214,7 @@ impl Traffic {
         rng: &mut impl Rng,
     ) {
         let occupancy = self.occupancy(map, ego);
-        let grants = self.junction_grants(map, lights, ego, t);
+        let grants = self.junction_grants(map, lights, ego);
         let mut accels = Vec::with_capacity(self.vehicles.len());
         for (i, v) in self.vehicles.iter().enumerate() {
             let gap = self.free_distance(map, lights, &occupancy, i, grants[i]);
@@ -333,13 +333,7 @@ impl Traffic {
     }
 
     /// Which vehicles may enter the junction ahead now.
-    fn junction_grants(
-        &self,
-        map: &Map,
-        lights: &[LightState],
-        ego: &EgoPresence,
-        _t: f64,
-    ) -> Vec<bool> {
+    fn junction_grants(&self, map: &Map, lights: &[LightState], ego: &EgoPresence) -> Vec<bool> {
         let mut occupied: Vec<LaneIdx> = self
             .vehicles
             .iter()
