@@ -1,0 +1,306 @@
+//! `ssr-agent bench`: forward latency (median of timed runs after warm-up) with the per-stage
+//! breakdown of the paper's latency analysis, a full policy step from TCP's 900x256 frames, and
+//! optionally a training step, plus parameter counts and per-episode state memory.
+
+use std::time::Instant;
+
+use anyhow::Context as _;
+use burn::module::Module;
+use burn::optim::{AdamWConfig, GradientsParams};
+use burn::tensor::{Device, Distribution, Tensor};
+
+use ssr_agent::camera::{CameraSpec, Rig};
+use ssr_agent::control::ControlConfig;
+use ssr_agent::device::Backend;
+use ssr_agent::model::bev::{BevGrid, GeometryTensors, SampleGeometry};
+use ssr_agent::model::config::SsrConfig;
+use ssr_agent::model::stl::COMMANDS;
+use ssr_agent::model::{ModelInput, SsrModel, float_tensor};
+use ssr_agent::policy::{Frame, SsrPolicy, StepInput};
+use ssr_agent::pose::{EgoMotion, Pose2};
+use ssr_agent::train::loss::{BetaTargets, ImitationTargets, LossWeights, losses};
+
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Model config: a preset (cpu-default, paper) or a JSON file. Default: the standard set.
+    #[arg(long)]
+    config: Option<String>,
+    /// Episodes per forward pass (with --config).
+    #[arg(long, default_value_t = 1)]
+    batch: usize,
+    /// Timed runs per measurement (the median is reported).
+    #[arg(long, default_value_t = 20)]
+    iterations: usize,
+    /// Untimed runs first.
+    #[arg(long, default_value_t = 3)]
+    warmup: usize,
+    /// Also time a training step (forward + FFP + losses + backward + AdamW) at --train-batch.
+    #[arg(long)]
+    train: bool,
+    #[arg(long, default_value_t = 8)]
+    train_batch: usize,
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
+    /// Print one JSON object per measurement instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn median(mut samples: Vec<f64>) -> f64 {
+    samples.sort_by(f64::total_cmp);
+    samples[samples.len() / 2]
+}
+
+/// Median milliseconds of `f` after `warmup` untimed runs; `f` must finish its device work.
+fn time_ms(warmup: usize, iterations: usize, mut f: impl FnMut()) -> f64 {
+    for _ in 0..warmup {
+        f();
+    }
+    median(
+        (0..iterations.max(1))
+            .map(|_| {
+                let start = Instant::now();
+                f();
+                start.elapsed().as_secs_f64() * 1e3
+            })
+            .collect(),
+    )
+}
+
+/// A batch with TCP's camera, a previous BEV and a small ego motion, random images.
+fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput {
+    let grid = BevGrid::new(&config.bev);
+    let rig = Rig::tcp();
+    let motion = EgoMotion {
+        dx: 0.4,
+        dy: 0.0,
+        dyaw: 0.01,
+    };
+    let geometry: Vec<SampleGeometry> = (0..batch)
+        .map(|_| SampleGeometry::new(&grid, &config.bev.pillar_heights, &rig, Some(motion), 6.0))
+        .collect();
+    let mut command = vec![0.0; batch * COMMANDS];
+    for b in 0..batch {
+        command[b * COMMANDS + 3] = 1.0;
+    }
+    ModelInput {
+        images: Tensor::random(
+            [batch, 3, config.image_height, config.image_width],
+            Distribution::Normal(0.0, 1.0),
+            device,
+        ),
+        cameras: 1,
+        geometry: GeometryTensors::batch(&geometry, &grid, config.bev.pillar_heights.len(), device),
+        previous_bev: Tensor::random(
+            [batch, grid.cells(), config.channels],
+            Distribution::Normal(0.0, 1.0),
+            device,
+        ),
+        speed: Tensor::full([batch, 1], 6.0, device),
+        target_point: float_tensor([12.0, 1.0].repeat(batch), [batch, 2], device),
+        command: float_tensor(command, [batch, COMMANDS], device),
+    }
+}
+
+struct Report {
+    config: String,
+    batch: usize,
+    rows: Vec<(&'static str, f64)>,
+}
+
+impl Report {
+    fn print(&self, json: bool) {
+        if json {
+            let fields: serde_json::Map<String, serde_json::Value> = self
+                .rows
+                .iter()
+                .map(|(k, v)| (k.to_string(), serde_json::json!(v)))
+                .collect();
+            println!(
+                "{}",
+                serde_json::json!({"framework": "burn", "config": self.config, "batch": self.batch, "results": fields})
+            );
+        } else {
+            println!("{} batch {}", self.config, self.batch);
+            for (name, value) in &self.rows {
+                println!("  {name:<28} {value:>10.2}");
+            }
+        }
+    }
+}
+
+fn sync(device: &Device) {
+    device.sync().expect("device work completes");
+}
+
+fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {
+    let model = SsrModel::new(config, device).valid();
+    let input = model_input(config, batch, device);
+    let (w, i) = (args.warmup, args.iterations);
+    let features = model.image_features(input.images.clone());
+    let bev = model.encode_bev(features.clone(), &input);
+    let scene = model.stl.forward(
+        bev.clone(),
+        model.bev.positions(),
+        input.command.clone(),
+        input.target_point.clone(),
+    );
+    let mut rows = vec![
+        ("params", model.num_params() as f64),
+        (
+            "forward_ms",
+            time_ms(w, i, || {
+                let out = model.forward(&input);
+                let _ = out.head.alpha.into_data();
+            }),
+        ),
+        (
+            "backbone_ms",
+            time_ms(w, i, || {
+                model.image_features(input.images.clone());
+                sync(device);
+            }),
+        ),
+        (
+            "bev_encoder_ms",
+            time_ms(w, i, || {
+                model.encode_bev(features.clone(), &input);
+                sync(device);
+            }),
+        ),
+        (
+            "stl_ms",
+            time_ms(w, i, || {
+                model.stl.forward(
+                    bev.clone(),
+                    model.bev.positions(),
+                    input.command.clone(),
+                    input.target_point.clone(),
+                );
+                sync(device);
+            }),
+        ),
+        (
+            "head_ms",
+            time_ms(w, i, || {
+                model.head.forward(
+                    scene.tokens.clone(),
+                    input.speed.clone(),
+                    input.target_point.clone(),
+                    input.command.clone(),
+                );
+                sync(device);
+            }),
+        ),
+    ];
+    if batch == 1 {
+        let policy = SsrPolicy::new(
+            model,
+            config.clone(),
+            ControlConfig::default(),
+            device.clone(),
+        );
+        let camera = CameraSpec::tcp_front();
+        let frame = Frame {
+            width: camera.width,
+            height: camera.height,
+            rgb: (0..camera.width * camera.height * 3)
+                .map(|k| (k * 2654435761 >> 24) as u8)
+                .collect(),
+        };
+        let mut episode = policy.new_episode();
+        let mut tick = 0;
+        let step = time_ms(w, i, || {
+            tick += 1;
+            let input = StepInput {
+                frames: vec![frame.clone()],
+                rig: Rig::tcp(),
+                pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
+                speed: 6.0,
+                command: 4,
+                target_point: [12.0, 1.0],
+                debug: false,
+            };
+            policy.step(&mut episode, &input).expect("valid input");
+        });
+        rows.push(("policy_step_900x256_ms", step));
+        rows.push(("episode_state_bytes", policy.episode_state_bytes() as f64));
+    }
+    Report {
+        config: config.name.clone(),
+        batch,
+        rows,
+    }
+}
+
+fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {
+    let device = device.clone().autodiff();
+    let mut model = SsrModel::new(config, &device);
+    let mut optimizer = AdamWConfig::new().with_weight_decay(0.01).init();
+    let input = model_input(config, batch, &device);
+    let p = config.head.pred_len;
+    let targets = ImitationTargets {
+        waypoints: Tensor::random([batch, p, 2], Distribution::Normal(0.0, 3.0), &device),
+        actions: BetaTargets::new(&vec![0.2; batch * (p + 1) * 2], batch, p + 1, 10.0, &device),
+        speed: Tensor::full([batch, 1], 5.0, &device),
+    };
+    let grid = BevGrid::new(&config.bev);
+    let future = Tensor::random(
+        [batch, grid.cells(), config.channels],
+        Distribution::Normal(0.0, 1.0),
+        &device,
+    );
+    let weights = LossWeights::default();
+    let step = time_ms(args.warmup.min(2), args.iterations.min(5), || {
+        let output = model.forward(&input);
+        let predicted = model.predict_future_bev(&output);
+        let loss = losses(
+            &output.head,
+            &targets,
+            Some((predicted, future.clone())),
+            &weights,
+        );
+        let grads = GradientsParams::from_grads(loss.total.backward(), &model);
+        model = optimizer.step(1e-4, model.clone(), grads);
+        sync(&device);
+    });
+    Report {
+        config: config.name.clone(),
+        batch,
+        rows: vec![("train_step_ms", step)],
+    }
+}
+
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let device = args.backend.device()?;
+    let runs: Vec<(SsrConfig, usize)> = match &args.config {
+        Some(spec) => vec![(
+            SsrConfig::from_name_or_file(spec).context("--config")?,
+            args.batch,
+        )],
+        None => vec![
+            (SsrConfig::cpu_default(), 1),
+            (SsrConfig::cpu_default(), 8),
+            (SsrConfig::paper(), 1),
+        ],
+    };
+    if !args.json {
+        println!(
+            "ssr-agent bench: backend {:?}, {} threads, median of {} runs after {} warm-up (ms)",
+            args.backend,
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1),
+            args.iterations,
+            args.warmup
+        );
+    }
+    for (config, batch) in &runs {
+        bench_forward(config, *batch, args, &device).print(args.json);
+    }
+    if args.train {
+        let config = &runs[0].0;
+        bench_train(config, args.train_batch, args, &device).print(args.json);
+    }
+    Ok(())
+}

@@ -1,0 +1,246 @@
+//! Camera rigs in CARLA's sensor description and the pinhole projection the network uses.
+//!
+//! A [`CameraSpec`] is what a CARLA user writes in `sensors()`: a position (x, y, z) in metres
+//! and a rotation (roll, pitch, yaw) in degrees relative to the ego vehicle, in CARLA's
+//! left-handed frame (x forward, y right, z up; positive yaw turns right, positive pitch looks
+//! up), plus the image size and the horizontal field of view. [`CameraSpec::project`] maps a
+//! point of the ego frame this crate uses everywhere (ISO 8855: x forward, y left, z up, origin
+//! at the centre of the vehicle box on the ground) into the image.
+//!
+//! Image coordinates are continuous pixels: (0, 0) is the top-left corner of the image and the
+//! centre of pixel (i, j) is at (i + 0.5, j + 0.5). The principal point is the image centre and
+//! the focal length is `width / (2 tan(fov / 2))` for both axes (square pixels), as in CARLA.
+
+use serde::{Deserialize, Serialize};
+
+/// Most cameras a rig may hold (the network keeps one learned embedding per camera slot).
+pub const MAX_CAMERAS: usize = 6;
+/// Largest image side accepted in a rig, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+
+/// One camera in CARLA's sensor description.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraSpec {
+    pub id: String,
+    /// Position relative to the ego, CARLA frame (x forward, y right, z up), metres.
+    pub x: f32,
+    pub y: f32,
+    pub z: f32,
+    /// Rotation relative to the ego, degrees, CARLA convention.
+    pub roll: f32,
+    pub pitch: f32,
+    pub yaw: f32,
+    pub width: u32,
+    pub height: u32,
+    /// Horizontal field of view, degrees.
+    pub fov: f32,
+}
+
+/// A rig that cannot be used, with the camera and the field at fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RigError {
+    #[error("a rig needs at least one camera")]
+    Empty,
+    #[error("a rig holds at most {MAX_CAMERAS} cameras, this one has {0}")]
+    TooManyCameras(usize),
+    #[error("camera {index} ('{id}'): {problem}")]
+    BadCamera {
+        index: usize,
+        id: String,
+        problem: String,
+    },
+    #[error("camera id '{0}' appears twice in the rig")]
+    DuplicateId(String),
+    #[error("not a rig in JSON (a list of cameras or {{\"cameras\": [...]}}): {0}")]
+    Json(String),
+}
+
+impl CameraSpec {
+    /// TCP's front camera: x -1.5, z 2.0, 900x256, fov 100.
+    pub fn tcp_front() -> Self {
+        Self {
+            id: "rgb_front".into(),
+            x: -1.5,
+            y: 0.0,
+            z: 2.0,
+            roll: 0.0,
+            pitch: 0.0,
+            yaw: 0.0,
+            width: 900,
+            height: 256,
+            fov: 100.0,
+        }
+    }
+
+    /// Focal length in pixels (same for both axes).
+    pub fn focal(&self) -> f32 {
+        self.width as f32 / (2.0 * (self.fov.to_radians() / 2.0).tan())
+    }
+
+    /// Checks every field; the message names the field and the bound it breaks.
+    pub fn validate(&self) -> Result<(), String> {
+        let numbers = [
+            ("x", self.x),
+            ("y", self.y),
+            ("z", self.z),
+            ("roll", self.roll),
+            ("pitch", self.pitch),
+            ("yaw", self.yaw),
+            ("fov", self.fov),
+        ];
+        if let Some((name, value)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(format!("{name} is not a finite number ({value})"));
+        }
+        if let Some((name, value)) = numbers[..3].iter().find(|(_, v)| v.abs() > 100.0) {
+            return Err(format!(
+                "{name} = {value} m is more than 100 m from the ego"
+            ));
+        }
+        if !(1.0..=179.0).contains(&self.fov) {
+            return Err(format!("fov = {} degrees is outside 1..179", self.fov));
+        }
+        for (name, side) in [("width", self.width), ("height", self.height)] {
+            if side == 0 || side > MAX_IMAGE_SIDE {
+                return Err(format!("{name} = {side} px is outside 1..{MAX_IMAGE_SIDE}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The camera's axes (forward, right, up) and position in the ego frame (y left).
+    fn pose_in_ego(&self) -> CameraPose {
+        let (sr, cr) = self.roll.to_radians().sin_cos();
+        let (sp, cp) = self.pitch.to_radians().sin_cos();
+        let (sy, cy) = self.yaw.to_radians().sin_cos();
+        // Columns of CARLA's (Unreal's) rotation matrix, in CARLA's frame.
+        let forward = [cp * cy, cp * sy, sp];
+        let right = [cy * sp * sr - sy * cr, sy * sp * sr + cy * cr, -cp * sr];
+        let up = [-cy * sp * cr - sy * sr, -sy * sp * cr + cy * sr, cp * cr];
+        // CARLA (x, y, z) is ego (x, -y, z).
+        let flip = |v: [f32; 3]| [v[0], -v[1], v[2]];
+        CameraPose {
+            position: [self.x, -self.y, self.z],
+            forward: flip(forward),
+            right: flip(right),
+            up: flip(up),
+        }
+    }
+
+    /// Projects an ego-frame point (x forward, y left, z up) to continuous pixel coordinates
+    /// (u right, v down) and its depth along the optical axis. `None` for points at or behind
+    /// the image plane (depth <= 1e-5 m); the pixel may lie outside the image.
+    pub fn project(&self, point: [f32; 3]) -> Option<([f32; 2], f32)> {
+        self.projector().project(point)
+    }
+
+    /// A projector with the camera's trigonometry done once, for projecting many points.
+    pub fn projector(&self) -> Projector {
+        Projector {
+            pose: self.pose_in_ego(),
+            focal: self.focal(),
+            centre: [self.width as f32 / 2.0, self.height as f32 / 2.0],
+            size: [self.width as f32, self.height as f32],
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct CameraPose {
+    position: [f32; 3],
+    forward: [f32; 3],
+    right: [f32; 3],
+    up: [f32; 3],
+}
+
+/// Projects ego-frame points into one camera (see [`CameraSpec::project`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Projector {
+    pose: CameraPose,
+    focal: f32,
+    centre: [f32; 2],
+    size: [f32; 2],
+}
+
+impl Projector {
+    /// Pixel coordinates and depth, or `None` behind the camera.
+    pub fn project(&self, point: [f32; 3]) -> Option<([f32; 2], f32)> {
+        let d = [
+            point[0] - self.pose.position[0],
+            point[1] - self.pose.position[1],
+            point[2] - self.pose.position[2],
+        ];
+        let dot = |a: [f32; 3]| a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+        let depth = dot(self.pose.forward);
+        if depth <= 1e-5 {
+            return None;
+        }
+        let u = self.centre[0] + self.focal * dot(self.pose.right) / depth;
+        let v = self.centre[1] - self.focal * dot(self.pose.up) / depth;
+        Some(([u, v], depth))
+    }
+
+    /// Image coordinates normalised by the image size (0..1 inside the image), or `None` when
+    /// the point is behind the camera or outside the image.
+    pub fn project_normalised(&self, point: [f32; 3]) -> Option<[f32; 2]> {
+        let ([u, v], _) = self.project(point)?;
+        let (nu, nv) = (u / self.size[0], v / self.size[1]);
+        ((0.0..1.0).contains(&nu) && (0.0..1.0).contains(&nv)).then_some([nu, nv])
+    }
+}
+
+/// An ordered set of cameras; frames arrive in this order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rig {
+    pub cameras: Vec<CameraSpec>,
+}
+
+impl Rig {
+    /// TCP's single front camera.
+    pub fn tcp() -> Self {
+        Self {
+            cameras: vec![CameraSpec::tcp_front()],
+        }
+    }
+
+    /// A validated rig: 1..=6 cameras, distinct ids, every field in range.
+    pub fn new(cameras: Vec<CameraSpec>) -> Result<Self, RigError> {
+        let rig = Self { cameras };
+        rig.validate()?;
+        Ok(rig)
+    }
+
+    pub fn validate(&self) -> Result<(), RigError> {
+        if self.cameras.is_empty() {
+            return Err(RigError::Empty);
+        }
+        if self.cameras.len() > MAX_CAMERAS {
+            return Err(RigError::TooManyCameras(self.cameras.len()));
+        }
+        for (index, camera) in self.cameras.iter().enumerate() {
+            camera.validate().map_err(|problem| RigError::BadCamera {
+                index,
+                id: camera.id.clone(),
+                problem,
+            })?;
+            if self.cameras[..index].iter().any(|c| c.id == camera.id) {
+                return Err(RigError::DuplicateId(camera.id.clone()));
+            }
+        }
+        Ok(())
+    }
+
+    /// Parses a rig from JSON: either `[camera, ...]` or `{"cameras": [camera, ...]}`.
+    pub fn from_json(text: &str) -> Result<Self, RigError> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Form {
+            List(Vec<CameraSpec>),
+            Object { cameras: Vec<CameraSpec> },
+        }
+        let form: Form = serde_json::from_str(text).map_err(|e| RigError::Json(e.to_string()))?;
+        let cameras = match form {
+            Form::List(c) | Form::Object { cameras: c } => c,
+        };
+        Self::new(cameras)
+    }
+}

@@ -1,0 +1,196 @@
+//! Checkpoints: the weights in one safetensors file whose metadata holds the model config (and
+//! free-form training notes), so a checkpoint always rebuilds the network it was saved from.
+//!
+//! Guarantees: [`load`] never panics on a bad file. It reports a missing or unreadable file, a
+//! file that is not safetensors, a truncated file (with the bytes expected and found), a missing
+//! or invalid config, and weights that do not fit the config (names and shapes), each as its
+//! own [`CheckpointError`]. Headers are capped at [`MAX_HEADER_BYTES`].
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::tensor::Device;
+
+use crate::model::SsrModel;
+use crate::model::config::SsrConfig;
+
+/// Metadata key of the config JSON.
+pub const CONFIG_KEY: &str = "ssr_config";
+/// Largest safetensors header accepted.
+pub const MAX_HEADER_BYTES: u64 = 16 << 20;
+
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("checkpoint {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("checkpoint {path} is not a safetensors file: {reason}")]
+    NotSafetensors { path: PathBuf, reason: String },
+    #[error(
+        "checkpoint {path} is truncated: its header promises {expected} bytes, the file has {actual}"
+    )]
+    Truncated {
+        path: PathBuf,
+        expected: u64,
+        actual: u64,
+    },
+    #[error("checkpoint {path} has no '{CONFIG_KEY}' in its metadata (not saved by ssr-agent?)")]
+    MissingConfig { path: PathBuf },
+    #[error("checkpoint {path} holds an invalid model config: {reason}")]
+    BadConfig { path: PathBuf, reason: String },
+    #[error("checkpoint {path} does not match its config '{config}': {details}")]
+    Mismatch {
+        path: PathBuf,
+        config: String,
+        details: String,
+    },
+}
+
+/// What a checkpoint's header says, read without loading the weights.
+#[derive(Debug, Clone)]
+pub struct CheckpointInfo {
+    pub config: SsrConfig,
+    /// Every metadata entry except the config.
+    pub metadata: BTreeMap<String, String>,
+    pub tensors: usize,
+    pub bytes: u64,
+}
+
+/// Saves `model` with `config` and extra metadata entries (for example training notes).
+pub fn save(
+    model: &SsrModel,
+    config: &SsrConfig,
+    metadata: &[(&str, String)],
+    path: &Path,
+) -> Result<(), CheckpointError> {
+    let io = |source| CheckpointError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(io)?;
+    }
+    let config_json = serde_json::to_string(config).expect("configs serialise");
+    let mut store = SafetensorsStore::from_file(path)
+        .metadata(CONFIG_KEY, config_json)
+        .overwrite(true);
+    for (key, value) in metadata {
+        store = store.metadata(*key, value.clone());
+    }
+    model
+        .save_into(&mut store)
+        .map_err(|e| CheckpointError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::other(e.to_string()),
+        })
+}
+
+/// Reads and checks a checkpoint's header: config, metadata, and that the file is complete.
+pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
+    use std::io::Read;
+    let io = |source| CheckpointError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let not_st = |reason: String| CheckpointError::NotSafetensors {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let actual = file.metadata().map_err(io)?.len();
+    let mut length = [0u8; 8];
+    file.read_exact(&mut length)
+        .map_err(|_| not_st(format!("only {actual} bytes, no header")))?;
+    let header_len = u64::from_le_bytes(length);
+    if header_len > MAX_HEADER_BYTES {
+        return Err(not_st(format!(
+            "header of {header_len} bytes exceeds the {MAX_HEADER_BYTES}-byte cap"
+        )));
+    }
+    if 8 + header_len > actual {
+        return Err(CheckpointError::Truncated {
+            path: path.to_path_buf(),
+            expected: 8 + header_len,
+            actual,
+        });
+    }
+    let mut header = vec![0u8; header_len as usize];
+    file.read_exact(&mut header).map_err(io)?;
+    let header: serde_json::Map<String, serde_json::Value> = serde_json::from_slice(&header)
+        .map_err(|e| not_st(format!("header is not a JSON object: {e}")))?;
+
+    let mut data_end = 0u64;
+    let mut tensors = 0;
+    let mut metadata = BTreeMap::new();
+    for (name, entry) in &header {
+        if name == "__metadata__" {
+            for (key, value) in entry.as_object().into_iter().flatten() {
+                metadata.insert(key.clone(), value.as_str().unwrap_or_default().to_string());
+            }
+            continue;
+        }
+        let end = entry
+            .get("data_offsets")
+            .and_then(|o| o.get(1))
+            .and_then(|v| v.as_u64())
+            .ok_or_else(|| not_st(format!("tensor '{name}' has no data_offsets")))?;
+        data_end = data_end.max(end);
+        tensors += 1;
+    }
+    let expected = 8 + header_len + data_end;
+    if expected > actual {
+        return Err(CheckpointError::Truncated {
+            path: path.to_path_buf(),
+            expected,
+            actual,
+        });
+    }
+    let config_json =
+        metadata
+            .remove(CONFIG_KEY)
+            .ok_or_else(|| CheckpointError::MissingConfig {
+                path: path.to_path_buf(),
+            })?;
+    let config: SsrConfig =
+        serde_json::from_str(&config_json).map_err(|e| CheckpointError::BadConfig {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+    config.validate().map_err(|e| CheckpointError::BadConfig {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    Ok(CheckpointInfo {
+        config,
+        metadata,
+        tensors,
+        bytes: actual,
+    })
+}
+
+/// Loads a checkpoint onto `device`: the network its config describes, with its weights.
+pub fn load(path: &Path, device: &Device) -> Result<(SsrModel, CheckpointInfo), CheckpointError> {
+    let info = inspect(path)?;
+    let mismatch = |details: String| CheckpointError::Mismatch {
+        path: path.to_path_buf(),
+        config: info.config.name.clone(),
+        details,
+    };
+    let mut model = SsrModel::new(&info.config, device);
+    let mut store = SafetensorsStore::from_file(path)
+        .validate(true)
+        .allow_partial(false);
+    let result = model
+        .load_from(&mut store)
+        .map_err(|e| mismatch(e.to_string()))?;
+    if !result.unused.is_empty() {
+        return Err(mismatch(format!(
+            "tensors the config has no place for: {}",
+            result.unused.join(", ")
+        )));
+    }
+    Ok((model, info))
+}

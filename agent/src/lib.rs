@@ -1,0 +1,24 @@
+//! ssr-agent: the SSR end-to-end driving network in Burn, the controllers that turn its outputs
+//! into vehicle control, and the per-episode inference API the gRPC server uses.
+//!
+//! - [`camera`]: camera rigs in CARLA's sensor description and their projection.
+//! - [`pose`]: ego poses and the ego motion between ticks.
+//! - [`model`]: the network (backbone, BEV encoder, Scenes TokenLearner, TCP head, FFP).
+//! - [`control`]: TCP's PID controllers, Beta rules and situation-based fusion.
+//! - [`policy`]: per-episode state and the step / batched-step API.
+//! - [`checkpoint`]: weights with their config in one safetensors file.
+//! - [`train`]: losses (imitation + future-BEV) used by training.
+//! - [`device`]: backend selection (CPU by default, wgpu behind the `wgpu` feature).
+//!
+//! Conventions: world frame = OpenDRIVE map frame (x east, y north, z up, m); ego frame = x
+//! forward, y left, z up, origin at the centre of the vehicle box on the ground; control in
+//! CARLA's convention (steer +1 = full right).
+
+pub mod camera;
+pub mod checkpoint;
+pub mod control;
+pub mod device;
+pub mod model;
+pub mod policy;
+pub mod pose;
+pub mod train;

@@ -1,0 +1,166 @@
+//! Image backbone: a ResNet of basic blocks (ResNet-18/34 family) with batch norm, and a neck
+//! that maps the last stage to the network's channel width.
+//!
+//! Input: images normalised with ImageNet statistics ([`normalise_images`]), `[N, 3, H, W]`.
+//! Output: `[N, C, H / stride, W / stride]` with the stride of [`SsrConfig::feature_stride`].
+
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::pool::{MaxPool2d, MaxPool2dConfig};
+use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+
+use super::config::SsrConfig;
+
+/// ImageNet mean and standard deviation of RGB in [0, 1].
+pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
+pub const IMAGENET_STD: [f32; 3] = [0.229, 0.224, 0.225];
+
+fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, device: &Device) -> Conv2d {
+    let pad = kernel / 2;
+    Conv2dConfig::new([cin, cout], [kernel, kernel])
+        .with_stride([stride, stride])
+        .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
+        .with_bias(false)
+        .init(device)
+}
+
+/// Convolution followed by batch norm.
+#[derive(Module, Debug)]
+struct ConvBn {
+    conv: Conv2d,
+    bn: BatchNorm,
+}
+
+impl ConvBn {
+    fn new(cin: usize, cout: usize, kernel: usize, stride: usize, device: &Device) -> Self {
+        Self {
+            conv: conv(cin, cout, kernel, stride, device),
+            bn: BatchNormConfig::new(cout).init(device),
+        }
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        self.bn.forward(self.conv.forward(x))
+    }
+}
+
+/// ResNet basic block: two 3x3 conv-BN with a (projected) shortcut.
+#[derive(Module, Debug)]
+struct BasicBlock {
+    first: ConvBn,
+    second: ConvBn,
+    shortcut: Option<ConvBn>,
+}
+
+impl BasicBlock {
+    fn new(cin: usize, cout: usize, stride: usize, device: &Device) -> Self {
+        let shortcut =
+            (stride != 1 || cin != cout).then(|| ConvBn::new(cin, cout, 1, stride, device));
+        Self {
+            first: ConvBn::new(cin, cout, 3, stride, device),
+            second: ConvBn::new(cout, cout, 3, 1, device),
+            shortcut,
+        }
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let residual = match &self.shortcut {
+            Some(projection) => projection.forward(x.clone()),
+            None => x.clone(),
+        };
+        let y = self.second.forward(relu(self.first.forward(x)));
+        relu(y + residual)
+    }
+}
+
+/// ResNet trunk plus neck (1x1 lateral conv then 3x3 conv, as SSR's single-level FPN).
+#[derive(Module, Debug)]
+pub struct Backbone {
+    stem: ConvBn,
+    pool: MaxPool2d,
+    blocks: Vec<BasicBlock>,
+    lateral: Conv2d,
+    smooth: Conv2d,
+}
+
+impl Backbone {
+    pub fn new(config: &SsrConfig, device: &Device) -> Self {
+        let b = &config.backbone;
+        let mut blocks = Vec::new();
+        let mut cin = b.stem_width;
+        for ((&count, &width), &stride) in b.blocks.iter().zip(&b.widths).zip(&b.strides) {
+            for index in 0..count {
+                blocks.push(BasicBlock::new(
+                    cin,
+                    width,
+                    if index == 0 { stride } else { 1 },
+                    device,
+                ));
+                cin = width;
+            }
+        }
+        let c = config.channels;
+        Self {
+            stem: ConvBn::new(3, b.stem_width, 7, 2, device),
+            pool: MaxPool2dConfig::new([3, 3])
+                .with_strides([2, 2])
+                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                .init(),
+            blocks,
+            lateral: Conv2dConfig::new([cin, c], [1, 1]).init(device),
+            smooth: Conv2dConfig::new([c, c], [3, 3])
+                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                .init(device),
+        }
+    }
+
+    /// `[N, 3, H, W]` normalised images to `[N, C, h, w]` features.
+    pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
+        let mut x = self.pool.forward(relu(self.stem.forward(images)));
+        for block in &self.blocks {
+            x = block.forward(x);
+        }
+        self.smooth.forward(self.lateral.forward(x))
+    }
+}
+
+/// An RGB8 frame (`width * height * 3` bytes, row-major) resized bilinearly (half-pixel
+/// centres, as `align_corners = false`) to `out_width x out_height` and ImageNet-normalised,
+/// as planar `[3, out_height, out_width]` floats.
+pub fn frame_to_input(
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+    out_width: usize,
+    out_height: usize,
+) -> Vec<f32> {
+    assert_eq!(rgb.len(), width * height * 3, "frame size");
+    let taps = |out: usize, size: usize| -> Vec<(usize, usize, f32)> {
+        (0..out)
+            .map(|i| {
+                let x = ((i as f32 + 0.5) * size as f32 / out as f32 - 0.5)
+                    .clamp(0.0, (size - 1) as f32);
+                let low = x as usize;
+                (low, (low + 1).min(size - 1), x - low as f32)
+            })
+            .collect()
+    };
+    let (columns, rows) = (taps(out_width, width), taps(out_height, height));
+    let plane = out_width * out_height;
+    let mut planar = vec![0f32; 3 * plane];
+    for (oy, &(y0, y1, fy)) in rows.iter().enumerate() {
+        for (ox, &(x0, x1, fx)) in columns.iter().enumerate() {
+            for channel in 0..3 {
+                let at = |x: usize, y: usize| rgb[(y * width + x) * 3 + channel] as f32;
+                let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
+                let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
+                let value = (top * (1.0 - fy) + bottom * fy) / 255.0;
+                planar[channel * plane + oy * out_width + ox] =
+                    (value - IMAGENET_MEAN[channel]) / IMAGENET_STD[channel];
+            }
+        }
+    }
+    planar
+}

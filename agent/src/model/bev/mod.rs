@@ -1,0 +1,205 @@
+//! BEV encoder: learned BEV queries with a learned positional embedding and the ego's motion
+//! and speed injected as BEVFormer's can-bus, refined by layers of temporal self-attention,
+//! spatial cross-attention into the camera features, and a feed-forward network (each followed
+//! by layer norm, BEVFormer's post-norm order).
+
+mod grid;
+mod spatial;
+mod temporal;
+
+pub use grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
+pub use spatial::ImageFeatures;
+pub use temporal::align_previous_bev;
+
+use burn::module::{Module, Param};
+use burn::nn::{LayerNorm, LayerNormConfig, Linear};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Distribution, Tensor};
+
+use spatial::SpatialCrossAttention;
+use temporal::TemporalSelfAttention;
+
+use crate::camera::MAX_CAMERAS;
+use crate::model::config::SsrConfig;
+use crate::model::float_tensor;
+use crate::model::init::xavier_linear;
+
+/// TSA -> LN -> SCA -> LN -> FFN -> LN.
+#[derive(Module, Debug)]
+struct EncoderLayer {
+    temporal: TemporalSelfAttention,
+    norm_temporal: LayerNorm,
+    spatial: SpatialCrossAttention,
+    norm_spatial: LayerNorm,
+    ffn_in: Linear,
+    ffn_out: Linear,
+    norm_ffn: LayerNorm,
+}
+
+#[derive(Module, Debug)]
+pub struct BevEncoder {
+    queries: Param<Tensor<2>>,
+    row_embed: Param<Tensor<2>>,
+    col_embed: Param<Tensor<2>>,
+    camera_embed: Param<Tensor<2>>,
+    can_bus_in: Linear,
+    can_bus_out: Linear,
+    can_bus_norm: LayerNorm,
+    layers: Vec<EncoderLayer>,
+    rows: usize,
+    cols: usize,
+}
+
+fn uniform(shape: [usize; 2], device: &Device) -> Param<Tensor<2>> {
+    Param::from_tensor(Tensor::random(
+        shape,
+        Distribution::Uniform(0.0, 1.0),
+        device,
+    ))
+}
+
+impl BevEncoder {
+    pub fn new(config: &SsrConfig, device: &Device) -> Self {
+        let c = config.channels;
+        let bev = &config.bev;
+        let layers = (0..bev.layers)
+            .map(|_| EncoderLayer {
+                temporal: TemporalSelfAttention::new(c, bev.heads, bev.temporal_points, device),
+                norm_temporal: LayerNormConfig::new(c).init(device),
+                spatial: SpatialCrossAttention::new(
+                    c,
+                    bev.heads,
+                    bev.pillar_heights.len(),
+                    bev.spatial_points,
+                    device,
+                ),
+                norm_spatial: LayerNormConfig::new(c).init(device),
+                ffn_in: xavier_linear(c, bev.ffn_dim, device),
+                ffn_out: xavier_linear(bev.ffn_dim, c, device),
+                norm_ffn: LayerNormConfig::new(c).init(device),
+            })
+            .collect();
+        Self {
+            queries: Param::from_tensor(Tensor::random(
+                [bev.rows * bev.cols, c],
+                Distribution::Normal(0.0, 1.0),
+                device,
+            )),
+            row_embed: uniform([bev.rows, c / 2], device),
+            col_embed: uniform([bev.cols, c / 2], device),
+            camera_embed: Param::from_tensor(Tensor::random(
+                [MAX_CAMERAS, c],
+                Distribution::Normal(0.0, 1.0),
+                device,
+            )),
+            can_bus_in: xavier_linear(CAN_BUS_DIM, c / 2, device),
+            can_bus_out: xavier_linear(c / 2, c, device),
+            can_bus_norm: LayerNormConfig::new(c).init(device),
+            layers,
+            rows: bev.rows,
+            cols: bev.cols,
+        }
+    }
+
+    /// The BEV positional embedding `[1, Q, C]`: [column embedding, row embedding] per cell.
+    pub fn positions(&self) -> Tensor<3> {
+        let (rows, cols) = (self.rows, self.cols);
+        let half = self.col_embed.dims()[1];
+        let col = self
+            .col_embed
+            .val()
+            .unsqueeze_dim::<3>(0)
+            .expand([rows, cols, half]);
+        let row = self
+            .row_embed
+            .val()
+            .unsqueeze_dim::<3>(1)
+            .expand([rows, cols, half]);
+        Tensor::cat(vec![col, row], 2).reshape([1, rows * cols, 2 * half])
+    }
+
+    /// Camera features `[B * cameras, C, h, w]` to sampling values with the camera embedding.
+    pub fn image_features(&self, features: Tensor<4>, cameras: usize) -> ImageFeatures {
+        let [bn, c, h, w] = features.dims();
+        let embed = self
+            .camera_embed
+            .val()
+            .narrow(0, 0, cameras)
+            .reshape([1, cameras, 1, c]);
+        let values = features
+            .reshape([bn / cameras, cameras, c, h * w])
+            .swap_dims(2, 3)
+            + embed;
+        ImageFeatures {
+            values: values.reshape([bn, h * w, c]),
+            height: h,
+            width: w,
+            cameras,
+        }
+    }
+
+    /// Encodes one tick: `previous_bev` `[B, Q, C]` (any values where `has_previous` is 0).
+    /// Returns the BEV `[B, Q, C]`.
+    pub fn forward(
+        &self,
+        features: &ImageFeatures,
+        geometry: &GeometryTensors,
+        previous_bev: Tensor<3>,
+    ) -> Tensor<3> {
+        let device = previous_bev.device();
+        let b = previous_bev.dims()[0];
+        let pos = self.positions();
+        let grid_points = reference_points(self.rows, self.cols, &device);
+        let aligned = align_previous_bev(
+            previous_bev,
+            self.rows,
+            self.cols,
+            geometry.previous_points.clone(),
+        );
+        let can_bus = self
+            .can_bus_norm
+            .forward(relu(self.can_bus_out.forward(relu(
+                self.can_bus_in.forward(geometry.can_bus.clone()),
+            ))));
+        let mut query = self.queries.val().unsqueeze_dim::<3>(0).repeat_dim(0, b)
+            + can_bus.unsqueeze_dim::<3>(1);
+        for layer in &self.layers {
+            query = layer.temporal.forward(
+                query,
+                pos.clone(),
+                aligned.clone(),
+                geometry.has_previous.clone(),
+                grid_points.clone(),
+                self.rows,
+                self.cols,
+            );
+            query = layer.norm_temporal.forward(query);
+            query = layer.spatial.forward(
+                query,
+                pos.clone(),
+                features,
+                geometry.camera_points.clone(),
+                geometry.camera_hits.clone(),
+            );
+            query = layer.norm_spatial.forward(query);
+            let ffn = layer
+                .ffn_out
+                .forward(relu(layer.ffn_in.forward(query.clone())));
+            query = layer.norm_ffn.forward(query + ffn);
+        }
+        query
+    }
+}
+
+/// Normalised centres of a `rows x cols` grid's cells, `[1, Q, 2]`.
+fn reference_points(rows: usize, cols: usize, device: &Device) -> Tensor<3> {
+    let values: Vec<f32> = (0..rows * cols)
+        .flat_map(|i| {
+            [
+                ((i % cols) as f32 + 0.5) / cols as f32,
+                ((i / cols) as f32 + 0.5) / rows as f32,
+            ]
+        })
+        .collect();
+    float_tensor(values, [1, rows * cols, 2], device)
+}

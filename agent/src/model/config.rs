@@ -1,0 +1,326 @@
+//! Model configurations: every size of the network, stored beside every checkpoint.
+//!
+//! Two presets: [`SsrConfig::paper`] (what the SSR paper drove CARLA with: ResNet-34 on TCP's
+//! 900x256 front camera, a 256-channel BEV, 3 encoder layers, 16 scene tokens, TCP head with 4
+//! waypoints at 0.5 s) and [`SsrConfig::cpu_default`] (the same architecture, narrower and on a
+//! smaller image and BEV, sized by `ssr-agent bench` to step in real time on two CPU cores).
+
+use serde::{Deserialize, Serialize};
+
+/// The whole network.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SsrConfig {
+    /// Preset name, for logs ("paper", "cpu-default" or a user's own).
+    pub name: String,
+    /// Network input size; frames of another size are resized (the calibration is unaffected,
+    /// since projections are kept in normalised image coordinates).
+    pub image_width: usize,
+    pub image_height: usize,
+    pub backbone: BackboneConfig,
+    /// Channels of the image features after the neck and of the BEV.
+    pub channels: usize,
+    pub bev: BevConfig,
+    pub tokens: TokenConfig,
+    pub head: HeadConfig,
+    pub ffp: FfpConfig,
+}
+
+/// ResNet with basic blocks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BackboneConfig {
+    pub stem_width: usize,
+    /// Blocks per stage (ResNet-34: 3, 4, 6, 3).
+    pub blocks: Vec<usize>,
+    /// Output channels per stage (ResNet-34: 64, 128, 256, 512).
+    pub widths: Vec<usize>,
+    /// Stride of each stage's first block (ResNet: 1, 2, 2, 2; the stem adds 4).
+    pub strides: Vec<usize>,
+}
+
+/// The BEV grid and its encoder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BevConfig {
+    /// Cells along x (rows, forward is row 0) and along y (columns, left is column 0).
+    pub rows: usize,
+    pub cols: usize,
+    /// Extent in the ego frame, metres: x in [x_min, x_max], y in [y_min, y_max].
+    pub x_min: f32,
+    pub x_max: f32,
+    pub y_min: f32,
+    pub y_max: f32,
+    /// Heights above the ground of the pillar points lifted from every cell, metres.
+    pub pillar_heights: Vec<f32>,
+    pub layers: usize,
+    pub heads: usize,
+    /// Sampling points per head in spatial cross-attention (split evenly over the pillar heights).
+    pub spatial_points: usize,
+    /// Sampling points per head and queue slot in temporal self-attention.
+    pub temporal_points: usize,
+    pub ffn_dim: usize,
+}
+
+/// Scenes TokenLearner and the self-attention over the scene tokens.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TokenConfig {
+    pub num_tokens: usize,
+    pub bottleneck: usize,
+    pub layers: usize,
+    pub heads: usize,
+    pub ffn_dim: usize,
+}
+
+/// TCP head.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeadConfig {
+    /// Width of the measurement encoder (speed, target point, command).
+    pub measurement_dim: usize,
+    /// Width of the join MLPs' hidden layers and of the GRU states.
+    pub hidden_dim: usize,
+    pub state_dim: usize,
+    /// Waypoints (and future control steps) predicted, 0.5 s apart.
+    pub pred_len: usize,
+}
+
+/// Future Feature Predictor (training only).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FfpConfig {
+    pub layers: usize,
+    /// TokenFuser's expansion of the scene tokens (64 in SSR).
+    pub fuser_slots: usize,
+}
+
+/// A configuration that cannot build a network.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("model config '{name}': {problem}")]
+pub struct ConfigError {
+    pub name: String,
+    pub problem: String,
+}
+
+impl SsrConfig {
+    /// The preset names [`SsrConfig::preset`] knows.
+    pub const PRESETS: [&'static str; 2] = ["cpu-default", "paper"];
+
+    /// A preset by name.
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "paper" => Some(Self::paper()),
+            "cpu-default" => Some(Self::cpu_default()),
+            _ => None,
+        }
+    }
+
+    /// A preset name or the path of a JSON config file, validated.
+    pub fn from_name_or_file(spec: &str) -> Result<Self, ConfigError> {
+        let config = match Self::preset(spec) {
+            Some(config) => config,
+            None => {
+                let fail = |problem: String| ConfigError {
+                    name: spec.to_string(),
+                    problem,
+                };
+                let text = std::fs::read_to_string(spec).map_err(|e| {
+                    fail(format!(
+                        "neither a preset ({}) nor a readable file: {e}",
+                        Self::PRESETS.join(", ")
+                    ))
+                })?;
+                serde_json::from_str(&text).map_err(|e| fail(format!("not a model config: {e}")))?
+            }
+        };
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// SSR's closed-loop setting: ResNet-34 on TCP's 900x256 camera, 256 channels, a 100x100
+    /// BEV (0.6 m cells, 15 m behind to 45 m ahead), 3 encoder layers, 16 tokens, TCP head.
+    pub fn paper() -> Self {
+        Self {
+            name: "paper".into(),
+            image_width: 900,
+            image_height: 256,
+            backbone: BackboneConfig {
+                stem_width: 64,
+                blocks: vec![3, 4, 6, 3],
+                widths: vec![64, 128, 256, 512],
+                strides: vec![1, 2, 2, 2],
+            },
+            channels: 256,
+            bev: BevConfig {
+                rows: 100,
+                cols: 100,
+                x_min: -15.0,
+                x_max: 45.0,
+                y_min: -30.0,
+                y_max: 30.0,
+                pillar_heights: vec![0.5, 1.5, 2.5, 3.5],
+                layers: 3,
+                heads: 8,
+                spatial_points: 8,
+                temporal_points: 4,
+                ffn_dim: 512,
+            },
+            tokens: TokenConfig {
+                num_tokens: 16,
+                bottleneck: 64,
+                layers: 3,
+                heads: 8,
+                ffn_dim: 512,
+            },
+            head: HeadConfig {
+                measurement_dim: 128,
+                hidden_dim: 512,
+                state_dim: 256,
+                pred_len: 4,
+            },
+            ffp: FfpConfig {
+                layers: 2,
+                fuser_slots: 64,
+            },
+        }
+    }
+
+    /// The CPU default: every part of [`SsrConfig::paper`], narrower, on a 320x96 image and a
+    /// 32x32 BEV of 1.5 m cells, with one sampling point per pillar height in spatial
+    /// cross-attention and two per slot in temporal self-attention (chosen with
+    /// `ssr-agent bench`: sampling dominates the BEV encoder on a CPU).
+    pub fn cpu_default() -> Self {
+        Self {
+            name: "cpu-default".into(),
+            image_width: 320,
+            image_height: 96,
+            backbone: BackboneConfig {
+                stem_width: 16,
+                blocks: vec![1, 1, 2, 1],
+                widths: vec![16, 32, 64, 128],
+                strides: vec![1, 2, 2, 1],
+            },
+            channels: 64,
+            bev: BevConfig {
+                rows: 32,
+                cols: 32,
+                x_min: -8.0,
+                x_max: 40.0,
+                y_min: -24.0,
+                y_max: 24.0,
+                pillar_heights: vec![0.5, 1.5, 2.5, 3.5],
+                layers: 2,
+                heads: 4,
+                spatial_points: 4,
+                temporal_points: 2,
+                ffn_dim: 128,
+            },
+            tokens: TokenConfig {
+                num_tokens: 16,
+                bottleneck: 32,
+                layers: 2,
+                heads: 4,
+                ffn_dim: 128,
+            },
+            head: HeadConfig {
+                measurement_dim: 64,
+                hidden_dim: 128,
+                state_dim: 128,
+                pred_len: 4,
+            },
+            ffp: FfpConfig {
+                layers: 2,
+                fuser_slots: 32,
+            },
+        }
+    }
+
+    /// Output stride of the backbone (image pixels per feature cell).
+    pub fn feature_stride(&self) -> usize {
+        4 * self.backbone.strides.iter().product::<usize>()
+    }
+
+    /// Feature map size (height, width) for the configured input.
+    pub fn feature_size(&self) -> (usize, usize) {
+        let mut h = self.image_height;
+        let mut w = self.image_width;
+        // Stem: 7x7/2 conv then 3x3/2 max-pool, both padded; then each stage's stride (3x3, pad 1).
+        for stride in [2, 2]
+            .into_iter()
+            .chain(self.backbone.strides.iter().copied())
+        {
+            h = (h - 1) / stride + 1;
+            w = (w - 1) / stride + 1;
+        }
+        (h, w)
+    }
+
+    /// Checks that every size fits together; the message names the field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let fail = |problem: String| {
+            Err(ConfigError {
+                name: self.name.clone(),
+                problem,
+            })
+        };
+        let b = &self.backbone;
+        if b.blocks.is_empty()
+            || b.blocks.len() != b.widths.len()
+            || b.blocks.len() != b.strides.len()
+        {
+            return fail(
+                "backbone.blocks, widths and strides must be non-empty and equally long".into(),
+            );
+        }
+        if b.blocks.contains(&0) || b.widths.contains(&0) || b.stem_width == 0 {
+            return fail("backbone blocks and widths must be positive".into());
+        }
+        if b.strides.iter().any(|s| !(1..=2).contains(s)) {
+            return fail("backbone strides must be 1 or 2".into());
+        }
+        if self.image_width < 32
+            || self.image_height < 32
+            || self.image_width > 4096
+            || self.image_height > 4096
+        {
+            return fail(format!(
+                "image {}x{} is outside 32..4096 px per side",
+                self.image_width, self.image_height
+            ));
+        }
+        let v = &self.bev;
+        if v.rows == 0 || v.cols == 0 || v.rows * v.cols > 40_000 {
+            return fail(format!(
+                "bev {}x{} must have 1..40000 cells",
+                v.rows, v.cols
+            ));
+        }
+        if !(v.x_min < v.x_max && v.y_min < v.y_max) {
+            return fail("bev ranges must satisfy x_min < x_max and y_min < y_max".into());
+        }
+        if v.pillar_heights.is_empty() || v.spatial_points % v.pillar_heights.len() != 0 {
+            return fail(
+                "bev.spatial_points must be a positive multiple of the number of pillar heights"
+                    .into(),
+            );
+        }
+        for (what, heads, dim) in [
+            ("bev.heads", v.heads, self.channels),
+            ("tokens.heads", self.tokens.heads, self.channels),
+        ] {
+            if heads == 0 || dim % heads != 0 {
+                return fail(format!("{what} = {heads} must divide channels = {dim}"));
+            }
+        }
+        if self.channels % 2 != 0 {
+            return fail(
+                "channels must be even (half for rows, half for columns in the BEV position)"
+                    .into(),
+            );
+        }
+        if v.layers == 0 || v.temporal_points == 0 || self.tokens.num_tokens == 0 {
+            return fail(
+                "bev.layers, bev.temporal_points and tokens.num_tokens must be positive".into(),
+            );
+        }
+        if self.head.pred_len < 2 || self.head.pred_len > 12 {
+            return fail("head.pred_len must be in 2..=12".into());
+        }
+        Ok(())
+    }
+}

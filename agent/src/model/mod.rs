@@ -1,0 +1,138 @@
+//! The SSR network: image backbone -> BEV encoder (spatial cross-attention through the camera
+//! calibration, temporal self-attention over the episode's previous BEV) -> Scenes TokenLearner
+//! (navigation-gated) -> TCP head; plus the Future Feature Predictor used in training.
+//!
+//! [`SsrModel::forward`] is one tick for a batch of episodes. Everything episode-specific
+//! (calibration, ego motion, previous BEV) comes in through [`ModelInput`]; the model holds no
+//! state between calls. [`crate::policy`] wraps it with per-episode state and control.
+
+pub mod backbone;
+pub mod bev;
+pub mod config;
+pub mod ffp;
+mod init;
+pub mod sampling;
+pub mod stl;
+pub mod tcp_head;
+mod transformer;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+
+use backbone::Backbone;
+use bev::{BevEncoder, GeometryTensors};
+use config::SsrConfig;
+use ffp::FutureFeaturePredictor;
+use stl::{SceneTokenLearner, SceneTokens};
+use tcp_head::{HeadOutput, TcpHead};
+
+/// One tick of a batch of B episodes with the same number of cameras.
+#[derive(Debug, Clone)]
+pub struct ModelInput {
+    /// `[B * cameras, 3, H, W]` ImageNet-normalised, at the config's input size.
+    pub images: Tensor<4>,
+    pub cameras: usize,
+    pub geometry: GeometryTensors,
+    /// `[B, Q, C]`; ignored (may be zeros) where `geometry.has_previous` is 0.
+    pub previous_bev: Tensor<3>,
+    /// `[B, 1]` m/s.
+    pub speed: Tensor<2>,
+    /// `[B, 2]` ego frame, m.
+    pub target_point: Tensor<2>,
+    /// `[B, 6]` one-hot of RoadOption - 1 (VOID mapped to LANEFOLLOW).
+    pub command: Tensor<2>,
+}
+
+/// What one tick produces.
+#[derive(Debug, Clone)]
+pub struct ModelOutput {
+    /// `[B, Q, C]`: kept as the episode's previous BEV for the next tick.
+    pub bev: Tensor<3>,
+    pub scene: SceneTokens,
+    pub head: HeadOutput,
+}
+
+#[derive(Module, Debug)]
+pub struct SsrModel {
+    pub backbone: Backbone,
+    pub bev: BevEncoder,
+    pub stl: SceneTokenLearner,
+    pub head: TcpHead,
+    pub ffp: FutureFeaturePredictor,
+}
+
+impl SsrModel {
+    /// A freshly initialised network (random weights: a component, not a driver).
+    pub fn new(config: &SsrConfig, device: &Device) -> Self {
+        Self {
+            backbone: Backbone::new(config, device),
+            bev: BevEncoder::new(config, device),
+            stl: SceneTokenLearner::new(config, device),
+            head: TcpHead::new(config, device),
+            ffp: FutureFeaturePredictor::new(config, device),
+        }
+    }
+
+    /// Backbone features `[B * cameras, C, h, w]`.
+    pub fn image_features(&self, images: Tensor<4>) -> Tensor<4> {
+        self.backbone.forward(images)
+    }
+
+    /// The BEV of one tick from the backbone features.
+    pub fn encode_bev(&self, features: Tensor<4>, input: &ModelInput) -> Tensor<3> {
+        let features = self.bev.image_features(features, input.cameras);
+        self.bev
+            .forward(&features, &input.geometry, input.previous_bev.clone())
+    }
+
+    /// STL and the head over a BEV.
+    pub fn plan(&self, bev: Tensor<3>, input: &ModelInput) -> (SceneTokens, HeadOutput) {
+        let scene = self.stl.forward(
+            bev,
+            self.bev.positions(),
+            input.command.clone(),
+            input.target_point.clone(),
+        );
+        let head = self.head.forward(
+            scene.tokens.clone(),
+            input.speed.clone(),
+            input.target_point.clone(),
+            input.command.clone(),
+        );
+        (scene, head)
+    }
+
+    /// One tick: backbone -> BEV -> STL -> head.
+    pub fn forward(&self, input: &ModelInput) -> ModelOutput {
+        let bev = self.encode_bev(self.image_features(input.images.clone()), input);
+        let (scene, head) = self.plan(bev.clone(), input);
+        ModelOutput { bev, scene, head }
+    }
+
+    /// FFP: the predicted BEV of a future frame from this tick's output.
+    pub fn predict_future_bev(&self, output: &ModelOutput) -> Tensor<3> {
+        self.ffp.forward(
+            output.scene.tokens.clone(),
+            output.head.waypoints.clone(),
+            output.bev.clone(),
+        )
+    }
+}
+
+/// A float tensor from row-major values.
+pub fn float_tensor<const D: usize>(
+    values: Vec<f32>,
+    shape: [usize; D],
+    device: &Device,
+) -> Tensor<D> {
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+/// A float tensor's values, row-major.
+pub fn float_values<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    tensor
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("converted to f32")
+}

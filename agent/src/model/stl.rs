@@ -1,0 +1,130 @@
+//! Scenes TokenLearner (STL): the BEV is gated channel-wise by the navigation information (the
+//! RoadOption command and the target point, concatenated as the paper does), concatenated with
+//! the BEV positional embedding, and summarised by TokenLearner into a few scene tokens that
+//! self-attention layers then relate. The token attention maps come back for visualisation.
+//!
+//! Unlike SSR's released code, the TokenLearner logits are transposed (not reinterpreted
+//! row-major), so token s attends with weights computed from every cell; we load no SSR weights,
+//! and the reinterpretation is a quirk, not part of the method.
+
+use burn::module::Module;
+use burn::nn::{GroupNorm, GroupNormConfig, Linear};
+use burn::tensor::activation::{gelu, relu, sigmoid, softmax};
+use burn::tensor::{Device, Tensor};
+
+use super::config::SsrConfig;
+use super::init::xavier_linear;
+use super::transformer::{SelfAttentionLayer, run_layers};
+
+/// RoadOption classes after mapping VOID to LANEFOLLOW (one-hot index = value - 1).
+pub const COMMANDS: usize = 6;
+/// Target points enter the gate divided by this many metres.
+pub const TARGET_SCALE: f32 = 25.0;
+
+/// Channel gate from the navigation information (an SE-style MLP ending in a sigmoid).
+#[derive(Module, Debug)]
+pub struct NavigationGate {
+    fc_in: Linear,
+    fc_out: Linear,
+}
+
+impl NavigationGate {
+    pub fn new(channels: usize, device: &Device) -> Self {
+        Self {
+            fc_in: xavier_linear(COMMANDS + 2, channels, device),
+            fc_out: xavier_linear(channels, channels, device),
+        }
+    }
+
+    /// `command` one-hot `[B, 6]`, `target_point` `[B, 2]` (ego frame, m) to a gate `[B, C]` in (0, 1).
+    pub fn forward(&self, command: Tensor<2>, target_point: Tensor<2>) -> Tensor<2> {
+        let navigation = Tensor::cat(vec![command, target_point.div_scalar(TARGET_SCALE)], 1);
+        sigmoid(self.fc_out.forward(relu(self.fc_in.forward(navigation))))
+    }
+}
+
+/// TokenLearner: spatial attention maps from a small MLP over group-normalised features.
+#[derive(Module, Debug)]
+pub struct TokenLearner {
+    norm: GroupNorm,
+    fc_in: Linear,
+    fc_out: Linear,
+}
+
+impl TokenLearner {
+    pub fn new(channels: usize, bottleneck: usize, tokens: usize, device: &Device) -> Self {
+        Self {
+            norm: GroupNormConfig::new(1, channels)
+                .with_epsilon(1e-6)
+                .init(device),
+            fc_in: xavier_linear(channels, bottleneck, device),
+            fc_out: xavier_linear(bottleneck, tokens, device),
+        }
+    }
+
+    /// `x` `[B, Q, D]` to tokens `[B, S, D]` and attention `[B, S, Q]` (each row sums to 1).
+    pub fn forward(&self, x: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
+        let normalised = self.norm.forward(x.clone().swap_dims(1, 2)).swap_dims(1, 2);
+        let logits = self.fc_out.forward(gelu(self.fc_in.forward(normalised)));
+        let attention = softmax(logits.swap_dims(1, 2), 2);
+        (attention.clone().matmul(x), attention)
+    }
+}
+
+/// What STL hands to the head.
+#[derive(Debug, Clone)]
+pub struct SceneTokens {
+    /// `[B, S, C]` after self-attention.
+    pub tokens: Tensor<3>,
+    /// `[B, S, Q]` TokenLearner attention over BEV cells.
+    pub attention: Tensor<3>,
+    /// `[B, C]` navigation gate.
+    pub gate: Tensor<2>,
+}
+
+#[derive(Module, Debug)]
+pub struct SceneTokenLearner {
+    gate: NavigationGate,
+    learner: TokenLearner,
+    layers: Vec<SelfAttentionLayer>,
+}
+
+impl SceneTokenLearner {
+    pub fn new(config: &SsrConfig, device: &Device) -> Self {
+        let c = config.channels;
+        let t = &config.tokens;
+        Self {
+            gate: NavigationGate::new(c, device),
+            learner: TokenLearner::new(2 * c, t.bottleneck, t.num_tokens, device),
+            layers: (0..t.layers)
+                .map(|_| SelfAttentionLayer::new(c, t.heads, t.ffn_dim, device))
+                .collect(),
+        }
+    }
+
+    /// `bev` `[B, Q, C]`, `pos` `[1, Q, C]`, `command` `[B, 6]`, `target_point` `[B, 2]`.
+    pub fn forward(
+        &self,
+        bev: Tensor<3>,
+        pos: Tensor<3>,
+        command: Tensor<2>,
+        target_point: Tensor<2>,
+    ) -> SceneTokens {
+        let [b, q, c] = bev.dims();
+        let gate = self.gate.forward(command, target_point);
+        let gated = bev * gate.clone().unsqueeze_dim::<3>(1);
+        let (tokens, attention) = self
+            .learner
+            .forward(Tensor::cat(vec![gated, pos.expand([b, q, c])], 2));
+        let s = tokens.dims()[1];
+        let content = tokens.clone().narrow(2, 0, c);
+        let token_pos = tokens.narrow(2, c, c);
+        let tokens = run_layers(&self.layers, content, Some(token_pos));
+        debug_assert_eq!(tokens.dims(), [b, s, c]);
+        SceneTokens {
+            tokens,
+            attention,
+            gate,
+        }
+    }
+}

@@ -1,0 +1,422 @@
+//! The inference API: an [`SsrPolicy`] (network + controller settings on a device) steps
+//! episodes, each with its own [`EpisodeState`] (previous BEV and pose, PID windows, fusion
+//! history). [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
+//!
+//! Every input is checked before anything runs; a bad input returns a [`StepError`] naming the
+//! episode and the field, and leaves every episode's state as it was.
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+
+use crate::camera::{Rig, RigError};
+use crate::control::{ControlConfig, ControlDecision, EpisodeController};
+use crate::model::backbone::frame_to_input;
+use crate::model::bev::{BevGrid, GeometryTensors, SampleGeometry};
+use crate::model::config::SsrConfig;
+use crate::model::stl::COMMANDS;
+use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
+use crate::pose::{EgoMotion, Pose2};
+
+/// Largest target-point distance accepted, metres.
+const MAX_TARGET_DISTANCE: f32 = 1000.0;
+/// Largest speed accepted, m/s.
+const MAX_SPEED: f32 = 100.0;
+
+/// One camera image, RGB8, row-major, `width * height * 3` bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+}
+
+/// Everything the network needs at one tick of one episode.
+#[derive(Debug, Clone)]
+pub struct StepInput {
+    /// One frame per rig camera, in rig order.
+    pub frames: Vec<Frame>,
+    pub rig: Rig,
+    /// Ego pose in the world frame; consecutive poses give the ego motion.
+    pub pose: Pose2,
+    /// m/s.
+    pub speed: f32,
+    /// CARLA RoadOption value: -1 (VOID, read as LANEFOLLOW) or 1..=6.
+    pub command: i32,
+    /// Ego frame (x forward, y left), metres.
+    pub target_point: [f32; 2],
+    /// Return token attention maps and both control sources.
+    pub debug: bool,
+}
+
+/// A bad input, naming the episode (its index in the batch) and what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepError {
+    #[error("episode {episode}: {source}")]
+    Rig { episode: usize, source: RigError },
+    #[error("episode {episode}: the rig has {expected} cameras but {got} frames came")]
+    FrameCount {
+        episode: usize,
+        expected: usize,
+        got: usize,
+    },
+    #[error(
+        "episode {episode}, camera '{camera}': frame is {got_w}x{got_h} but the rig says {want_w}x{want_h}"
+    )]
+    FrameSize {
+        episode: usize,
+        camera: String,
+        want_w: u32,
+        want_h: u32,
+        got_w: u32,
+        got_h: u32,
+    },
+    #[error(
+        "episode {episode}, camera '{camera}': a {w}x{h} RGB8 frame needs {want} bytes, got {got}"
+    )]
+    FrameBytes {
+        episode: usize,
+        camera: String,
+        w: u32,
+        h: u32,
+        want: usize,
+        got: usize,
+    },
+    #[error("episode {episode}: {field} = {value} is not a finite number in range")]
+    BadNumber {
+        episode: usize,
+        field: &'static str,
+        value: f32,
+    },
+    #[error("episode {episode}: command {command} is not a RoadOption (-1 or 1..=6)")]
+    BadCommand { episode: usize, command: i32 },
+    #[error("step_batch got {episodes} episode states for {inputs} inputs")]
+    BatchShape { episodes: usize, inputs: usize },
+}
+
+/// What one episode remembers between ticks.
+#[derive(Debug, Clone)]
+pub struct EpisodeState {
+    previous: Option<(Tensor<3>, Pose2)>,
+    controller: EpisodeController,
+    ticks: u64,
+}
+
+impl EpisodeState {
+    /// Ticks stepped so far.
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+
+    /// Whether the next step has a previous BEV to attend to.
+    pub fn has_previous_bev(&self) -> bool {
+        self.previous.is_some()
+    }
+}
+
+/// Debug outputs of one step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepDebug {
+    /// `[tokens][rows * cols]` TokenLearner attention over the BEV (each row sums to 1).
+    pub token_attention: Vec<Vec<f32>>,
+    pub bev_rows: usize,
+    pub bev_cols: usize,
+    /// Control branch Beta parameters for [acceleration, steer].
+    pub alpha: [f32; 2],
+    pub beta: [f32; 2],
+    /// The speed head's prediction, m/s.
+    pub predicted_speed: f32,
+}
+
+/// What one step returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepOutput {
+    pub decision: ControlDecision,
+    /// Planned waypoints, ego frame, 0.5 s apart.
+    pub waypoints: Vec<[f32; 2]>,
+    pub debug: Option<StepDebug>,
+}
+
+/// The network on a device with the controller settings.
+#[derive(Debug, Clone)]
+pub struct SsrPolicy {
+    model: SsrModel,
+    config: SsrConfig,
+    control: ControlConfig,
+    grid: BevGrid,
+    device: Device,
+}
+
+/// The RoadOption's one-hot index, or `None` for values that are not RoadOptions.
+pub fn command_index(command: i32) -> Option<usize> {
+    match command {
+        -1 => Some(3),
+        1..=6 => Some(command as usize - 1),
+        _ => None,
+    }
+}
+
+fn check_input(episode: usize, input: &StepInput) -> Result<(), StepError> {
+    input
+        .rig
+        .validate()
+        .map_err(|source| StepError::Rig { episode, source })?;
+    if input.frames.len() != input.rig.cameras.len() {
+        return Err(StepError::FrameCount {
+            episode,
+            expected: input.rig.cameras.len(),
+            got: input.frames.len(),
+        });
+    }
+    for (frame, camera) in input.frames.iter().zip(&input.rig.cameras) {
+        if (frame.width, frame.height) != (camera.width, camera.height) {
+            return Err(StepError::FrameSize {
+                episode,
+                camera: camera.id.clone(),
+                want_w: camera.width,
+                want_h: camera.height,
+                got_w: frame.width,
+                got_h: frame.height,
+            });
+        }
+        let want = frame.width as usize * frame.height as usize * 3;
+        if frame.rgb.len() != want {
+            return Err(StepError::FrameBytes {
+                episode,
+                camera: camera.id.clone(),
+                w: frame.width,
+                h: frame.height,
+                want,
+                got: frame.rgb.len(),
+            });
+        }
+    }
+    let numbers = [
+        ("speed", input.speed, MAX_SPEED),
+        ("target_point.x", input.target_point[0], MAX_TARGET_DISTANCE),
+        ("target_point.y", input.target_point[1], MAX_TARGET_DISTANCE),
+        ("pose.x", input.pose.x, 1e7),
+        ("pose.y", input.pose.y, 1e7),
+        ("pose.yaw", input.pose.yaw, 1e3),
+    ];
+    for (field, value, limit) in numbers {
+        if !value.is_finite() || value.abs() > limit {
+            return Err(StepError::BadNumber {
+                episode,
+                field,
+                value,
+            });
+        }
+    }
+    if command_index(input.command).is_none() {
+        return Err(StepError::BadCommand {
+            episode,
+            command: input.command,
+        });
+    }
+    Ok(())
+}
+
+impl SsrPolicy {
+    /// Wraps a network for inference (batch norm in evaluation mode, no autodiff).
+    pub fn new(model: SsrModel, config: SsrConfig, control: ControlConfig, device: Device) -> Self {
+        let grid = BevGrid::new(&config.bev);
+        Self {
+            model: model.valid(),
+            config,
+            control,
+            grid,
+            device,
+        }
+    }
+
+    pub fn config(&self) -> &SsrConfig {
+        &self.config
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// A fresh episode: no previous BEV, empty controller windows.
+    pub fn new_episode(&self) -> EpisodeState {
+        EpisodeState {
+            previous: None,
+            controller: EpisodeController::new(self.control.clone()),
+            ticks: 0,
+        }
+    }
+
+    /// Bytes of tensor state one episode keeps (its previous BEV).
+    pub fn episode_state_bytes(&self) -> usize {
+        self.grid.cells() * self.config.channels * std::mem::size_of::<f32>()
+    }
+
+    /// One tick of one episode.
+    pub fn step(
+        &self,
+        episode: &mut EpisodeState,
+        input: &StepInput,
+    ) -> Result<StepOutput, StepError> {
+        Ok(self
+            .step_batch(&mut [episode], std::slice::from_ref(input))?
+            .remove(0))
+    }
+
+    /// One tick of several episodes in as few forward passes as camera counts allow. Outputs
+    /// come back in input order.
+    pub fn step_batch(
+        &self,
+        episodes: &mut [&mut EpisodeState],
+        inputs: &[StepInput],
+    ) -> Result<Vec<StepOutput>, StepError> {
+        if episodes.len() != inputs.len() {
+            return Err(StepError::BatchShape {
+                episodes: episodes.len(),
+                inputs: inputs.len(),
+            });
+        }
+        for (index, input) in inputs.iter().enumerate() {
+            check_input(index, input)?;
+        }
+        let mut outputs: Vec<Option<StepOutput>> = vec![None; inputs.len()];
+        let mut camera_counts: Vec<usize> = inputs.iter().map(|i| i.rig.cameras.len()).collect();
+        camera_counts.sort_unstable();
+        camera_counts.dedup();
+        for cameras in camera_counts {
+            let members: Vec<usize> = (0..inputs.len())
+                .filter(|&i| inputs[i].rig.cameras.len() == cameras)
+                .collect();
+            let group_inputs: Vec<&StepInput> = members.iter().map(|&i| &inputs[i]).collect();
+            let mut group_states: Vec<&mut EpisodeState> = Vec::with_capacity(members.len());
+            for (index, state) in episodes.iter_mut().enumerate() {
+                if members.contains(&index) {
+                    group_states.push(&mut **state);
+                }
+            }
+            let group_outputs = self.run_group(&mut group_states, &group_inputs, cameras);
+            for (index, output) in members.into_iter().zip(group_outputs) {
+                outputs[index] = Some(output);
+            }
+        }
+        Ok(outputs
+            .into_iter()
+            .map(|o| o.expect("every input belongs to a group"))
+            .collect())
+    }
+
+    /// Images `[B * cameras, 3, H, W]` at the network's input size, normalised.
+    fn images(&self, inputs: &[&StepInput]) -> Tensor<4> {
+        let (width, height) = (self.config.image_width, self.config.image_height);
+        let frames: Vec<&Frame> = inputs.iter().flat_map(|input| &input.frames).collect();
+        let values = frames
+            .iter()
+            .flat_map(|f| {
+                frame_to_input(&f.rgb, f.width as usize, f.height as usize, width, height)
+            })
+            .collect();
+        float_tensor(values, [frames.len(), 3, height, width], &self.device)
+    }
+
+    fn run_group(
+        &self,
+        states: &mut [&mut EpisodeState],
+        inputs: &[&StepInput],
+        cameras: usize,
+    ) -> Vec<StepOutput> {
+        let b = inputs.len();
+        let (q, c) = (self.grid.cells(), self.config.channels);
+        let heights = &self.config.bev.pillar_heights;
+        let geometries: Vec<SampleGeometry> = inputs
+            .iter()
+            .zip(states.iter())
+            .map(|(input, state)| {
+                let motion = state
+                    .previous
+                    .as_ref()
+                    .map(|(_, pose)| EgoMotion::between(*pose, input.pose));
+                SampleGeometry::new(&self.grid, heights, &input.rig, motion, input.speed)
+            })
+            .collect();
+        let previous_bev = Tensor::cat(
+            states
+                .iter()
+                .map(|s| match &s.previous {
+                    Some((bev, _)) => bev.clone(),
+                    None => Tensor::zeros([1, q, c], &self.device),
+                })
+                .collect(),
+            0,
+        );
+        let mut command = vec![0f32; b * COMMANDS];
+        for (i, input) in inputs.iter().enumerate() {
+            command[i * COMMANDS + command_index(input.command).expect("checked")] = 1.0;
+        }
+        let model_input = ModelInput {
+            images: self.images(inputs),
+            cameras,
+            geometry: GeometryTensors::batch(&geometries, &self.grid, heights.len(), &self.device),
+            previous_bev,
+            speed: float_tensor(
+                inputs.iter().map(|i| i.speed).collect(),
+                [b, 1],
+                &self.device,
+            ),
+            target_point: float_tensor(
+                inputs.iter().flat_map(|i| i.target_point).collect(),
+                [b, 2],
+                &self.device,
+            ),
+            command: float_tensor(command, [b, COMMANDS], &self.device),
+        };
+        let output = self.model.forward(&model_input);
+
+        let pred_len = self.config.head.pred_len;
+        let waypoints = float_values(output.head.waypoints.clone());
+        let alpha = float_values(output.head.alpha.clone());
+        let beta = float_values(output.head.beta.clone());
+        let speed = float_values(output.head.speed.clone());
+        let wants_debug = inputs.iter().any(|i| i.debug);
+        let attention = wants_debug.then(|| float_values(output.scene.attention.clone()));
+        let tokens = self.config.tokens.num_tokens;
+
+        let mut results = Vec::with_capacity(b);
+        for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
+            let path: Vec<[f32; 2]> = (0..pred_len)
+                .map(|k| {
+                    [
+                        waypoints[(i * pred_len + k) * 2],
+                        waypoints[(i * pred_len + k) * 2 + 1],
+                    ]
+                })
+                .collect();
+            let a = [alpha[2 * i], alpha[2 * i + 1]];
+            let bt = [beta[2 * i], beta[2 * i + 1]];
+            let decision = state
+                .controller
+                .act(&path, input.target_point, input.speed, a, bt);
+            let debug = (input.debug).then(|| {
+                let maps = attention
+                    .as_ref()
+                    .expect("attention read when debug is asked");
+                StepDebug {
+                    token_attention: (0..tokens)
+                        .map(|s| maps[(i * tokens + s) * q..(i * tokens + s + 1) * q].to_vec())
+                        .collect(),
+                    bev_rows: self.grid.rows,
+                    bev_cols: self.grid.cols,
+                    alpha: a,
+                    beta: bt,
+                    predicted_speed: speed[i] * crate::model::tcp_head::SPEED_SCALE,
+                }
+            });
+            state.previous = Some((output.bev.clone().narrow(0, i, 1), input.pose));
+            state.ticks += 1;
+            results.push(StepOutput {
+                decision,
+                waypoints: path,
+                debug,
+            });
+        }
+        results
+    }
+}

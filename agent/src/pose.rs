@@ -1,0 +1,61 @@
+//! Planar ego poses in the world frame and the ego motion between two ticks.
+//!
+//! World frame: the OpenDRIVE map frame (x east, y north, z up, metres); yaw in radians,
+//! counter-clockwise from +x. Ego frame: x forward, y left.
+
+use serde::{Deserialize, Serialize};
+
+/// The ego's planar pose in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pose2 {
+    pub x: f32,
+    pub y: f32,
+    pub yaw: f32,
+}
+
+impl Pose2 {
+    pub fn new(x: f32, y: f32, yaw: f32) -> Self {
+        Self { x, y, yaw }
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.yaw.is_finite()
+    }
+}
+
+/// How the ego moved from the previous tick to this one, in the previous ego frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EgoMotion {
+    /// Translation of the ego origin, previous ego frame (x forward, y left), metres.
+    pub dx: f32,
+    pub dy: f32,
+    /// Heading change, radians, counter-clockwise positive.
+    pub dyaw: f32,
+}
+
+impl EgoMotion {
+    /// The motion that takes the ego from `previous` to `current`.
+    pub fn between(previous: Pose2, current: Pose2) -> Self {
+        let (s, c) = previous.yaw.sin_cos();
+        let (wx, wy) = (current.x - previous.x, current.y - previous.y);
+        Self {
+            dx: c * wx + s * wy,
+            dy: -s * wx + c * wy,
+            dyaw: wrap_angle(current.yaw - previous.yaw),
+        }
+    }
+
+    /// Where a point of the current ego frame lies in the previous ego frame.
+    pub fn to_previous(&self, point: [f32; 2]) -> [f32; 2] {
+        let (s, c) = self.dyaw.sin_cos();
+        [
+            c * point[0] - s * point[1] + self.dx,
+            s * point[0] + c * point[1] + self.dy,
+        ]
+    }
+}
+
+/// An angle wrapped to [-pi, pi).
+pub fn wrap_angle(angle: f32) -> f32 {
+    (angle + std::f32::consts::PI).rem_euclid(std::f32::consts::TAU) - std::f32::consts::PI
+}
