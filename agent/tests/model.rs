@@ -1,0 +1,224 @@
+//! The network through its public interface: shapes per config, the first-frame path, temporal
+//! alignment, token attention, the navigation gate, and the sampler against grid_sample.
+
+mod common;
+
+use burn::module::Module;
+use burn::tensor::ops::GridSampleOptions;
+use burn::tensor::{Device, Distribution, Tensor};
+
+use common::{max_abs_diff, model_input, tiny_config};
+use ssr_agent::model::bev::{BevGrid, align_previous_bev};
+use ssr_agent::model::config::SsrConfig;
+use ssr_agent::model::sampling::bilinear_sample;
+use ssr_agent::model::stl::NavigationGate;
+use ssr_agent::model::{SsrModel, float_tensor, float_values};
+use ssr_agent::pose::{EgoMotion, Pose2};
+
+fn check_shapes(config: &SsrConfig, batch: usize, cameras: usize) {
+    let device = Device::flex();
+    let model = SsrModel::new(config, &device).valid();
+    let input = model_input(config, batch, cameras, true, &device);
+    let (fh, fw) = config.feature_size();
+    assert_eq!(
+        model.image_features(input.images.clone()).dims(),
+        [batch * cameras, config.channels, fh, fw]
+    );
+    let out = model.forward(&input);
+    let q = config.bev.rows * config.bev.cols;
+    let s = config.tokens.num_tokens;
+    let p = config.head.pred_len;
+    assert_eq!(out.bev.dims(), [batch, q, config.channels]);
+    assert_eq!(out.scene.tokens.dims(), [batch, s, config.channels]);
+    assert_eq!(out.scene.attention.dims(), [batch, s, q]);
+    assert_eq!(out.scene.gate.dims(), [batch, config.channels]);
+    assert_eq!(out.head.waypoints.dims(), [batch, p, 2]);
+    assert_eq!(out.head.alpha.dims(), [batch, 2]);
+    assert_eq!(out.head.future_beta.dims(), [batch, p, 2]);
+    assert_eq!(out.head.speed.dims(), [batch, 1]);
+    assert_eq!(
+        model.predict_future_bev(&out).dims(),
+        [batch, q, config.channels]
+    );
+    assert!(
+        float_values(out.head.alpha)
+            .iter()
+            .all(|a| a.is_finite() && *a > 0.0)
+    );
+}
+
+#[test]
+fn shapes_per_config() {
+    check_shapes(&tiny_config(), 2, 1);
+    check_shapes(&tiny_config(), 2, 3);
+    check_shapes(&SsrConfig::cpu_default(), 2, 1);
+    let paper = SsrConfig::paper();
+    assert_eq!(
+        paper.feature_size(),
+        (8, 29),
+        "TCP's ResNet-34 map for 900x256"
+    );
+    check_shapes(&paper, 1, 1);
+}
+
+#[test]
+fn configs_validate_and_bad_ones_name_the_field() {
+    for name in SsrConfig::PRESETS {
+        SsrConfig::preset(name).unwrap().validate().unwrap();
+    }
+    let mut bad = SsrConfig::cpu_default();
+    bad.bev.heads = 3;
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("bev.heads")
+    );
+    let mut bad = SsrConfig::cpu_default();
+    bad.bev.spatial_points = 5;
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("spatial_points")
+    );
+    assert!(
+        SsrConfig::from_name_or_file("no-such-preset")
+            .unwrap_err()
+            .to_string()
+            .contains("neither a preset")
+    );
+}
+
+#[test]
+fn first_frame_ignores_the_previous_bev_and_later_frames_use_it() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let model = SsrModel::new(&config, &device).valid();
+    let mut first = model_input(&config, 1, 1, false, &device);
+    let a = float_values(model.forward(&first).bev);
+    first.previous_bev = first.previous_bev.clone().mul_scalar(-3.0).add_scalar(5.0);
+    let b = float_values(model.forward(&first).bev);
+    assert!(
+        max_abs_diff(a, b) < 1e-5,
+        "no previous BEV means its values cannot matter"
+    );
+
+    let mut later = model_input(&config, 1, 1, true, &device);
+    let a = float_values(model.forward(&later).bev);
+    later.previous_bev = later.previous_bev.clone().mul_scalar(-3.0).add_scalar(5.0);
+    let b = float_values(model.forward(&later).bev);
+    assert!(
+        max_abs_diff(a, b) > 1e-3,
+        "the previous BEV feeds temporal self-attention"
+    );
+}
+
+#[test]
+fn temporal_alignment_moves_a_static_blob_by_the_ego_motion() {
+    let device = Device::flex();
+    let config = SsrConfig::cpu_default();
+    let grid = BevGrid::new(&config.bev);
+    // A landmark at world (20, 5); the ego was at the origin heading east, then moved.
+    let previous_pose = Pose2::new(0.0, 0.0, 0.0);
+    let current_pose = Pose2::new(3.0, 1.5, 0.3);
+    let landmark = [20.0f32, 5.0];
+    let previous_cell = grid.cell_of(landmark).unwrap(); // previous ego frame == world here
+    let mut values = vec![0.0f32; grid.cells() * 2];
+    values[previous_cell * 2] = 1.0;
+    let previous = float_tensor(values, [1, grid.cells(), 2], &device);
+
+    let motion = EgoMotion::between(previous_pose, current_pose);
+    let points: Vec<f32> = (0..grid.cells())
+        .flat_map(|i| grid.normalised(motion.to_previous(grid.cell_centre(i))))
+        .collect();
+    let aligned = float_values(align_previous_bev(
+        previous,
+        grid.rows,
+        grid.cols,
+        float_tensor(points, [1, grid.cells(), 2], &device),
+    ));
+
+    // Where the landmark is in the current ego frame, by hand.
+    let (s, c) = current_pose.yaw.sin_cos();
+    let (wx, wy) = (landmark[0] - current_pose.x, landmark[1] - current_pose.y);
+    let expected = grid.cell_of([c * wx + s * wy, -s * wx + c * wy]).unwrap();
+    let channel0: Vec<f32> = aligned.chunks(2).map(|v| v[0]).collect();
+    let (peak, value) =
+        channel0.iter().enumerate().fold(
+            (0, 0.0),
+            |best, (i, v)| if *v > best.1 { (i, *v) } else { best },
+        );
+    let (pr, pc, er, ec) = (
+        peak / grid.cols,
+        peak % grid.cols,
+        expected / grid.cols,
+        expected % grid.cols,
+    );
+    assert!(value > 0.2, "the blob survives alignment ({value})");
+    assert!(
+        pr.abs_diff(er) <= 1 && pc.abs_diff(ec) <= 1,
+        "peak at ({pr},{pc}), expected ({er},{ec})"
+    );
+    assert!(channel0.iter().sum::<f32>() > 0.5, "mass is kept");
+    assert!(aligned.chunks(2).all(|v| v[1] == 0.0));
+}
+
+#[test]
+fn token_attention_rows_sum_to_one() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let model = SsrModel::new(&config, &device).valid();
+    let out = model.forward(&model_input(&config, 2, 1, true, &device));
+    let q = config.bev.rows * config.bev.cols;
+    for row in float_values(out.scene.attention).chunks(q) {
+        assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-4);
+        assert!(row.iter().all(|w| *w >= 0.0));
+    }
+}
+
+#[test]
+fn command_and_target_point_change_the_gate() {
+    let device = Device::flex();
+    let gate = NavigationGate::new(16, &device);
+    let onehot = |i: usize| {
+        let mut v = vec![0.0; 6];
+        v[i] = 1.0;
+        float_tensor(v, [1, 6], &device)
+    };
+    let target = |x: f32, y: f32| float_tensor(vec![x, y], [1, 2], &device);
+    let base = float_values(gate.forward(onehot(3), target(10.0, 0.0)));
+    let other_command = float_values(gate.forward(onehot(0), target(10.0, 0.0)));
+    let other_target = float_values(gate.forward(onehot(3), target(10.0, 8.0)));
+    assert!(base.iter().all(|g| *g > 0.0 && *g < 1.0));
+    assert!(max_abs_diff(base.clone(), other_command) > 1e-3);
+    assert!(max_abs_diff(base, other_target) > 1e-3);
+}
+
+#[test]
+fn sampler_matches_grid_sample() {
+    let device = Device::flex();
+    let (n, c, h, w, l) = (3, 5, 6, 9, 40);
+    let maps = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+    // Inside, on the border, and outside the map.
+    let locations = Tensor::<3>::random([n, l, 2], Distribution::Uniform(-0.3, 1.3), &device);
+    let reference = maps
+        .clone()
+        .grid_sample_2d(
+            locations
+                .clone()
+                .mul_scalar(2.0)
+                .sub_scalar(1.0)
+                .reshape([n, l, 1, 2]),
+            GridSampleOptions::default(),
+        )
+        .reshape([n, c, l])
+        .swap_dims(1, 2);
+    let values = maps.reshape([n, c, h * w]).swap_dims(1, 2);
+    let ours = bilinear_sample(values, h, w, locations);
+    let diff = max_abs_diff(float_values(ours), float_values(reference));
+    assert!(
+        diff < 1e-5,
+        "bilinear_sample differs from grid_sample_2d by {diff}"
+    );
+}

@@ -1,0 +1,164 @@
+//! The inference API: episode state across steps, batched steps, and input errors that leave
+//! every episode as it was.
+
+mod common;
+
+use burn::tensor::Device;
+
+use common::{rig, step_input, tiny_config};
+use ssr_agent::control::ControlConfig;
+use ssr_agent::model::SsrModel;
+use ssr_agent::policy::{SsrPolicy, StepError};
+
+fn policy() -> SsrPolicy {
+    let device = Device::flex();
+    let config = tiny_config();
+    SsrPolicy::new(
+        SsrModel::new(&config, &device),
+        config,
+        ControlConfig::default(),
+        device,
+    )
+}
+
+#[test]
+fn an_episode_keeps_its_bev_and_debug_maps_come_back() {
+    let policy = policy();
+    let rig = rig(1, 900, 256);
+    let mut episode = policy.new_episode();
+    assert!(!episode.has_previous_bev());
+    let out = policy.step(&mut episode, &step_input(&rig, 0, 1)).unwrap();
+    assert_eq!(out.waypoints.len(), policy.config().head.pred_len);
+    let c = out.decision.control;
+    assert!(
+        (-1.0..=1.0).contains(&c.steer)
+            && (0.0..=1.0).contains(&c.throttle)
+            && (0.0..=1.0).contains(&c.brake)
+    );
+    let debug = out.debug.unwrap();
+    assert_eq!(
+        debug.token_attention.len(),
+        policy.config().tokens.num_tokens
+    );
+    assert_eq!(
+        debug.token_attention[0].len(),
+        debug.bev_rows * debug.bev_cols
+    );
+    assert!(episode.has_previous_bev() && episode.ticks() == 1);
+    policy.step(&mut episode, &step_input(&rig, 1, 1)).unwrap();
+    assert_eq!(episode.ticks(), 2);
+    assert_eq!(policy.episode_state_bytes(), 8 * 8 * 16 * 4);
+}
+
+#[test]
+fn a_batch_equals_single_steps_even_with_mixed_rigs() {
+    let policy = policy();
+    let rigs = [rig(1, 900, 256), rig(3, 400, 300), rig(1, 900, 256)];
+    let inputs: Vec<_> = rigs
+        .iter()
+        .enumerate()
+        .map(|(i, r)| step_input(r, 0, i as u32 + 7))
+        .collect();
+    let mut singles: Vec<_> = (0..3).map(|_| policy.new_episode()).collect();
+    let expected: Vec<_> = singles
+        .iter_mut()
+        .zip(&inputs)
+        .map(|(e, i)| policy.step(e, i).unwrap())
+        .collect();
+    let mut batched: Vec<_> = (0..3).map(|_| policy.new_episode()).collect();
+    let mut refs: Vec<_> = batched.iter_mut().collect();
+    let got = policy.step_batch(&mut refs, &inputs).unwrap();
+    for (a, b) in expected.iter().zip(&got) {
+        for (wa, wb) in a.waypoints.iter().zip(&b.waypoints) {
+            assert!(
+                (wa[0] - wb[0]).abs() < 1e-4 && (wa[1] - wb[1]).abs() < 1e-4,
+                "{wa:?} vs {wb:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_named_and_change_nothing() {
+    let policy = policy();
+    let rig = rig(1, 900, 256);
+    let mut episode = policy.new_episode();
+    policy.step(&mut episode, &step_input(&rig, 0, 1)).unwrap();
+
+    let mut input = step_input(&rig, 1, 1);
+    input.speed = f32::NAN;
+    assert!(matches!(
+        policy.step(&mut episode, &input),
+        Err(StepError::BadNumber { field: "speed", .. })
+    ));
+    let mut input = step_input(&rig, 1, 1);
+    input.command = 9;
+    assert_eq!(
+        policy.step(&mut episode, &input).unwrap_err(),
+        StepError::BadCommand {
+            episode: 0,
+            command: 9
+        }
+    );
+    let mut input = step_input(&rig, 1, 1);
+    input.frames.clear();
+    assert!(matches!(
+        policy.step(&mut episode, &input),
+        Err(StepError::FrameCount {
+            expected: 1,
+            got: 0,
+            ..
+        })
+    ));
+    let mut input = step_input(&rig, 1, 1);
+    input.frames[0].rgb.truncate(100);
+    let err = policy.step(&mut episode, &input).unwrap_err();
+    assert!(
+        err.to_string().contains("needs 691200 bytes, got 100"),
+        "{err}"
+    );
+    let mut input = step_input(&rig, 1, 1);
+    input.frames[0].width = 800;
+    assert!(matches!(
+        policy.step(&mut episode, &input),
+        Err(StepError::FrameSize { .. })
+    ));
+    let mut input = step_input(&rig, 1, 1);
+    input.rig.cameras[0].fov = -5.0;
+    assert!(matches!(
+        policy.step(&mut episode, &input),
+        Err(StepError::Rig { .. })
+    ));
+
+    // A bad second episode fails the whole batch before anything runs.
+    let mut other = policy.new_episode();
+    let mut bad = step_input(&rig, 1, 2);
+    bad.target_point = [f32::INFINITY, 0.0];
+    let err = policy
+        .step_batch(
+            &mut [&mut episode, &mut other],
+            &[step_input(&rig, 1, 1), bad],
+        )
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            StepError::BadNumber {
+                episode: 1,
+                field: "target_point.x",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(matches!(
+        policy.step_batch(&mut [&mut episode], &[]),
+        Err(StepError::BatchShape { .. })
+    ));
+    assert_eq!(
+        episode.ticks(),
+        1,
+        "failed steps leave the episode untouched"
+    );
+    assert_eq!(other.ticks(), 0);
+}
