@@ -39,6 +39,7 @@ import json
 import math
 import os
 import statistics
+import subprocess
 import time
 
 import numpy as np
@@ -50,36 +51,16 @@ import torch.nn.functional as F
 # config.rs
 # ---------------------------------------------------------------------------------------------
 
-PRESETS = {
-    "paper": dict(
-        image_width=900,
-        image_height=256,
-        backbone=dict(stem_width=64, blocks=[3, 4, 6, 3], widths=[64, 128, 256, 512], strides=[1, 2, 2, 2]),
-        channels=256,
-        bev=dict(
-            rows=100, cols=100, x_min=-15.0, x_max=45.0, y_min=-30.0, y_max=30.0,
-            pillar_heights=[0.5, 1.5, 2.5, 3.5], layers=3, heads=8, spatial_points=8,
-            temporal_points=4, ffn_dim=512,
-        ),
-        tokens=dict(num_tokens=16, bottleneck=64, layers=3, heads=8, ffn_dim=512),
-        head=dict(measurement_dim=128, hidden_dim=512, state_dim=256, pred_len=4),
-        ffp=dict(layers=2, fuser_slots=64),
-    ),
-    "cpu-default": dict(
-        image_width=320,
-        image_height=96,
-        backbone=dict(stem_width=16, blocks=[1, 1, 2, 1], widths=[16, 32, 64, 128], strides=[1, 2, 2, 1]),
-        channels=64,
-        bev=dict(
-            rows=32, cols=32, x_min=-8.0, x_max=40.0, y_min=-24.0, y_max=24.0,
-            pillar_heights=[0.5, 1.5, 2.5, 3.5], layers=2, heads=4, spatial_points=8,
-            temporal_points=4, ffn_dim=128,
-        ),
-        tokens=dict(num_tokens=16, bottleneck=32, layers=2, heads=4, ffn_dim=128),
-        head=dict(measurement_dim=64, hidden_dim=128, state_dim=128, pred_len=4),
-        ffp=dict(layers=2, fuser_slots=32),
-    ),
-}
+def load_config(spec):
+    """A model config: a JSON file, or a preset name resolved by ``ssr-agent config NAME`` so the
+    twin always uses the Rust presets (set SSR_AGENT_BIN if the binary is elsewhere)."""
+    if os.path.exists(spec):
+        with open(spec) as f:
+            return json.load(f)
+    binary = os.environ.get("SSR_AGENT_BIN", "target/release/ssr-agent")
+    out = subprocess.run([binary, "config", spec], check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)
+
 
 MAX_CAMERAS = 6  # camera.rs
 COMMANDS = 6  # stl.rs
@@ -831,7 +812,7 @@ def timed_forward(model, inputs, sync):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--config", choices=sorted(PRESETS), default="cpu-default")
+    parser.add_argument("--config", default="cpu-default", help="preset name or config JSON file")
     parser.add_argument("--batch", type=int, default=1)
     parser.add_argument("--iters", type=int, default=20)
     parser.add_argument("--warmup", type=int, default=3)
@@ -849,7 +830,7 @@ def main():
     torch.manual_seed(args.seed)
     device = torch.device(args.device)
     sync = (lambda: torch.cuda.synchronize(device)) if device.type == "cuda" else (lambda: None)
-    config = PRESETS[args.config]
+    config = load_config(args.config)
 
     model = SsrModel(config).to(device)
     params = sum(p.numel() for p in model.parameters())

@@ -139,7 +139,6 @@ impl CameraSpec {
             pose: self.pose_in_ego(),
             focal: self.focal(),
             centre: [self.width as f32 / 2.0, self.height as f32 / 2.0],
-            size: [self.width as f32, self.height as f32],
         }
     }
 }
@@ -158,7 +157,6 @@ pub struct Projector {
     pose: CameraPose,
     focal: f32,
     centre: [f32; 2],
-    size: [f32; 2],
 }
 
 impl Projector {
@@ -177,14 +175,6 @@ impl Projector {
         let u = self.centre[0] + self.focal * dot(self.pose.right) / depth;
         let v = self.centre[1] - self.focal * dot(self.pose.up) / depth;
         Some(([u, v], depth))
-    }
-
-    /// Image coordinates normalised by the image size (0..1 inside the image), or `None` when
-    /// the point is behind the camera or outside the image.
-    pub fn project_normalised(&self, point: [f32; 3]) -> Option<[f32; 2]> {
-        let ([u, v], _) = self.project(point)?;
-        let (nu, nv) = (u / self.size[0], v / self.size[1]);
-        ((0.0..1.0).contains(&nu) && (0.0..1.0).contains(&nv)).then_some([nu, nv])
     }
 }
 

@@ -233,10 +233,6 @@ impl SsrPolicy {
         &self.config
     }
 
-    pub fn device(&self) -> &Device {
-        &self.device
-    }
-
     /// A fresh episode: no previous BEV, empty controller windows.
     pub fn new_episode(&self) -> EpisodeState {
         EpisodeState {

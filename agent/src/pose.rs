@@ -17,10 +17,6 @@ impl Pose2 {
     pub fn new(x: f32, y: f32, yaw: f32) -> Self {
         Self { x, y, yaw }
     }
-
-    pub fn is_finite(&self) -> bool {
-        self.x.is_finite() && self.y.is_finite() && self.yaw.is_finite()
-    }
 }
 
 /// How the ego moved from the previous tick to this one, in the previous ego frame.

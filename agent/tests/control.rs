@@ -10,23 +10,6 @@ fn near(a: f32, b: f32) -> bool {
     (a - b).abs() < 1e-4
 }
 
-fn tcp_follower(config: &ControlConfig) -> TrajectoryFollower {
-    TrajectoryFollower::new(
-        Pid::new(
-            config.turn_kp,
-            config.turn_ki,
-            config.turn_kd,
-            config.pid_window,
-        ),
-        Pid::new(
-            config.speed_kp,
-            config.speed_ki,
-            config.speed_kd,
-            config.pid_window,
-        ),
-    )
-}
-
 #[test]
 fn pid_uses_the_window_mean_and_last_difference() {
     let mut pid = Pid::new(1.0, 0.5, 0.25, 4);
@@ -75,7 +58,7 @@ fn trajectory_control_reproduces_tcp_by_hand() {
     let config = ControlConfig::default();
     let straight = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]]; // 4 m/s
     // Below the desired speed: speed PID on the clipped error 0.25 saturates at 0.75.
-    let c = tcp_follower(&config).control(&straight, [20.0, 0.0], 3.0, &config);
+    let c = TrajectoryFollower::new(&config).control(&straight, [20.0, 0.0], 3.0, &config);
     assert_eq!(
         c,
         Control {
@@ -85,7 +68,7 @@ fn trajectory_control_reproduces_tcp_by_hand() {
         }
     );
     // 5 / 4 > 1.1: brake.
-    let c = tcp_follower(&config).control(&straight, [20.0, 0.0], 5.0, &config);
+    let c = TrajectoryFollower::new(&config).control(&straight, [20.0, 0.0], 5.0, &config);
     assert_eq!(
         c,
         Control {
@@ -97,7 +80,7 @@ fn trajectory_control_reproduces_tcp_by_hand() {
     // Curving right while the near target is to the left (45 degrees): the target wins,
     // angle -0.5, steer = 0.75 (-0.5) + 0.75 (-0.5 / 40) + 0.3 (-0.5).
     let curve = [[2.0, 0.0], [4.0, -1.0], [6.0, -3.0], [7.0, -5.0]];
-    let c = tcp_follower(&config).control(&curve, [8.0, 8.0], 4.0, &config);
+    let c = TrajectoryFollower::new(&config).control(&curve, [8.0, 8.0], 4.0, &config);
     assert!(near(c.steer, -0.534375), "{c:?}");
 }
 

@@ -13,7 +13,6 @@ pub mod trajectory;
 use serde::{Deserialize, Serialize};
 
 use fusion::Fusion;
-use pid::Pid;
 use trajectory::TrajectoryFollower;
 
 /// A control command (CARLA convention).
@@ -123,20 +122,7 @@ pub struct EpisodeController {
 impl EpisodeController {
     pub fn new(config: ControlConfig) -> Self {
         Self {
-            follower: TrajectoryFollower::new(
-                Pid::new(
-                    config.turn_kp,
-                    config.turn_ki,
-                    config.turn_kd,
-                    config.pid_window,
-                ),
-                Pid::new(
-                    config.speed_kp,
-                    config.speed_ki,
-                    config.speed_kd,
-                    config.pid_window,
-                ),
-            ),
+            follower: TrajectoryFollower::new(&config),
             fusion: Fusion::new(config.turn_window),
             config,
         }

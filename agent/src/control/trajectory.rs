@@ -26,8 +26,22 @@ pub struct TrajectoryFollower {
 }
 
 impl TrajectoryFollower {
-    pub fn new(turn: Pid, speed: Pid) -> Self {
-        Self { turn, speed }
+    /// Fresh PIDs with the gains and window of `config`.
+    pub fn new(config: &ControlConfig) -> Self {
+        Self {
+            turn: Pid::new(
+                config.turn_kp,
+                config.turn_ki,
+                config.turn_kd,
+                config.pid_window,
+            ),
+            speed: Pid::new(
+                config.speed_kp,
+                config.speed_ki,
+                config.speed_kd,
+                config.pid_window,
+            ),
+        }
     }
 
     /// Control from at least two waypoints (ego frame), the target point and the speed (m/s).

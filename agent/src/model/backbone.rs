@@ -2,7 +2,7 @@
 //! that maps the last stage to the network's channel width.
 //!
 //! Input: images normalised with ImageNet statistics ([`normalise_images`]), `[N, 3, H, W]`.
-//! Output: `[N, C, H / stride, W / stride]` with the stride of [`SsrConfig::feature_stride`].
+//! Output: `[N, C, h, w]` with the size of [`SsrConfig::feature_size`] (stride 16 or 32).
 
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};

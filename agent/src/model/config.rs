@@ -230,11 +230,6 @@ impl SsrConfig {
         }
     }
 
-    /// Output stride of the backbone (image pixels per feature cell).
-    pub fn feature_stride(&self) -> usize {
-        4 * self.backbone.strides.iter().product::<usize>()
-    }
-
     /// Feature map size (height, width) for the configured input.
     pub fn feature_size(&self) -> (usize, usize) {
         let mut h = self.image_height;

@@ -142,10 +142,6 @@ impl SampleGeometry {
             ],
         }
     }
-
-    pub fn cameras(&self) -> usize {
-        self.cameras
-    }
 }
 
 /// A batch of sample geometries as tensors.
