@@ -12,7 +12,7 @@ use burn::tensor::{Device, Distribution, Tensor};
 use ssr_agent::camera::{CameraSpec, Rig};
 use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
-use ssr_agent::model::bev::{BevGrid, GeometryTensors, SampleGeometry};
+use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::stl::COMMANDS;
 use ssr_agent::model::{ModelInput, SsrModel, float_tensor};
@@ -69,7 +69,7 @@ fn time_ms(warmup: usize, iterations: usize, mut f: impl FnMut()) -> f64 {
 
 /// A batch with TCP's camera, a previous BEV and a small ego motion, random images.
 fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput {
-    let grid = BevGrid::new(&config.bev);
+    let grid = config.bev.grid;
     let rig = Rig::tcp();
     let motion = EgoMotion {
         dx: 0.4,
@@ -244,7 +244,7 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
         actions: BetaTargets::new(&vec![0.2; batch * (p + 1) * 2], batch, p + 1, 10.0, &device),
         speed: Tensor::full([batch, 1], 5.0, &device),
     };
-    let grid = BevGrid::new(&config.bev);
+    let grid = config.bev.grid;
     let future = Tensor::random(
         [batch, grid.cells(), config.channels],
         Distribution::Normal(0.0, 1.0),

@@ -11,7 +11,7 @@ use burn::tensor::{Device, Tensor};
 use crate::camera::{Rig, RigError};
 use crate::control::{ControlConfig, ControlDecision, EpisodeController};
 use crate::model::backbone::frame_to_input;
-use crate::model::bev::{BevGrid, GeometryTensors, SampleGeometry};
+use crate::model::bev::{GeometryTensors, SampleGeometry};
 use crate::model::config::SsrConfig;
 use crate::model::stl::COMMANDS;
 use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
@@ -142,7 +142,6 @@ pub struct SsrPolicy {
     model: SsrModel,
     config: SsrConfig,
     control: ControlConfig,
-    grid: BevGrid,
     device: Device,
 }
 
@@ -219,12 +218,10 @@ fn check_input(episode: usize, input: &StepInput) -> Result<(), StepError> {
 impl SsrPolicy {
     /// Wraps a network for inference (batch norm in evaluation mode, no autodiff).
     pub fn new(model: SsrModel, config: SsrConfig, control: ControlConfig, device: Device) -> Self {
-        let grid = BevGrid::new(&config.bev);
         Self {
             model: model.valid(),
             config,
             control,
-            grid,
             device,
         }
     }
@@ -244,7 +241,7 @@ impl SsrPolicy {
 
     /// Bytes of tensor state one episode keeps (its previous BEV).
     pub fn episode_state_bytes(&self) -> usize {
-        self.grid.cells() * self.config.channels * std::mem::size_of::<f32>()
+        self.config.bev.grid.cells() * self.config.channels * std::mem::size_of::<f32>()
     }
 
     /// One tick of one episode.
@@ -320,7 +317,7 @@ impl SsrPolicy {
         cameras: usize,
     ) -> Vec<StepOutput> {
         let b = inputs.len();
-        let (q, c) = (self.grid.cells(), self.config.channels);
+        let (q, c) = (self.config.bev.grid.cells(), self.config.channels);
         let heights = &self.config.bev.pillar_heights;
         let geometries: Vec<SampleGeometry> = inputs
             .iter()
@@ -330,7 +327,13 @@ impl SsrPolicy {
                     .previous
                     .as_ref()
                     .map(|(_, pose)| EgoMotion::between(*pose, input.pose));
-                SampleGeometry::new(&self.grid, heights, &input.rig, motion, input.speed)
+                SampleGeometry::new(
+                    &self.config.bev.grid,
+                    heights,
+                    &input.rig,
+                    motion,
+                    input.speed,
+                )
             })
             .collect();
         let previous_bev = Tensor::cat(
@@ -350,7 +353,12 @@ impl SsrPolicy {
         let model_input = ModelInput {
             images: self.images(inputs),
             cameras,
-            geometry: GeometryTensors::batch(&geometries, &self.grid, heights.len(), &self.device),
+            geometry: GeometryTensors::batch(
+                &geometries,
+                &self.config.bev.grid,
+                heights.len(),
+                &self.device,
+            ),
             previous_bev,
             speed: float_tensor(
                 inputs.iter().map(|i| i.speed).collect(),
@@ -398,8 +406,8 @@ impl SsrPolicy {
                     token_attention: (0..tokens)
                         .map(|s| maps[(i * tokens + s) * q..(i * tokens + s + 1) * q].to_vec())
                         .collect(),
-                    bev_rows: self.grid.rows,
-                    bev_cols: self.grid.cols,
+                    bev_rows: self.config.bev.grid.rows,
+                    bev_cols: self.config.bev.grid.cols,
                     alpha: a,
                     beta: bt,
                     predicted_speed: speed[i] * crate::model::tcp_head::SPEED_SCALE,

@@ -8,7 +8,7 @@ use burn::tensor::ops::GridSampleOptions;
 use burn::tensor::{Device, Distribution, Tensor};
 
 use common::{max_abs_diff, model_input, tiny_config};
-use ssr_agent::model::bev::{BevGrid, align_previous_bev};
+use ssr_agent::model::bev::align_previous_bev;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::sampling::bilinear_sample;
 use ssr_agent::model::stl::NavigationGate;
@@ -25,7 +25,7 @@ fn check_shapes(config: &SsrConfig, batch: usize, cameras: usize) {
         [batch * cameras, config.channels, fh, fw]
     );
     let out = model.forward(&input);
-    let q = config.bev.rows * config.bev.cols;
+    let q = config.bev.grid.cells();
     let s = config.tokens.num_tokens;
     let p = config.head.pred_len;
     assert_eq!(out.bev.dims(), [batch, q, config.channels]);
@@ -118,7 +118,7 @@ fn first_frame_ignores_the_previous_bev_and_later_frames_use_it() {
 fn temporal_alignment_moves_a_static_blob_by_the_ego_motion() {
     let device = Device::flex();
     let config = SsrConfig::cpu_default();
-    let grid = BevGrid::new(&config.bev);
+    let grid = config.bev.grid;
     // A landmark at world (20, 5); the ego was at the origin heading east, then moved.
     let previous_pose = Pose2::new(0.0, 0.0, 0.0);
     let current_pose = Pose2::new(3.0, 1.5, 0.3);
@@ -170,7 +170,7 @@ fn token_attention_rows_sum_to_one() {
     let config = tiny_config();
     let model = SsrModel::new(&config, &device).valid();
     let out = model.forward(&model_input(&config, 2, 1, true, &device));
-    let q = config.bev.rows * config.bev.cols;
+    let q = config.bev.grid.cells();
     for row in float_values(out.scene.attention).chunks(q) {
         assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-4);
         assert!(row.iter().all(|w| *w >= 0.0));

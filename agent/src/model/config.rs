@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::bev::BevGrid;
+
 /// The whole network.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SsrConfig {
@@ -40,14 +42,9 @@ pub struct BackboneConfig {
 /// The BEV grid and its encoder.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BevConfig {
-    /// Cells along x (rows, forward is row 0) and along y (columns, left is column 0).
-    pub rows: usize,
-    pub cols: usize,
-    /// Extent in the ego frame, metres: x in [x_min, x_max], y in [y_min, y_max].
-    pub x_min: f32,
-    pub x_max: f32,
-    pub y_min: f32,
-    pub y_max: f32,
+    /// Cells and the ego-frame area they cover (stored flat: rows, cols, x_min, ...).
+    #[serde(flatten)]
+    pub grid: BevGrid,
     /// Heights above the ground of the pillar points lifted from every cell, metres.
     pub pillar_heights: Vec<f32>,
     pub layers: usize,
@@ -147,12 +144,14 @@ impl SsrConfig {
             },
             channels: 256,
             bev: BevConfig {
-                rows: 100,
-                cols: 100,
-                x_min: -15.0,
-                x_max: 45.0,
-                y_min: -30.0,
-                y_max: 30.0,
+                grid: BevGrid {
+                    rows: 100,
+                    cols: 100,
+                    x_min: -15.0,
+                    x_max: 45.0,
+                    y_min: -30.0,
+                    y_max: 30.0,
+                },
                 pillar_heights: vec![0.5, 1.5, 2.5, 3.5],
                 layers: 3,
                 heads: 8,
@@ -197,12 +196,14 @@ impl SsrConfig {
             },
             channels: 64,
             bev: BevConfig {
-                rows: 32,
-                cols: 32,
-                x_min: -8.0,
-                x_max: 40.0,
-                y_min: -24.0,
-                y_max: 24.0,
+                grid: BevGrid {
+                    rows: 32,
+                    cols: 32,
+                    x_min: -8.0,
+                    x_max: 40.0,
+                    y_min: -24.0,
+                    y_max: 24.0,
+                },
                 pillar_heights: vec![0.5, 1.5, 2.5, 3.5],
                 layers: 2,
                 heads: 4,
@@ -279,13 +280,14 @@ impl SsrConfig {
             ));
         }
         let v = &self.bev;
-        if v.rows == 0 || v.cols == 0 || v.rows * v.cols > 40_000 {
+        let g = &v.grid;
+        if g.rows == 0 || g.cols == 0 || g.cells() > 40_000 {
             return fail(format!(
                 "bev {}x{} must have 1..40000 cells",
-                v.rows, v.cols
+                g.rows, g.cols
             ));
         }
-        if !(v.x_min < v.x_max && v.y_min < v.y_max) {
+        if !(g.x_min < g.x_max && g.y_min < g.y_max) {
             return fail("bev ranges must satisfy x_min < x_max and y_min < y_max".into());
         }
         if v.pillar_heights.is_empty() || v.spatial_points % v.pillar_heights.len() != 0 {

@@ -4,7 +4,7 @@
 use burn::tensor::{Device, Distribution, Tensor};
 
 use ssr_agent::camera::{CameraSpec, Rig};
-use ssr_agent::model::bev::{BevGrid, GeometryTensors, SampleGeometry};
+use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::stl::COMMANDS;
 use ssr_agent::model::{ModelInput, float_tensor};
@@ -21,8 +21,8 @@ pub fn tiny_config() -> SsrConfig {
     config.backbone.widths = vec![8, 8, 16, 16];
     config.backbone.blocks = vec![1, 1, 1, 1];
     config.channels = 16;
-    config.bev.rows = 8;
-    config.bev.cols = 8;
+    config.bev.grid.rows = 8;
+    config.bev.grid.cols = 8;
     config.bev.heads = 2;
     config.bev.ffn_dim = 32;
     config.tokens.num_tokens = 4;
@@ -65,7 +65,7 @@ pub fn model_input(
     has_previous: bool,
     device: &Device,
 ) -> ModelInput {
-    let grid = BevGrid::new(&config.bev);
+    let grid = config.bev.grid;
     let rig = rig(cameras, 900, 256);
     let motion = has_previous.then_some(EgoMotion {
         dx: 0.5,

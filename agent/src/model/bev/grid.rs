@@ -7,9 +7,9 @@
 //! rows, 0..1 across the grid.
 
 use burn::tensor::{Device, Tensor};
+use serde::{Deserialize, Serialize};
 
 use crate::camera::Rig;
-use crate::model::config::BevConfig;
 use crate::model::float_tensor;
 use crate::pose::EgoMotion;
 
@@ -20,10 +20,12 @@ pub const CAN_BUS_DIM: usize = 5;
 const BEHIND_CAMERA: f32 = -4.0;
 
 /// The area the BEV covers and its cells.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BevGrid {
+    /// Cells along x (rows, forward is row 0) and along y (columns, left is column 0).
     pub rows: usize,
     pub cols: usize,
+    /// Extent in the ego frame, metres: x in [x_min, x_max], y in [y_min, y_max].
     pub x_min: f32,
     pub x_max: f32,
     pub y_min: f32,
@@ -31,17 +33,6 @@ pub struct BevGrid {
 }
 
 impl BevGrid {
-    pub fn new(config: &BevConfig) -> Self {
-        Self {
-            rows: config.rows,
-            cols: config.cols,
-            x_min: config.x_min,
-            x_max: config.x_max,
-            y_min: config.y_min,
-            y_max: config.y_max,
-        }
-    }
-
     pub fn cells(&self) -> usize {
         self.rows * self.cols
     }

@@ -81,12 +81,12 @@ impl BevEncoder {
             .collect();
         Self {
             queries: Param::from_tensor(Tensor::random(
-                [bev.rows * bev.cols, c],
+                [bev.grid.cells(), c],
                 Distribution::Normal(0.0, 1.0),
                 device,
             )),
-            row_embed: uniform([bev.rows, c / 2], device),
-            col_embed: uniform([bev.cols, c / 2], device),
+            row_embed: uniform([bev.grid.rows, c / 2], device),
+            col_embed: uniform([bev.grid.cols, c / 2], device),
             camera_embed: Param::from_tensor(Tensor::random(
                 [MAX_CAMERAS, c],
                 Distribution::Normal(0.0, 1.0),
@@ -96,8 +96,8 @@ impl BevEncoder {
             can_bus_out: xavier_linear(c / 2, c, device),
             can_bus_norm: LayerNormConfig::new(c).init(device),
             layers,
-            rows: bev.rows,
-            cols: bev.cols,
+            rows: bev.grid.rows,
+            cols: bev.grid.cols,
         }
     }
 
