@@ -1,7 +1,8 @@
 //! ssr-agent: the SSR end-to-end driving network in Burn, the controllers that turn its outputs
 //! into vehicle control, and the per-episode inference API the gRPC server uses.
 //!
-//! - [`camera`]: camera rigs in CARLA's sensor description and their projection.
+//! - [`camera`]: camera rigs in CARLA's sensor description and their projection (owned by
+//!   `sim-bridge`, which renders and records through the same rigs; re-exported here).
 //! - [`pose`]: ego poses and the ego motion between ticks.
 //! - [`model`]: the network (backbone, BEV encoder, Scenes TokenLearner, TCP head, FFP).
 //! - [`control`]: TCP's PID controllers, Beta rules and situation-based fusion.
@@ -14,7 +15,7 @@
 //! forward, y left, z up, origin at the centre of the vehicle box on the ground; control in
 //! CARLA's convention (steer +1 = full right).
 
-pub mod camera;
+pub use sim_bridge::camera;
 pub mod checkpoint;
 pub mod control;
 pub mod device;

@@ -8,13 +8,14 @@
 
 use glam::{DVec2, DVec3};
 
+use crate::camera::Rig;
 use crate::map::Map;
 use crate::route::plan::PlanNode;
 use crate::route::{DenseRoute, RoadOption};
 use crate::world::World;
 pub use crate::world::ego::Control;
 
-/// One camera image (filled once the renderer exists; empty until then).
+/// One camera image, rendered through the agent's rig.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CameraFrame {
     /// The rig's camera id.
@@ -46,7 +47,8 @@ pub struct Observation {
     pub command: RoadOption,
     /// The route follower's target point in the ego frame (x forward, y left), m.
     pub target_point: DVec2,
-    /// Camera images (empty until cameras are configured).
+    /// Camera images in the order of the agent's [`Agent::sensors`] rig; empty for an agent
+    /// without sensors and on ticks [`Agent::wants_frames`] declines.
     pub frames: Vec<CameraFrame>,
 }
 
@@ -74,6 +76,16 @@ pub trait Agent {
     fn name(&self) -> String;
     /// Called once before the first tick of a route.
     fn start_route(&mut self, ctx: &RouteContext<'_>);
+    /// The cameras this agent drives from (CARLA's `sensors()`); `None` renders nothing.
+    fn sensors(&self) -> Option<Rig> {
+        None
+    }
+    /// Whether to render frames on tick `frame` (every tick by default; a recorder that keeps
+    /// 2 Hz declines the others and saves their rendering).
+    fn wants_frames(&self, frame: u64) -> bool {
+        let _ = frame;
+        true
+    }
     /// Decide this tick's control. `world` is privileged ground truth: only in-process agents
     /// such as the expert may read it; sensor-based agents use `obs` alone.
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control;

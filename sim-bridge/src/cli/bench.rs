@@ -3,10 +3,18 @@
 use std::time::Instant;
 
 use clap::Subcommand;
+use sim_bridge::agent::{Agent, Observation, RouteContext};
+use sim_bridge::camera::Rig;
+use sim_bridge::eval::run_route;
+use sim_bridge::expert::Expert;
 use sim_bridge::map::MapOptions;
+use sim_bridge::render::{CameraRenderer, SceneState};
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::RouteSet;
+use sim_bridge::scoring::ScoringConfig;
+use sim_bridge::world::ActorView;
 use sim_bridge::world::ego::Control;
+use sim_bridge::world::state::{EgoState, LightState};
 use sim_bridge::world::{DT, World, WorldConfig};
 
 #[derive(Debug, Subcommand)]
@@ -25,10 +33,34 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 120)]
         vehicles: usize,
     },
+    /// Camera render time per frame on one core: the expert drives the first Town05-style
+    /// long route with full traffic, its world is captured every few ticks, and each capture
+    /// is rendered through the rig. Prints the median and p90 per frame (all cameras).
+    Render {
+        /// A rig preset (`tcp`: 900x256; `tcp-small`: 320x96, the cpu-default model's input) or
+        /// a JSON rig file.
+        #[arg(long, default_value = "tcp")]
+        rig: String,
+        /// Frames to render.
+        #[arg(long, default_value_t = 200)]
+        frames: usize,
+        /// Ticks between captures (20 Hz ticks).
+        #[arg(long, default_value_t = 5)]
+        every: u64,
+        /// Background vehicles.
+        #[arg(long, default_value_t = 120)]
+        vehicles: usize,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
+        BenchCommand::Render {
+            rig,
+            frames,
+            every,
+            vehicles,
+        } => bench_render(&rig, frames, every, vehicles),
         BenchCommand::Sim {
             seconds,
             repeats,
@@ -70,5 +102,101 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             );
             Ok(())
         }
+    }
+}
+
+/// Captures world states while the expert drives, then times rendering each through the rig.
+fn bench_render(rig: &str, frames: usize, every: u64, vehicles: usize) -> anyhow::Result<()> {
+    let rig = Rig::from_name_or_file(rig)?;
+    let set = RouteSet::find("town05-long-style").expect("bundled set");
+    let map = super::load_map(set.town.name(), MapOptions::default())?;
+    let spec = &sim_bridge::route::xml::parse(set.name, set.bundled_xml())?[0];
+    let dense = plan_route(&map, spec)?;
+    let config = WorldConfig {
+        vehicles,
+        ..WorldConfig::default()
+    };
+    let mut capture = Capture {
+        expert: Expert::new(),
+        every: every.max(1),
+        wanted: frames.max(1),
+        states: Vec::new(),
+    };
+    run_route(
+        &map,
+        spec,
+        &dense,
+        &mut capture,
+        config,
+        ScoringConfig::default(),
+        0,
+        0,
+        |_| {},
+    );
+    let baked = Instant::now();
+    let mut renderer = CameraRenderer::new(&map, config.appearance());
+    let bake_ms = baked.elapsed().as_secs_f64() * 1e3;
+    let mut times = Vec::with_capacity(capture.states.len());
+    for (k, (ego, actors, lights)) in capture.states.iter().enumerate() {
+        let state = SceneState {
+            ego: *ego,
+            actors,
+            lights,
+        };
+        let start = Instant::now();
+        let out = renderer.render(&rig, &state, k as u64);
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(out);
+    }
+    times.sort_by(f64::total_cmp);
+    let pick = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    let sizes: Vec<String> = rig
+        .cameras
+        .iter()
+        .map(|c| format!("{}x{}", c.width, c.height))
+        .collect();
+    println!(
+        "bench render: {} frames of {} camera(s) [{}] on {} ({} static triangles, baked in {bake_ms:.0} ms), 1 thread",
+        times.len(),
+        rig.cameras.len(),
+        sizes.join(", "),
+        map.name,
+        renderer.static_triangles()
+    );
+    println!(
+        "  per frame: median {:.2} ms, p90 {:.2} ms, max {:.2} ms",
+        pick(0.5),
+        pick(0.9),
+        pick(1.0)
+    );
+    Ok(())
+}
+
+/// The expert, capturing the world every `every` ticks until it has `wanted` states.
+struct Capture {
+    expert: Expert,
+    every: u64,
+    wanted: usize,
+    states: Vec<(EgoState, Vec<ActorView>, Vec<LightState>)>,
+}
+
+impl Agent for Capture {
+    fn name(&self) -> String {
+        "expert (capturing)".into()
+    }
+
+    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+        self.expert.start_route(ctx);
+    }
+
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+        if obs.frame % self.every == 0 && self.states.len() < self.wanted {
+            self.states.push((
+                world.ego_state(),
+                world.actors(),
+                world.light_states().to_vec(),
+            ));
+        }
+        self.expert.run_step(obs, world)
     }
 }

@@ -10,50 +10,23 @@ use indicatif::{ProgressBar, ProgressStyle};
 use sim_bridge::agent::Agent;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
-use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::render::topdown::write_run_png;
-use sim_bridge::route::planner::plan_route;
 use sim_bridge::scoring::{Results, ScoringConfig, summary_table};
-use sim_bridge::world::WorldConfig;
+
+use super::args::{PlannedRoute, RouteArgs, WorldArgs};
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
     /// Who drives: `expert` (the privileged rule-based expert).
     #[arg(long, default_value = "expert")]
     agent: String,
-    /// A bundled route set (see `sim-bridge routes list`) or a CARLA route XML file.
-    #[arg(long, default_value = "town05-long-style")]
-    routes: String,
-    /// The map: an .xodr file or a bundled town name (defaults to a bundled set's own town).
-    #[arg(long)]
-    map: Option<PathBuf>,
-    /// Only these route ids (comma separated).
-    #[arg(long, value_delimiter = ',')]
-    route_ids: Vec<String>,
-    /// At most this many routes (after --route-ids).
-    #[arg(long)]
-    limit: Option<usize>,
+    #[command(flatten)]
+    route: RouteArgs,
+    #[command(flatten)]
+    world: WorldArgs,
     /// Runs of each route; repetition r uses seed S + r.
     #[arg(long, default_value_t = 1)]
     repetitions: usize,
-    /// Base seed of traffic, scenarios and lights.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Background vehicles (default: the leaderboard's number for the town, 120 for Town05).
-    #[arg(long)]
-    vehicles: Option<usize>,
-    /// Background walkers on sidewalks.
-    #[arg(long, default_value_t = 0)]
-    walkers: usize,
-    /// No route scenarios (walkers crossing, cyclists, red-light runners).
-    #[arg(long)]
-    no_scenarios: bool,
-    /// No parked cars.
-    #[arg(long)]
-    no_parked_cars: bool,
-    /// Do not place lights at multi-lane four-way junctions that the map leaves without.
-    #[arg(long)]
-    no_placed_lights: bool,
     /// Where to write the leaderboard results JSON.
     #[arg(long, default_value = "results.json")]
     out: PathBuf,
@@ -65,35 +38,7 @@ pub struct EvalArgs {
     quiet: bool,
 }
 
-/// The leaderboard's background-vehicle count for a town (Town05: 120).
-pub fn default_vehicles(map: &Map) -> usize {
-    match map.name.to_ascii_lowercase().as_str() {
-        "town02" => 100,
-        "town04" => 200,
-        "town06" => 150,
-        "ssr_train_small" => 60,
-        _ => 120,
-    }
-}
-
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
-    let options = MapOptions {
-        place_missing_lights: !args.no_placed_lights,
-    };
-    let (map, mut specs) = super::load_routes(&args.routes, args.map.as_ref(), options)?;
-    if !args.route_ids.is_empty() {
-        specs.retain(|s| args.route_ids.contains(&s.id));
-        if specs.is_empty() {
-            bail!(
-                "none of --route-ids {:?} is in {}",
-                args.route_ids,
-                args.routes
-            );
-        }
-    }
-    if let Some(limit) = args.limit {
-        specs.truncate(limit);
-    }
     if args.repetitions == 0 {
         bail!("--repetitions must be at least 1");
     }
@@ -101,37 +46,15 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         "expert" => Box::new(Expert::new()),
         other => bail!("--agent {other}: unknown agent (available: expert)"),
     };
+    let (map, planned) = args.route.load()?;
     if let Some(dir) = &args.pictures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    // Plan every route first: one that cannot be planned on this map is reported and left out,
-    // and the rest still run.
-    let mut planned = Vec::with_capacity(specs.len());
-    for spec in &specs {
-        match plan_route(&map, spec) {
-            Ok(dense) => planned.push((spec, dense)),
-            Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
-        }
-    }
-    if planned.is_empty() {
-        bail!(
-            "no route of {} could be planned on map {}",
-            args.routes,
-            map.name
-        );
-    }
-    let vehicles = args.vehicles.unwrap_or_else(|| default_vehicles(&map));
     let total = planned.len() * args.repetitions;
     let mut records = Vec::with_capacity(total);
     for repetition in 0..args.repetitions {
-        for (spec, dense) in &planned {
-            let world = WorldConfig {
-                vehicles,
-                walkers: args.walkers,
-                scenarios: !args.no_scenarios,
-                parked_cars: !args.no_parked_cars,
-                seed: args.seed + repetition as u64,
-            };
+        for PlannedRoute { spec, dense } in &planned {
+            let world = args.world.config(&map, args.world.seed + repetition as u64);
             let bar = progress_bar(args.quiet, &format!("route {} rep {repetition}", spec.id));
             let index = records.len();
             let run = run_route(

@@ -1,7 +1,10 @@
 //! Argument parsing and the subcommands, each a thin layer over the library.
 
+mod args;
 mod bench;
+mod collect;
 mod eval;
+mod render;
 mod routes;
 mod towns;
 
@@ -33,6 +36,12 @@ pub struct Cli {
 enum Command {
     /// Drive an agent over a route set and score it like the leaderboard.
     Eval(eval::EvalArgs),
+    /// Drive routes and write what the cameras saw: PNG frames and an animation of each run
+    /// with the camera view beside a top-down view.
+    Render(render::RenderArgs),
+    /// Record the expert driving route sets (with noise injection) into a training dataset;
+    /// resumable.
+    Collect(collect::CollectArgs),
     /// List, show or regenerate route sets.
     #[command(subcommand)]
     Routes(routes::RoutesCommand),
@@ -63,6 +72,8 @@ pub fn init_logging(verbose: u8) {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Eval(args) => eval::run(args),
+        Command::Render(args) => render::run(args),
+        Command::Collect(args) => collect::run(args),
         Command::Routes(cmd) => routes::run(cmd),
         Command::Towns(cmd) => towns::run(cmd),
         Command::Bench(cmd) => bench::run(cmd),

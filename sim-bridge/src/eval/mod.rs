@@ -2,7 +2,8 @@
 //! lockstep, score each run with the leaderboard criteria and gather the results.
 //!
 //! One tick, in the leaderboard's order: read the state, update the route follower and the
-//! scenario triggers, ask the agent, evaluate the criteria (with the contacts of the previous
+//! scenario triggers, render the agent's cameras (if it has any), ask the agent, evaluate the
+//! criteria (with the contacts of the previous
 //! world step), then step the world.
 
 use std::time::Instant;
@@ -11,6 +12,7 @@ use glam::DVec3;
 
 use crate::agent::{Agent, Observation, RouteContext};
 use crate::map::Map;
+use crate::render::{CameraRenderer, SceneState};
 use crate::route::DenseRoute;
 use crate::route::plan::{RouteFollower, global_plan, to_ego_frame};
 use crate::route::xml::RouteSpec;
@@ -60,6 +62,10 @@ pub fn run_route(
         plan: &plan,
     });
     let mut world = World::new(map, dense, world_config);
+    let rig = agent.sensors();
+    let mut cameras = rig
+        .as_ref()
+        .map(|_| CameraRenderer::new(map, world_config.appearance()));
     let mut scorer = RouteScorer::new(map, dense, scoring);
     let mut contacts = Vec::new();
     let mut progress = 0;
@@ -71,6 +77,18 @@ pub fn run_route(
         world.trigger_scenarios(progress);
         let node = follower.step(ego.position.truncate());
         let target = to_ego_frame(node.position, ego.position, ego.yaw);
+        let frames = match (&rig, &mut cameras) {
+            (Some(rig), Some(renderer)) if agent.wants_frames(frame) => {
+                let actors = world.actors();
+                let scene = SceneState {
+                    ego,
+                    actors: &actors,
+                    lights: world.light_states(),
+                };
+                renderer.render(rig, &scene, frame)
+            }
+            _ => Vec::new(),
+        };
         let obs = Observation {
             time: world.time,
             frame,
@@ -80,7 +98,7 @@ pub fn run_route(
             compass: Observation::compass_of(ego.yaw),
             command: node.option,
             target_point: target.truncate(),
-            frames: Vec::new(),
+            frames,
         };
         let control = agent.run_step(&obs, &world);
         if let Some(end) = scorer.tick(world.time, &ego, &contacts, world.light_states()) {

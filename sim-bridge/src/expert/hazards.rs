@@ -25,11 +25,33 @@ pub struct HazardMemory {
     served_signs: Vec<usize>,
 }
 
+/// Why the expert slows or stops: the kind of the nearest obstacle, or the forecast.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BrakeReason {
+    /// A vehicle or cyclist on the path.
+    Vehicle,
+    /// A walker on the path.
+    Walker,
+    /// A static obstacle or parked car on the path.
+    Obstacle,
+    /// A red light, or a yellow one it can still stop for.
+    TrafficLight,
+    /// A stop sign it has not yet stopped at.
+    StopSign,
+    /// Traffic on the lane it must change into.
+    LaneChange,
+    /// The collision forecast.
+    PredictedCollision,
+}
+
 /// The result of a scan.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct HazardView {
     /// Nearest obstacle on the path: (free gap in metres, its speed along the path).
     pub obstacle: Option<(f64, f64)>,
+    /// What the nearest obstacle is.
+    pub cause: Option<BrakeReason>,
     /// A walker or cyclist is near the path ahead.
     pub walker_near: bool,
     /// The forecast predicts a collision.
@@ -37,9 +59,10 @@ pub struct HazardView {
 }
 
 impl HazardView {
-    fn obstacle(&mut self, gap: f64, speed: f64) {
+    fn obstacle(&mut self, gap: f64, speed: f64, cause: BrakeReason) {
         if self.obstacle.is_none_or(|(g, _)| gap < g) {
             self.obstacle = Some((gap, speed));
+            self.cause = Some(cause);
         }
     }
 }
@@ -66,7 +89,12 @@ pub fn scan(
         {
             let gap = along(route, index, j) - ego.half_extent.x;
             let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
-            view.obstacle(gap, speed);
+            let cause = match a.kind {
+                ActorKind::Vehicle | ActorKind::Cyclist => BrakeReason::Vehicle,
+                ActorKind::Walker => BrakeReason::Walker,
+                ActorKind::Static => BrakeReason::Obstacle,
+            };
+            view.obstacle(gap, speed, cause);
         }
         let local = DVec2::new(rel.dot(ego.forward()), rel.perp_dot(ego.forward()).abs());
         let vulnerable = matches!(a.kind, ActorKind::Walker | ActorKind::Cyclist);
@@ -121,7 +149,8 @@ fn lane_change_gap(
         on_target && (ego_s - 15.0..ego_s + 5.0).contains(&s)
     });
     if busy {
-        view.obstacle(along(route, index, start) - ego.half_extent.x, 0.0);
+        let gap = along(route, index, start) - ego.half_extent.x;
+        view.obstacle(gap, 0.0, BrakeReason::LaneChange);
     }
 }
 
@@ -174,9 +203,9 @@ fn stop_lines(
             .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
         {
             match world.light_states()[light.id] {
-                LightState::Red => view.obstacle(gap, 0.0),
+                LightState::Red => view.obstacle(gap, 0.0, BrakeReason::TrafficLight),
                 LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => {
-                    view.obstacle(gap, 0.0)
+                    view.obstacle(gap, 0.0, BrakeReason::TrafficLight)
                 }
                 _ => {}
             }
@@ -192,7 +221,7 @@ fn stop_lines(
             if ego.speed < 0.1 && gap < super::IDM_GAP + 1.5 {
                 memory.served_signs.push(sign.id);
             } else {
-                view.obstacle(gap.max(0.0), 0.0);
+                view.obstacle(gap.max(0.0), 0.0, BrakeReason::StopSign);
             }
         }
     }

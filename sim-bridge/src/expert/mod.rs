@@ -12,6 +12,8 @@
 
 pub mod hazards;
 
+pub use hazards::BrakeReason;
+
 use glam::DVec2;
 
 use crate::agent::{Agent, Control, Observation, RouteContext};
@@ -43,12 +45,19 @@ pub struct Expert {
     index: usize,
     hazards: hazards::HazardMemory,
     params: EgoParams,
+    reason: Option<BrakeReason>,
 }
 
 impl Expert {
     /// A new expert.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Why the last control brakes (or holds the ego still): the hazard that made it, `None`
+    /// when it does not brake or brakes only for speed (curves, junctions).
+    pub fn brake_reason(&self) -> Option<BrakeReason> {
+        self.reason
     }
 }
 
@@ -62,6 +71,7 @@ impl Agent for Expert {
         self.index = 0;
         self.hazards = hazards::HazardMemory::default();
         self.params = EgoParams::default();
+        self.reason = None;
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
@@ -85,11 +95,16 @@ impl Agent for Expert {
         if view.walker_near {
             target = target.min(WALKER_SPEED);
         }
+        let free = idm(obs.speed, target, None);
         let mut accel = idm(obs.speed, target, view.obstacle);
+        let mut cause = view.cause.filter(|_| accel < free - 0.1);
         if view.collision_predicted {
             accel = -self.params.max_brake;
+            cause = Some(BrakeReason::PredictedCollision);
         }
         let control = to_pedals(accel, obs.speed, &self.params);
+        let holding = obs.speed < 0.1 && control.throttle == 0.0;
+        self.reason = cause.filter(|_| control.brake > 0.0 || holding);
         let steer = if control.brake > 0.5 {
             steer * 0.5
         } else {

@@ -1,6 +1,6 @@
 //! Road maps: an OpenDRIVE file baked by the `xodr` crate into the lane graph the simulator
-//! drives on ([`lanes`]), a spatial index over it ([`spatial`]), and the traffic control the
-//! world enforces: junctions, traffic lights and stop signs ([`control`]).
+//! drives on ([`lanes`]), a spatial index over it ([`spatial`]), the drawable road surface
+//! ([`surface`]), and the traffic control the world enforces: junctions, traffic lights and stop signs ([`control`]).
 //!
 //! Frame: the OpenDRIVE map frame (right-handed, x east, y north, z up, metres). Guarantees:
 //! a loaded [`Map`] has at least one driving lane; a file over [`MAX_MAP_BYTES`] or one that is
@@ -9,6 +9,7 @@
 pub mod control;
 pub mod lanes;
 pub mod spatial;
+pub mod surface;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -18,6 +19,7 @@ use glam::{DVec2, DVec3};
 pub use control::{Approach, Junction, StopLine, StopSign, TrafficLight};
 pub use lanes::{JunctionIdx, Lane, LaneIdx, LaneKind, LanePose, Projection};
 use spatial::SegmentGrid;
+pub use surface::Surface;
 
 /// The largest OpenDRIVE file accepted (CARLA's largest towns are under 20 MB).
 pub const MAX_MAP_BYTES: u64 = 64 * 1024 * 1024;
@@ -73,6 +75,8 @@ pub struct Map {
     pub stop_signs: Vec<StopSign>,
     /// Plan bounds of all lanes: (min, max).
     pub bounds: (DVec2, DVec2),
+    /// The drawable road surface (every lane type, road marks).
+    pub surface: Surface,
     grid: SegmentGrid,
 }
 
@@ -137,6 +141,7 @@ impl Map {
             lights: Vec::new(),
             stop_signs: Vec::new(),
             bounds: (lo, hi),
+            surface: Surface::from_network(net),
             grid,
         };
         control::derive(&mut map, net, junction_ids, options);

@@ -40,6 +40,28 @@ impl Canvas {
         }
     }
 
+    /// A `side` x `side` canvas showing `radius` metres around `centre`.
+    pub fn around(centre: DVec2, radius: f64, side: u32, background: [u8; 3]) -> Self {
+        let side = side.max(1);
+        Self {
+            width: side,
+            height: side,
+            pixels: background
+                .iter()
+                .copied()
+                .cycle()
+                .take((side * side * 3) as usize)
+                .collect(),
+            origin: centre - DVec2::splat(radius),
+            scale: side as f64 / (2.0 * radius.max(1e-3)),
+        }
+    }
+
+    /// Row-major RGB8 pixels.
+    pub fn pixels(&self) -> &[u8] {
+        &self.pixels
+    }
+
     /// Pixels per metre.
     pub fn scale(&self) -> f64 {
         self.scale

@@ -1,5 +1,15 @@
-//! Pictures for people: a top-down PNG of a route run (map, route, ego trace, actors,
-//! infractions).
+//! Pictures: camera frames through a rig (a CPU rasterizer: [`cameras`] over [`scene`],
+//! [`actors`], [`shapes`], [`raster`] and [`style`]), and top-down PNGs of route runs for
+//! people ([`topdown`] on [`canvas`]).
 
+pub mod actors;
+pub mod cameras;
 pub mod canvas;
+pub mod raster;
+pub mod scene;
+pub mod shapes;
+pub mod style;
 pub mod topdown;
+
+pub use cameras::{CameraRenderer, SceneState};
+pub use style::Appearance;

@@ -1,6 +1,7 @@
-//! The top-down picture of one route run: lanes coloured by type, the route in blue, the ego's
-//! trace in green (red where it ended), other actors at the end of the run, and each infraction
-//! as a marker coloured by kind.
+//! Top-down pictures: the whole of one route run (lanes coloured by type, the route in blue, the
+//! ego's trace in green, red where it ended, other actors at the end of the run, each
+//! infraction as a marker coloured by kind), and the local view around the ego at one instant
+//! that `sim-bridge render` puts beside the camera frames.
 
 use std::path::Path;
 
@@ -11,10 +12,88 @@ use crate::map::{LaneKind, Map};
 use crate::route::DenseRoute;
 use crate::scoring::{Infraction, InfractionKind};
 use crate::world::ActorView;
-use crate::world::state::ActorKind;
+use crate::world::state::{ActorKind, EgoState, Obb};
 
 /// Longest side of the picture, px.
 const MAX_SIDE: u32 = 1400;
+/// Terrain colour.
+const BACKGROUND: [u8; 3] = [34, 92, 46];
+
+/// The `radius` metres around the ego at one instant, north up, `side` pixels square: lanes,
+/// stop lines, the route, the actors and the ego (white, with its heading).
+pub fn local_view(
+    map: &Map,
+    route: &DenseRoute,
+    ego: &EgoState,
+    actors: &[ActorView],
+    radius: f64,
+    side: u32,
+) -> Canvas {
+    let centre = ego.position.truncate();
+    let mut c = Canvas::around(centre, radius, side, BACKGROUND);
+    draw_map(&mut c, map, route, Some((centre, radius * 1.5)));
+    for a in actors {
+        if (a.obb.centre - centre).length() < radius * 1.5 {
+            draw_box(&mut c, &a.obb, actor_colour(a.kind));
+        }
+    }
+    draw_box(&mut c, &ego.obb(), [255, 255, 255]);
+    let nose = centre + ego.forward() * ego.half_extent.x;
+    c.line(centre, nose, 0.4, [240, 40, 40]);
+    c
+}
+
+/// Lanes by type, stop lines and the route; with `near`, only what lies within the given
+/// distance of the given point.
+fn draw_map(c: &mut Canvas, map: &Map, route: &DenseRoute, near: Option<(DVec2, f64)>) {
+    let keep = |p: DVec2| near.is_none_or(|(centre, r)| (p - centre).length() < r);
+    for lane in &map.lanes {
+        let colour = match lane.kind {
+            LaneKind::Driving => [70, 70, 74],
+            LaneKind::Parking => [95, 95, 100],
+            LaneKind::Sidewalk => [160, 155, 145],
+            LaneKind::Shoulder => [110, 105, 95],
+            LaneKind::Other => [80, 110, 80],
+        };
+        for w in lane.points.windows(2) {
+            let (a, b) = (w[0].truncate(), w[1].truncate());
+            if keep(a) || keep(b) {
+                c.line(a, b, lane.width, colour);
+            }
+        }
+    }
+    for line in map.lights.iter().flat_map(|l| &l.stop_lines) {
+        let (a, b) = line.ends(1.0);
+        if keep(a) {
+            c.line(a, b, 0.6, [230, 230, 230]);
+        }
+    }
+    for w in route.points.windows(2) {
+        let (a, b) = (w[0].position.truncate(), w[1].position.truncate());
+        if keep(a) || keep(b) {
+            c.line(a, b, 1.2, [60, 120, 235]);
+        }
+    }
+}
+
+fn actor_colour(kind: ActorKind) -> [u8; 3] {
+    match kind {
+        ActorKind::Vehicle => [240, 200, 60],
+        ActorKind::Cyclist => [250, 140, 40],
+        ActorKind::Walker => [250, 90, 200],
+        ActorKind::Static => [150, 120, 90],
+    }
+}
+
+fn draw_box(c: &mut Canvas, obb: &Obb, colour: [u8; 3]) {
+    let (f, l) = obb.axes();
+    let (hx, hy) = (f * obb.half.x, l * obb.half.y);
+    let o = obb.centre;
+    c.polygon(
+        &[o + hx + hy, o - hx + hy, o - hx - hy, o + hx - hy],
+        colour,
+    );
+}
 
 /// Draw a run and write it as PNG to `path`.
 pub fn write_run_png(
@@ -25,52 +104,19 @@ pub fn write_run_png(
     infractions: &[Infraction],
     path: &Path,
 ) -> std::io::Result<()> {
-    let mut c = Canvas::fit(map.bounds.0, map.bounds.1, 10.0, MAX_SIDE, [34, 92, 46]);
-    for lane in &map.lanes {
-        let colour = match lane.kind {
-            LaneKind::Driving => [70, 70, 74],
-            LaneKind::Parking => [95, 95, 100],
-            LaneKind::Sidewalk => [160, 155, 145],
-            LaneKind::Shoulder => [110, 105, 95],
-            LaneKind::Other => [80, 110, 80],
-        };
-        for w in lane.points.windows(2) {
-            c.line(w[0].truncate(), w[1].truncate(), lane.width, colour);
-        }
-    }
-    for light in &map.lights {
-        for line in &light.stop_lines {
-            let (a, b) = line.ends(1.0);
-            c.line(a, b, 0.6, [230, 230, 230]);
-        }
-    }
-    let route_pts: Vec<DVec2> = route.points.iter().map(|p| p.position.truncate()).collect();
-    for w in route_pts.windows(2) {
-        c.line(w[0], w[1], 1.2, [60, 120, 235]);
-    }
+    let mut c = Canvas::fit(map.bounds.0, map.bounds.1, 10.0, MAX_SIDE, BACKGROUND);
+    draw_map(&mut c, map, route, None);
     for w in trace.windows(2) {
         c.line(w[0].truncate(), w[1].truncate(), 0.9, [80, 230, 90]);
     }
     for a in actors {
-        let colour = match a.kind {
-            ActorKind::Vehicle => [240, 200, 60],
-            ActorKind::Cyclist => [250, 140, 40],
-            ActorKind::Walker => [250, 90, 200],
-            ActorKind::Static => [150, 120, 90],
-        };
-        let (f, l) = a.obb.axes();
-        let (hx, hy) = (f * a.obb.half.x, l * a.obb.half.y);
-        let o = a.obb.centre;
-        c.polygon(
-            &[o + hx + hy, o - hx + hy, o - hx - hy, o + hx - hy],
-            colour,
-        );
+        draw_box(&mut c, &a.obb, actor_colour(a.kind));
     }
     if let Some(last) = trace.last() {
         c.disc(last.truncate(), 2.5, [240, 40, 40]);
     }
-    if let Some(first) = route_pts.first() {
-        c.disc(*first, 2.5, [255, 255, 255]);
+    if let Some(first) = route.points.first() {
+        c.disc(first.position.truncate(), 2.5, [255, 255, 255]);
     }
     for inf in infractions {
         let colour = match inf.kind {

@@ -12,7 +12,7 @@ use glam::{DVec2, DVec3};
 use super::state::EgoState;
 
 /// The control an agent sends each tick (CARLA's VehicleControl subset).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Control {
     /// Steering in [-1, 1], +1 = full right.
     pub steer: f64,

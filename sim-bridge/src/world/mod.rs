@@ -17,6 +17,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::map::Map;
+use crate::render::Appearance;
 use crate::route::DenseRoute;
 use ego::{Control, Ego, EgoParams};
 use lights::LightController;
@@ -40,6 +41,20 @@ pub struct WorldConfig {
     pub parked_cars: bool,
     /// Seed of every random choice.
     pub seed: u64,
+    /// Draw camera frames in a look varied from the seed (colours, sun, noise) instead of the
+    /// canonical one.
+    pub randomise_appearance: bool,
+}
+
+impl WorldConfig {
+    /// The look camera frames of this world are drawn in.
+    pub fn appearance(&self) -> Appearance {
+        if self.randomise_appearance {
+            Appearance::randomised(self.seed)
+        } else {
+            Appearance::default()
+        }
+    }
 }
 
 impl Default for WorldConfig {
@@ -50,6 +65,7 @@ impl Default for WorldConfig {
             scenarios: true,
             parked_cars: true,
             seed: 0,
+            randomise_appearance: false,
         }
     }
 }

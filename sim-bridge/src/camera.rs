@@ -1,4 +1,5 @@
-//! Camera rigs in CARLA's sensor description and the pinhole projection the network uses.
+//! Camera rigs in CARLA's sensor description and their pinhole projection, shared by the
+//! renderer, the dataset and the network (the `ssr-agent` crate re-exports this module).
 //!
 //! A [`CameraSpec`] is what a CARLA user writes in `sensors()`: a position (x, y, z) in metres
 //! and a rotation (roll, pitch, yaw) in degrees relative to the ego vehicle, in CARLA's
@@ -53,6 +54,8 @@ pub enum RigError {
     DuplicateId(String),
     #[error("not a rig in JSON (a list of cameras or {{\"cameras\": [...]}}): {0}")]
     Json(String),
+    #[error("rig {path}: {problem}")]
+    File { path: String, problem: String },
 }
 
 impl CameraSpec {
@@ -79,6 +82,17 @@ impl CameraSpec {
 
     /// Checks every field; the message names the field and the bound it breaks.
     pub fn validate(&self) -> Result<(), String> {
+        let id_ok = (1..=64).contains(&self.id.len())
+            && self
+                .id
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        if !id_ok {
+            return Err(format!(
+                "id '{}' must be 1-64 letters, digits, '_' or '-' (it names files and folders)",
+                self.id
+            ));
+        }
         let numbers = [
             ("x", self.x),
             ("y", self.y),
@@ -108,7 +122,7 @@ impl CameraSpec {
     }
 
     /// The camera's axes (forward, right, up) and position in the ego frame (y left).
-    fn pose_in_ego(&self) -> CameraPose {
+    pub fn pose_in_ego(&self) -> CameraPose {
         let (sr, cr) = self.roll.to_radians().sin_cos();
         let (sp, cp) = self.pitch.to_radians().sin_cos();
         let (sy, cy) = self.yaw.to_radians().sin_cos();
@@ -143,12 +157,16 @@ impl CameraSpec {
     }
 }
 
-#[derive(Debug, Clone, Copy)]
-struct CameraPose {
-    position: [f32; 3],
-    forward: [f32; 3],
-    right: [f32; 3],
-    up: [f32; 3],
+/// A camera's optical centre and unit axes in the ego frame (x forward, y left, z up).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraPose {
+    pub position: [f32; 3],
+    /// Optical axis.
+    pub forward: [f32; 3],
+    /// Image +u.
+    pub right: [f32; 3],
+    /// Image -v.
+    pub up: [f32; 3],
 }
 
 /// Projects ego-frame points into one camera (see [`CameraSpec::project`]).
@@ -184,12 +202,72 @@ pub struct Rig {
     pub cameras: Vec<CameraSpec>,
 }
 
+/// Named rigs: (name, what it is).
+pub const RIG_PRESETS: [(&str, &str); 2] = [
+    ("tcp", "TCP's front camera: x -1.5, z 2.0, 900x256, fov 100"),
+    (
+        "tcp-small",
+        "TCP's front camera at 320x96, the input size of the cpu-default model",
+    ),
+];
+
+/// Largest rig file read, bytes.
+const MAX_RIG_FILE_BYTES: u64 = 1 << 20;
+
 impl Rig {
     /// TCP's single front camera.
     pub fn tcp() -> Self {
         Self {
             cameras: vec![CameraSpec::tcp_front()],
         }
+    }
+
+    /// TCP's front camera at 320x96 (same pose and fov), the cpu-default model's input size,
+    /// so frames need no resizing.
+    pub fn tcp_small() -> Self {
+        Self {
+            cameras: vec![CameraSpec {
+                width: 320,
+                height: 96,
+                ..CameraSpec::tcp_front()
+            }],
+        }
+    }
+
+    /// A preset of [`RIG_PRESETS`] by name.
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "tcp" => Some(Self::tcp()),
+            "tcp-small" => Some(Self::tcp_small()),
+            _ => None,
+        }
+    }
+
+    /// A preset name or the path of a JSON rig file (see [`Rig::from_json`]).
+    pub fn from_name_or_file(arg: &str) -> Result<Self, RigError> {
+        if let Some(rig) = Self::preset(arg) {
+            return Ok(rig);
+        }
+        let path = std::path::Path::new(arg);
+        let unreadable = |e: std::io::Error| {
+            let names: Vec<&str> = RIG_PRESETS.iter().map(|(n, _)| *n).collect();
+            RigError::File {
+                path: arg.to_string(),
+                problem: format!("{e} (and not a preset: {})", names.join(", ")),
+            }
+        };
+        let bytes = std::fs::metadata(path).map_err(unreadable)?.len();
+        if bytes > MAX_RIG_FILE_BYTES {
+            return Err(RigError::File {
+                path: arg.to_string(),
+                problem: format!("{bytes} bytes, over the {MAX_RIG_FILE_BYTES}-byte limit"),
+            });
+        }
+        let text = std::fs::read_to_string(path).map_err(unreadable)?;
+        Self::from_json(&text).map_err(|e| RigError::File {
+            path: arg.to_string(),
+            problem: e.to_string(),
+        })
     }
 
     /// A validated rig: 1..=6 cameras, distinct ids, every field in range.

@@ -1,0 +1,125 @@
+//! Arguments shared by the commands that drive routes (`eval`, `render`, `collect`): which
+//! routes on which map, and what populates the world.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use clap::Args;
+use sim_bridge::map::{Map, MapOptions};
+use sim_bridge::route::DenseRoute;
+use sim_bridge::route::planner::plan_route;
+use sim_bridge::route::xml::RouteSpec;
+use sim_bridge::world::WorldConfig;
+
+/// Which routes, on which map.
+#[derive(Debug, Clone, Args)]
+pub struct RouteArgs {
+    /// A bundled route set (see `sim-bridge routes list`) or a CARLA route XML file.
+    #[arg(long, default_value = "town05-long-style")]
+    pub routes: String,
+    /// The map: an .xodr file or a bundled town name (defaults to a bundled set's own town).
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Only these route ids (comma separated).
+    #[arg(long, value_delimiter = ',')]
+    pub route_ids: Vec<String>,
+    /// At most this many routes (after --route-ids).
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Do not place lights at multi-lane four-way junctions that the map leaves without.
+    #[arg(long)]
+    pub no_placed_lights: bool,
+}
+
+/// A route ready to drive.
+pub struct PlannedRoute {
+    pub spec: RouteSpec,
+    pub dense: DenseRoute,
+}
+
+impl RouteArgs {
+    /// The map and the selected routes, planned. A route that cannot be planned is reported
+    /// and left out; none at all is an error.
+    pub fn load(&self) -> anyhow::Result<(Map, Vec<PlannedRoute>)> {
+        let options = MapOptions {
+            place_missing_lights: !self.no_placed_lights,
+        };
+        let (map, mut specs) = super::load_routes(&self.routes, self.map.as_ref(), options)?;
+        if !self.route_ids.is_empty() {
+            specs.retain(|s| self.route_ids.contains(&s.id));
+            if specs.is_empty() {
+                bail!(
+                    "none of --route-ids {:?} is in {}",
+                    self.route_ids,
+                    self.routes
+                );
+            }
+        }
+        if let Some(limit) = self.limit {
+            specs.truncate(limit);
+        }
+        let mut planned = Vec::with_capacity(specs.len());
+        for spec in specs {
+            match plan_route(&map, &spec) {
+                Ok(dense) => planned.push(PlannedRoute { spec, dense }),
+                Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
+            }
+        }
+        if planned.is_empty() {
+            bail!(
+                "no route of {} could be planned on map {}",
+                self.routes,
+                map.name
+            );
+        }
+        Ok((map, planned))
+    }
+}
+
+/// What populates the world.
+#[derive(Debug, Clone, Args)]
+pub struct WorldArgs {
+    /// Base seed of traffic, scenarios, lights (and the look, with --randomise-appearance).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Background vehicles (default: the leaderboard's number for the town, 120 for Town05).
+    #[arg(long)]
+    pub vehicles: Option<usize>,
+    /// Background walkers on sidewalks.
+    #[arg(long, default_value_t = 0)]
+    pub walkers: usize,
+    /// No route scenarios (walkers crossing, cyclists, red-light runners).
+    #[arg(long)]
+    pub no_scenarios: bool,
+    /// No parked cars.
+    #[arg(long)]
+    pub no_parked_cars: bool,
+    /// Vary camera colours, sun and sensor noise with the seed.
+    #[arg(long)]
+    pub randomise_appearance: bool,
+}
+
+impl WorldArgs {
+    /// The world of one run on `map` with world seed `seed`.
+    pub fn config(&self, map: &Map, seed: u64) -> WorldConfig {
+        WorldConfig {
+            vehicles: self.vehicles.unwrap_or_else(|| default_vehicles(map)),
+            walkers: self.walkers,
+            scenarios: !self.no_scenarios,
+            parked_cars: !self.no_parked_cars,
+            seed,
+            randomise_appearance: self.randomise_appearance,
+        }
+    }
+}
+
+/// The leaderboard's background-vehicle count for a town (Town05: 120).
+pub fn default_vehicles(map: &Map) -> usize {
+    match map.name.to_ascii_lowercase().as_str() {
+        "town02" => 100,
+        "town04" => 200,
+        "town06" => 150,
+        "ssr_train_small" => 60,
+        _ => 120,
+    }
+}

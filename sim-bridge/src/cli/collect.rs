@@ -1,0 +1,150 @@
+//! `sim-bridge collect`: record the expert driving route sets into a training dataset (see the
+//! `sim_bridge::dataset` docs for the layout). Interrupt it at any time; running the same
+//! command again resumes.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use sim_bridge::camera::Rig;
+use sim_bridge::dataset::NoiseConfig;
+use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect};
+use sim_bridge::map::Map;
+
+use super::args::{PlannedRoute, RouteArgs, WorldArgs};
+
+#[derive(Debug, Args)]
+pub struct CollectArgs {
+    /// Route sets to drive, comma separated (bundled set names, or one route XML with --map).
+    #[command(flatten)]
+    route: RouteArgs,
+    #[command(flatten)]
+    world: WorldArgs,
+    /// Dataset folder (created; an existing one is resumed).
+    #[arg(long)]
+    out: PathBuf,
+    /// Camera rig: a preset (`tcp-small`: TCP's front camera at 320x96, the cpu-default
+    /// model's input; `tcp`: 900x256) or a JSON rig file.
+    #[arg(long, default_value = "tcp-small")]
+    rig: String,
+    /// Stored frames per simulated second (20 Hz divided by a whole number).
+    #[arg(long, default_value_t = 2.0)]
+    rate: f64,
+    /// Runs of each route. Every run gets its own world seed: --seed plus its position in the
+    /// run list (repetitions after all routes), so a resumed collection replays the same runs.
+    #[arg(long, default_value_t = 1)]
+    repetitions: usize,
+    /// Steering perturbations per simulated second (0 disables noise injection).
+    #[arg(long, default_value_t = NoiseConfig::default().rate)]
+    noise_rate: f64,
+    /// Worker threads (one route run each).
+    #[arg(long, default_value_t = default_jobs())]
+    jobs: usize,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+pub fn run(args: CollectArgs) -> anyhow::Result<()> {
+    if args.repetitions == 0 {
+        bail!("--repetitions must be at least 1");
+    }
+    if !(args.noise_rate >= 0.0 && args.noise_rate.is_finite()) {
+        bail!("--noise-rate must be a finite number >= 0");
+    }
+    let rig = Rig::from_name_or_file(&args.rig)?;
+    let mut sets: Vec<(String, Map, Vec<PlannedRoute>)> = Vec::new();
+    for name in args
+        .route
+        .routes
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+    {
+        let one = RouteArgs {
+            routes: name.to_string(),
+            ..args.route.clone()
+        };
+        let (map, planned) = one.load()?;
+        sets.push((name.to_string(), map, planned));
+    }
+    let mut tasks = Vec::new();
+    for repetition in 0..args.repetitions {
+        for (set, map, planned) in &sets {
+            for PlannedRoute { spec, dense } in planned {
+                let seed = args.world.seed + tasks.len() as u64;
+                tasks.push(EpisodeTask {
+                    map,
+                    route_set: set.clone(),
+                    spec: spec.clone(),
+                    dense: dense.clone(),
+                    repetition,
+                    world: args.world.config(map, seed),
+                });
+            }
+        }
+    }
+    let config = CollectConfig {
+        out: args.out.clone(),
+        rig,
+        rate_hz: args.rate,
+        noise: NoiseConfig {
+            rate: args.noise_rate,
+            ..NoiseConfig::default()
+        },
+        jobs: args.jobs,
+    };
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(tasks.len() as u64)
+    };
+    let style = ProgressStyle::with_template(
+        "{prefix} [{bar:40}] {pos}/{len} episodes {msg} ({elapsed}, eta {eta})",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style.progress_chars("=> "));
+    bar.set_prefix("collect");
+    let frames = std::sync::atomic::AtomicUsize::new(0);
+    let started = std::time::Instant::now();
+    let summary = collect(&config, &tasks, |done| {
+        if !done.skipped {
+            let total = frames.fetch_add(done.info.frames, std::sync::atomic::Ordering::Relaxed)
+                + done.info.frames;
+            let rate = total as f64 / started.elapsed().as_secs_f64().max(1e-9);
+            bar.set_message(format!("{total} frames, {rate:.0} frames/s"));
+        }
+        bar.inc(1);
+    })?;
+    bar.finish_and_clear();
+    let manifest = sim_bridge::dataset::Dataset::open(&args.out)?.manifest;
+    println!(
+        "collected {} episodes ({} frames) in {:.1} s: {:.0} frames/s; skipped {} already complete",
+        summary.recorded,
+        summary.frames,
+        summary.wall_seconds,
+        summary.frames as f64 / summary.wall_seconds.max(1e-9),
+        summary.skipped
+    );
+    println!(
+        "dataset {}: {} episodes, {} frames ({} with a truncated future), {:.1} MB ({:.1} MB per 10k frames)",
+        args.out.display(),
+        manifest.episodes,
+        manifest.frames,
+        manifest.truncated_frames,
+        manifest.bytes as f64 / 1e6,
+        manifest.bytes as f64 / 1e6 / (manifest.frames.max(1) as f64 / 1e4)
+    );
+    for (town, count) in &manifest.towns {
+        println!(
+            "  {town}: {} episodes, {} frames",
+            count.episodes, count.frames
+        );
+    }
+    Ok(())
+}

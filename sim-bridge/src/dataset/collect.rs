@@ -1,0 +1,324 @@
+//! Collection: record the expert over many route runs into one dataset, on several threads,
+//! resuming where an interrupted collection stopped.
+//!
+//! Each run is an [`EpisodeTask`] with a deterministic folder name. Complete episodes already
+//! on disk are skipped; leftover `.partial` folders (episodes that were in flight when the
+//! last collection died) are deleted and their runs redone, which reproduces them exactly since
+//! a run depends only on its map, route and world config. A dataset collected with another rig
+//! or rate is refused rather than mixed.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Instant;
+
+use super::recorder::EpisodeRecorder;
+use super::{
+    Dataset, DatasetError, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FORMAT, FUTURE_COUNT,
+    FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, write_atomic,
+};
+use crate::camera::Rig;
+use crate::eval::run_route;
+use crate::map::Map;
+use crate::route::DenseRoute;
+use crate::route::xml::RouteSpec;
+use crate::scoring::ScoringConfig;
+use crate::world::{DT, WorldConfig};
+
+/// How to record.
+#[derive(Debug, Clone)]
+pub struct CollectConfig {
+    /// Dataset root.
+    pub out: PathBuf,
+    pub rig: Rig,
+    /// Stored frames per simulated second (20 Hz divided by a whole number of ticks).
+    pub rate_hz: f64,
+    pub noise: NoiseConfig,
+    /// Worker threads.
+    pub jobs: usize,
+}
+
+/// One route run to record.
+pub struct EpisodeTask<'m> {
+    pub map: &'m Map,
+    pub route_set: String,
+    pub spec: RouteSpec,
+    pub dense: DenseRoute,
+    pub repetition: usize,
+    pub world: WorldConfig,
+}
+
+impl EpisodeTask<'_> {
+    /// Folder name: town, set, route and repetition, in file-name-safe characters.
+    pub fn name(&self) -> String {
+        let raw = format!(
+            "{}__{}__{}__r{}",
+            self.map.name, self.route_set, self.spec.id, self.repetition
+        );
+        raw.chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                    c
+                } else {
+                    '-'
+                }
+            })
+            .collect()
+    }
+}
+
+/// What happened during a collection.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CollectSummary {
+    /// Episodes recorded now.
+    pub recorded: usize,
+    /// Episodes found complete and skipped.
+    pub skipped: usize,
+    /// Frames recorded now.
+    pub frames: usize,
+    pub wall_seconds: f64,
+}
+
+/// Progress reports, one per finished episode.
+#[derive(Debug, Clone)]
+pub struct EpisodeDone {
+    pub info: EpisodeInfo,
+    /// Whether it was already on disk.
+    pub skipped: bool,
+}
+
+/// Record every task not yet in the dataset; `progress` hears of each episode as it ends.
+pub fn collect(
+    config: &CollectConfig,
+    tasks: &[EpisodeTask<'_>],
+    progress: impl Fn(&EpisodeDone) + Sync,
+) -> Result<CollectSummary, DatasetError> {
+    let ticks_per_frame = ticks_per_frame(config.rate_hz).ok_or_else(|| {
+        DatasetError::invalid(
+            &config.out,
+            format!(
+                "rate {} Hz is not 20 Hz divided by a whole number of ticks",
+                config.rate_hz
+            ),
+        )
+    })?;
+    let episodes = config.out.join("episodes");
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| DatasetError::Io { path, source }
+    };
+    std::fs::create_dir_all(&episodes).map_err(io(&episodes))?;
+    check_compatible(config)?;
+    remove_partials(&episodes)?;
+    let started = Instant::now();
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let summary = Mutex::new(CollectSummary::default());
+    let first_error: Mutex<Option<DatasetError>> = Mutex::new(None);
+    let worker = || {
+        while !failed.load(Ordering::Relaxed) {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some(task) = tasks.get(k) else { break };
+            let result = collect_one(config, task, ticks_per_frame).and_then(|done| {
+                let mut s = summary.lock().expect("summary lock");
+                if done.skipped {
+                    s.skipped += 1;
+                } else {
+                    s.recorded += 1;
+                    s.frames += done.info.frames;
+                    write_manifest(config)?;
+                }
+                progress(&done);
+                Ok(())
+            });
+            if let Err(e) = result {
+                failed.store(true, Ordering::Relaxed);
+                first_error.lock().expect("error lock").get_or_insert(e);
+            }
+        }
+    };
+    std::thread::scope(|scope| {
+        for _ in 0..config.jobs.max(1) {
+            scope.spawn(worker);
+        }
+    });
+    if let Some(e) = first_error.into_inner().expect("error lock") {
+        return Err(e);
+    }
+    write_manifest(config)?;
+    let mut summary = summary.into_inner().expect("summary lock");
+    summary.wall_seconds = started.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+/// Ticks per stored frame for a rate, if the rate divides 20 Hz.
+pub fn ticks_per_frame(rate_hz: f64) -> Option<u64> {
+    if !(rate_hz > 0.0) {
+        return None;
+    }
+    let ticks = (1.0 / (rate_hz * DT)).round();
+    ((ticks * rate_hz * DT - 1.0).abs() < 1e-9 && ticks >= 1.0).then_some(ticks as u64)
+}
+
+fn collect_one(
+    config: &CollectConfig,
+    task: &EpisodeTask<'_>,
+    ticks_per_frame: u64,
+) -> Result<EpisodeDone, DatasetError> {
+    let name = task.name();
+    let episodes = config.out.join("episodes");
+    let dir = episodes.join(&name);
+    let info_path = dir.join("episode.json");
+    if info_path.exists() {
+        return Ok(EpisodeDone {
+            info: read_json(&info_path)?,
+            skipped: true,
+        });
+    }
+    let partial = episodes.join(format!(".{name}.partial"));
+    let io = |source| DatasetError::Io {
+        path: partial.clone(),
+        source,
+    };
+    let seed = task.world.seed;
+    let mut recorder = EpisodeRecorder::create(
+        &partial,
+        config.rig.clone(),
+        ticks_per_frame,
+        config.noise,
+        seed,
+    )
+    .map_err(io)?;
+    let run = run_route(
+        task.map,
+        &task.spec,
+        &task.dense,
+        &mut recorder,
+        task.world,
+        ScoringConfig::default(),
+        0,
+        task.repetition,
+        |_| {},
+    );
+    let totals = recorder.finish().map_err(io)?;
+    let scores = run.record.scores;
+    let info = EpisodeInfo {
+        name: name.clone(),
+        town: task.map.name.clone(),
+        route_set: task.route_set.clone(),
+        route_id: task.spec.id.clone(),
+        repetition: task.repetition,
+        seed,
+        rig: config.rig.clone(),
+        rate_hz: config.rate_hz,
+        ticks_per_frame,
+        noise: config.noise,
+        randomise_appearance: task.world.randomise_appearance,
+        frames: totals.frames,
+        truncated_frames: totals.truncated_frames,
+        bytes: totals.bytes,
+        outcome: EpisodeOutcome {
+            status: run.record.status.clone(),
+            route_completion: scores.score_route,
+            driving_score: scores.score_composed,
+            sim_seconds: run.record.meta.duration_game,
+        },
+        wall_seconds: run.wall_seconds,
+    };
+    let json = serde_json::to_vec_pretty(&info)
+        .map_err(|e| DatasetError::invalid(&partial, e.to_string()))?;
+    std::fs::write(partial.join("episode.json"), json).map_err(io)?;
+    std::fs::rename(&partial, &dir).map_err(io)?;
+    Ok(EpisodeDone {
+        info,
+        skipped: false,
+    })
+}
+
+/// Refuse to add to a dataset recorded with another rig or rate.
+fn check_compatible(config: &CollectConfig) -> Result<(), DatasetError> {
+    if !config.out.join("manifest.json").exists() {
+        return Ok(());
+    }
+    let existing = Dataset::open(&config.out)?;
+    let m = &existing.manifest;
+    if m.rig != config.rig || (m.rate_hz - config.rate_hz).abs() > 1e-9 {
+        return Err(DatasetError::invalid(
+            &config.out,
+            format!(
+                "the dataset there was recorded with another rig or rate ({} camera(s) at {} Hz); \
+                 collect into a new folder instead of mixing",
+                m.rig.cameras.len(),
+                m.rate_hz
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Delete the folders of episodes that were in flight when a collection stopped.
+fn remove_partials(episodes: &Path) -> Result<(), DatasetError> {
+    let io = |source| DatasetError::Io {
+        path: episodes.to_path_buf(),
+        source,
+    };
+    for entry in std::fs::read_dir(episodes).map_err(io)? {
+        let entry = entry.map_err(io)?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') && name.ends_with(".partial") {
+            std::fs::remove_dir_all(entry.path()).map_err(io)?;
+        }
+    }
+    Ok(())
+}
+
+/// Rebuild `manifest.json` from every complete episode on disk.
+pub fn write_manifest(config: &CollectConfig) -> Result<Manifest, DatasetError> {
+    let episodes = config.out.join("episodes");
+    let io = |source| DatasetError::Io {
+        path: episodes.clone(),
+        source,
+    };
+    let mut infos: Vec<EpisodeInfo> = Vec::new();
+    for entry in std::fs::read_dir(&episodes).map_err(io)? {
+        let path = entry.map_err(io)?.path().join("episode.json");
+        if path.exists() {
+            infos.push(read_json(&path)?);
+        }
+    }
+    infos.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut manifest = Manifest {
+        format: FORMAT.into(),
+        version: VERSION,
+        rig: config.rig.clone(),
+        rate_hz: config.rate_hz,
+        future_step_s: FUTURE_STEP,
+        future_count: FUTURE_COUNT,
+        episodes: infos.len(),
+        frames: 0,
+        truncated_frames: 0,
+        bytes: 0,
+        towns: Default::default(),
+        episode_list: Vec::with_capacity(infos.len()),
+    };
+    for info in &infos {
+        manifest.frames += info.frames;
+        manifest.truncated_frames += info.truncated_frames;
+        manifest.bytes += info.bytes;
+        let town: &mut TownCount = manifest.towns.entry(info.town.clone()).or_default();
+        town.episodes += 1;
+        town.frames += info.frames;
+        manifest.episode_list.push(EpisodeEntry {
+            name: info.name.clone(),
+            town: info.town.clone(),
+            route_set: info.route_set.clone(),
+            route_id: info.route_id.clone(),
+            frames: info.frames,
+        });
+    }
+    let path = config.out.join("manifest.json");
+    let json = serde_json::to_vec_pretty(&manifest)
+        .map_err(|e| DatasetError::invalid(&path, e.to_string()))?;
+    write_atomic(&path, &json).map_err(|source| DatasetError::Io { path, source })?;
+    Ok(manifest)
+}

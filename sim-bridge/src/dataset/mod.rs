@@ -1,0 +1,318 @@
+//! Expert driving datasets: the on-disk format, the [`recorder`] that writes one episode while
+//! the expert drives, the [`collect`] loop over many routes (parallel, resumable), and the
+//! [`Dataset`] reader that training uses.
+//!
+//! # Layout (format version 1)
+//! ```text
+//! <root>/manifest.json                    Manifest: rig, rate, counts, sizes, towns, episodes
+//! <root>/episodes/<name>/episode.json     EpisodeInfo: town, route, seed, rig, noise, outcome
+//! <root>/episodes/<name>/measurements.jsonl   one FrameRecord per line, in time order
+//! <root>/episodes/<name>/<camera>/<index:06>.png   RGB8 frames, one folder per camera
+//! ```
+//! Every file is plain JSON or PNG, so a dataset can be inspected with `jq` and an image
+//! viewer, and read one episode (one line) at a time.
+//!
+//! Guarantees: an episode folder exists only once its episode is complete (it is written as
+//! `episodes/.<name>.partial` and renamed at the end), so an interrupted collection loses at
+//! most the episodes in flight, which a resumed collection redoes from scratch, and never
+//! holds a frame twice. The manifest is rewritten (atomically) after every episode.
+
+pub mod collect;
+pub mod recorder;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Rig;
+use crate::expert::BrakeReason;
+use crate::image::{RgbImage, decode_png};
+use crate::world::ego::Control;
+
+/// Value of [`Manifest::format`].
+pub const FORMAT: &str = "ssrdrive-dataset";
+/// Value of [`Manifest::version`].
+pub const VERSION: u32 = 1;
+/// Spacing of the future waypoints and controls, seconds.
+pub const FUTURE_STEP: f64 = 0.5;
+/// Number of future waypoints and controls (3 s).
+pub const FUTURE_COUNT: usize = 6;
+/// Largest JSON file read (manifest, episode, measurements), bytes.
+const MAX_JSON_BYTES: u64 = 512 * 1024 * 1024;
+/// Largest PNG read, bytes.
+const MAX_PNG_BYTES: u64 = 64 * 1024 * 1024;
+
+/// One stored frame: what the agent observed, what the expert did and what came next.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Position in the episode, from 0.
+    pub index: usize,
+    /// Simulator tick (20 Hz) it was taken at.
+    pub tick: u64,
+    /// Simulation time, s.
+    pub time: f64,
+    /// Forward speed, m/s.
+    pub speed: f64,
+    /// Ego box centre on the ground, world frame (OpenDRIVE: x east, y north, z up), m.
+    pub position: [f64; 3],
+    /// Heading, rad counter-clockwise from +x.
+    pub yaw: f64,
+    /// Route-follower command, CARLA RoadOption value (1 left ... 6 change lane right).
+    pub command: i32,
+    /// Route-follower target point, ego frame (x forward, y left), m.
+    pub target_point: [f64; 2],
+    /// The expert's control: the training label (steer +1 = full right).
+    pub control: Control,
+    /// The control actually applied (differs from `control` while noise is injected).
+    pub executed: Control,
+    /// Whether injected noise was steering the car on this tick.
+    pub noise: bool,
+    /// Why the expert brakes or holds still, if it does for a hazard.
+    pub brake_reason: Option<BrakeReason>,
+    /// Future ego positions every [`FUTURE_STEP`] s, in this frame's ego frame, m.
+    pub waypoints: Vec<[f64; 2]>,
+    /// The expert's control at the same future instants.
+    pub future_controls: Vec<Control>,
+    /// False when the route ended before the last future instant (then fewer than
+    /// [`FUTURE_COUNT`] waypoints are given).
+    pub future_complete: bool,
+    /// Image files relative to the episode folder, in rig order.
+    pub images: Vec<String>,
+}
+
+/// Noise injection: now and then the executed steering is pushed off the expert's for a short
+/// while; the recorded label stays the expert's own (its correction).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NoiseConfig {
+    /// Perturbations started per simulated second, on average (0 = none).
+    pub rate: f64,
+    /// Duration of one perturbation, s (drawn uniformly in this range).
+    pub duration: [f64; 2],
+    /// Steering offset magnitude (drawn uniformly, random sign).
+    pub steer: [f64; 2],
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        Self {
+            rate: 0.1,
+            duration: [0.5, 1.0],
+            steer: [0.1, 0.3],
+        }
+    }
+}
+
+/// How one episode ended in the simulator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeOutcome {
+    /// The leaderboard status ("Completed", "Failed - Agent got blocked", ...).
+    pub status: String,
+    /// Route completion, percent.
+    pub route_completion: f64,
+    /// Driving score of the run (noise included).
+    pub driving_score: f64,
+    /// Simulated seconds.
+    pub sim_seconds: f64,
+}
+
+/// `episode.json`: everything about one recorded route run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeInfo {
+    /// Folder name under `episodes/`.
+    pub name: String,
+    pub town: String,
+    pub route_set: String,
+    pub route_id: String,
+    pub repetition: usize,
+    /// World seed (traffic, scenarios, lights, appearance, noise).
+    pub seed: u64,
+    pub rig: Rig,
+    /// Stored frames per simulated second.
+    pub rate_hz: f64,
+    pub ticks_per_frame: u64,
+    pub noise: NoiseConfig,
+    pub randomise_appearance: bool,
+    pub frames: usize,
+    /// Frames whose future was cut by the end of the route.
+    pub truncated_frames: usize,
+    /// Bytes of images and measurements.
+    pub bytes: u64,
+    pub outcome: EpisodeOutcome,
+    pub wall_seconds: f64,
+}
+
+/// Per-town totals in the manifest.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TownCount {
+    pub episodes: usize,
+    pub frames: usize,
+}
+
+/// An episode as the manifest lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeEntry {
+    pub name: String,
+    pub town: String,
+    pub route_set: String,
+    pub route_id: String,
+    pub frames: usize,
+}
+
+/// `manifest.json`: the dataset at a glance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Always [`VERSION`].
+    pub version: u32,
+    pub rig: Rig,
+    pub rate_hz: f64,
+    pub future_step_s: f64,
+    pub future_count: usize,
+    pub episodes: usize,
+    pub frames: usize,
+    pub truncated_frames: usize,
+    pub bytes: u64,
+    pub towns: BTreeMap<String, TownCount>,
+    /// Every complete episode, sorted by name.
+    pub episode_list: Vec<EpisodeEntry>,
+}
+
+/// A dataset that cannot be read, with the file and the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {problem}")]
+    Invalid { path: PathBuf, problem: String },
+}
+
+impl DatasetError {
+    fn invalid(path: &Path, problem: impl Into<String>) -> Self {
+        DatasetError::Invalid {
+            path: path.to_path_buf(),
+            problem: problem.into(),
+        }
+    }
+}
+
+/// Read a whole file, refusing one over `limit` bytes.
+fn read_capped(path: &Path, limit: u64) -> Result<Vec<u8>, DatasetError> {
+    let io = |source| DatasetError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > limit {
+        return Err(DatasetError::invalid(
+            path,
+            format!("{len} bytes, over the {limit}-byte limit"),
+        ));
+    }
+    std::fs::read(path).map_err(io)
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, DatasetError> {
+    let bytes = read_capped(path, MAX_JSON_BYTES)?;
+    serde_json::from_slice(&bytes).map_err(|e| DatasetError::invalid(path, e.to_string()))
+}
+
+/// A dataset opened for reading.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    root: PathBuf,
+    pub manifest: Manifest,
+}
+
+impl Dataset {
+    /// Open the dataset at `root` (reads only the manifest).
+    pub fn open(root: &Path) -> Result<Self, DatasetError> {
+        let path = root.join("manifest.json");
+        let manifest: Manifest = read_json(&path)?;
+        if manifest.format != FORMAT || manifest.version != VERSION {
+            return Err(DatasetError::invalid(
+                &path,
+                format!(
+                    "format {} version {}, expected {FORMAT} version {VERSION}",
+                    manifest.format, manifest.version
+                ),
+            ));
+        }
+        Ok(Self {
+            root: root.to_path_buf(),
+            manifest,
+        })
+    }
+
+    /// Folder of an episode.
+    pub fn episode_dir(&self, name: &str) -> PathBuf {
+        self.root.join("episodes").join(name)
+    }
+
+    /// An episode's `episode.json`.
+    pub fn episode(&self, name: &str) -> Result<EpisodeInfo, DatasetError> {
+        read_json(&self.episode_dir(name).join("episode.json"))
+    }
+
+    /// An episode's frame records, in time order. A line that does not parse, or records out
+    /// of order, is an error naming the line.
+    pub fn frames(&self, name: &str) -> Result<Vec<FrameRecord>, DatasetError> {
+        let path = self.episode_dir(name).join("measurements.jsonl");
+        let bytes = read_capped(&path, MAX_JSON_BYTES)?;
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|e| DatasetError::invalid(&path, format!("not UTF-8: {e}")))?;
+        let mut out = Vec::new();
+        for (n, line) in text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty())
+        {
+            let record: FrameRecord = serde_json::from_str(line)
+                .map_err(|e| DatasetError::invalid(&path, format!("line {}: {e}", n + 1)))?;
+            if record.index != out.len() {
+                return Err(DatasetError::invalid(
+                    &path,
+                    format!(
+                        "line {}: frame {} where {} was due",
+                        n + 1,
+                        record.index,
+                        out.len()
+                    ),
+                ));
+            }
+            out.push(record);
+        }
+        Ok(out)
+    }
+
+    /// The images of one frame, in rig order.
+    pub fn images(&self, name: &str, record: &FrameRecord) -> Result<Vec<RgbImage>, DatasetError> {
+        let dir = self.episode_dir(name);
+        record
+            .images
+            .iter()
+            .map(|rel| {
+                if rel.contains("..") || Path::new(rel).is_absolute() {
+                    return Err(DatasetError::invalid(
+                        &dir,
+                        format!("image path {rel} leaves the episode"),
+                    ));
+                }
+                let path = dir.join(rel);
+                let bytes = read_capped(&path, MAX_PNG_BYTES)?;
+                decode_png(&bytes).map_err(|e| DatasetError::invalid(&path, e.to_string()))
+            })
+            .collect()
+    }
+}
+
+/// Write `bytes` to `path` through a temporary file and a rename, so readers never see half.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes)?;
+    std::fs::rename(&tmp, path)
+}

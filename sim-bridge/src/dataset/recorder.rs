@@ -1,0 +1,247 @@
+//! Records one episode while the expert drives: an [`Agent`] that asks for the rig's frames
+//! every `ticks_per_frame` ticks, writes them as PNG, injects steering noise into the executed
+//! control while labelling each frame with the expert's own control, and fills in each frame's
+//! future (waypoints and controls every 0.5 s for 3 s) once that future has been driven.
+
+use std::collections::VecDeque;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use glam::DVec2;
+use rand::{RngExt as _, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::{FUTURE_COUNT, FUTURE_STEP, FrameRecord, NoiseConfig};
+use crate::agent::{Agent, Control, Observation, RouteContext};
+use crate::camera::Rig;
+use crate::expert::Expert;
+use crate::image::encode_png;
+use crate::world::{DT, World};
+
+/// The ego on one tick, kept to compute earlier frames' futures.
+#[derive(Debug, Clone, Copy)]
+struct TickState {
+    position: DVec2,
+    yaw: f64,
+    label: Control,
+}
+
+/// The expert, recording into an episode folder.
+pub struct EpisodeRecorder {
+    expert: Expert,
+    rig: Rig,
+    dir: PathBuf,
+    ticks_per_frame: u64,
+    noise: NoiseConfig,
+    rng: ChaCha8Rng,
+    /// Remaining ticks of the current perturbation and its steering offset.
+    perturbation: Option<(u64, f64)>,
+    history: Vec<TickState>,
+    pending: VecDeque<FrameRecord>,
+    measurements: std::io::BufWriter<std::fs::File>,
+    frames: usize,
+    truncated: usize,
+    bytes: u64,
+    error: Option<std::io::Error>,
+}
+
+/// What a finished recording holds.
+#[derive(Debug, Clone, Copy)]
+pub struct RecordingTotals {
+    pub frames: usize,
+    pub truncated_frames: usize,
+    pub bytes: u64,
+}
+
+impl EpisodeRecorder {
+    /// Record into `dir` (created, with one subfolder per camera).
+    pub fn create(
+        dir: &Path,
+        rig: Rig,
+        ticks_per_frame: u64,
+        noise: NoiseConfig,
+        seed: u64,
+    ) -> std::io::Result<Self> {
+        for camera in &rig.cameras {
+            std::fs::create_dir_all(dir.join(&camera.id))?;
+        }
+        let file = std::fs::File::create(dir.join("measurements.jsonl"))?;
+        Ok(Self {
+            expert: Expert::new(),
+            rig,
+            dir: dir.to_path_buf(),
+            ticks_per_frame: ticks_per_frame.max(1),
+            noise,
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x0150_15e0),
+            perturbation: None,
+            history: Vec::new(),
+            pending: VecDeque::new(),
+            measurements: std::io::BufWriter::new(file),
+            frames: 0,
+            truncated: 0,
+            bytes: 0,
+            error: None,
+        })
+    }
+
+    /// Write out the frames still waiting for their future (marked incomplete) and flush.
+    pub fn finish(mut self) -> std::io::Result<RecordingTotals> {
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        while let Some(record) = self.pending.pop_front() {
+            self.write_record(record)?;
+        }
+        self.measurements.flush()?;
+        Ok(RecordingTotals {
+            frames: self.frames,
+            truncated_frames: self.truncated,
+            bytes: self.bytes,
+        })
+    }
+
+    /// Ticks between two future instants.
+    fn future_ticks(&self) -> u64 {
+        (FUTURE_STEP / DT).round() as u64
+    }
+
+    /// The executed control: the label, pushed off now and then by noise.
+    fn perturb(&mut self, label: Control) -> (Control, bool) {
+        if self.perturbation.is_none()
+            && self.noise.rate > 0.0
+            && self.rng.random_bool((self.noise.rate * DT).clamp(0.0, 1.0))
+        {
+            let [d0, d1] = self.noise.duration;
+            let [s0, s1] = self.noise.steer;
+            let ticks = (self.rng.random_range(d0..=d1.max(d0)) / DT).round() as u64;
+            let sign = if self.rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let offset = sign * self.rng.random_range(s0..=s1.max(s0));
+            self.perturbation = Some((ticks.max(1), offset));
+        }
+        match self.perturbation {
+            Some((left, offset)) => {
+                self.perturbation = (left > 1).then_some((left - 1, offset));
+                let steer = (label.steer + offset).clamp(-1.0, 1.0);
+                (Control { steer, ..label }, true)
+            }
+            None => (label, false),
+        }
+    }
+
+    fn store_frames(&mut self, obs: &Observation) -> std::io::Result<Vec<String>> {
+        let mut images = Vec::with_capacity(obs.frames.len());
+        for frame in &obs.frames {
+            let rel = format!("{}/{:06}.png", frame.camera, self.frames);
+            let png =
+                encode_png(frame.width, frame.height, &frame.rgb).map_err(std::io::Error::other)?;
+            std::fs::write(self.dir.join(&rel), &png)?;
+            self.bytes += png.len() as u64;
+            images.push(rel);
+        }
+        Ok(images)
+    }
+
+    fn write_record(&mut self, mut record: FrameRecord) -> std::io::Result<()> {
+        let step = self.future_ticks();
+        let start = record.tick as usize;
+        let origin = self.history[start];
+        let (sin, cos) = origin.yaw.sin_cos();
+        record.waypoints.clear();
+        record.future_controls.clear();
+        for k in 1..=FUTURE_COUNT as u64 {
+            let Some(future) = self.history.get(start + (k * step) as usize) else {
+                break;
+            };
+            let d = future.position - origin.position;
+            record
+                .waypoints
+                .push([cos * d.x + sin * d.y, -sin * d.x + cos * d.y]);
+            record.future_controls.push(future.label);
+        }
+        record.future_complete = record.waypoints.len() == FUTURE_COUNT;
+        if !record.future_complete {
+            self.truncated += 1;
+        }
+        let line = serde_json::to_string(&record).map_err(std::io::Error::other)?;
+        self.measurements.write_all(line.as_bytes())?;
+        self.measurements.write_all(b"\n")?;
+        self.bytes += line.len() as u64 + 1;
+        Ok(())
+    }
+
+    fn record_tick(
+        &mut self,
+        obs: &Observation,
+        label: Control,
+        executed: Control,
+        noise: bool,
+    ) -> std::io::Result<()> {
+        if !obs.frames.is_empty() {
+            let images = self.store_frames(obs)?;
+            self.pending.push_back(FrameRecord {
+                index: self.frames,
+                tick: obs.frame,
+                time: obs.time,
+                speed: obs.speed,
+                position: obs.position.to_array(),
+                yaw: obs.yaw,
+                command: obs.command.value(),
+                target_point: obs.target_point.to_array(),
+                control: label,
+                executed,
+                noise,
+                brake_reason: self.expert.brake_reason(),
+                waypoints: Vec::new(),
+                future_controls: Vec::new(),
+                future_complete: false,
+                images,
+            });
+            self.frames += 1;
+        }
+        let horizon = self.future_ticks() * FUTURE_COUNT as u64;
+        while self
+            .pending
+            .front()
+            .is_some_and(|r| r.tick + horizon < self.history.len() as u64)
+        {
+            let record = self.pending.pop_front().expect("checked");
+            self.write_record(record)?;
+        }
+        Ok(())
+    }
+}
+
+impl Agent for EpisodeRecorder {
+    fn name(&self) -> String {
+        "expert (recording)".into()
+    }
+
+    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+        self.expert.start_route(ctx);
+    }
+
+    fn sensors(&self) -> Option<Rig> {
+        Some(self.rig.clone())
+    }
+
+    fn wants_frames(&self, frame: u64) -> bool {
+        frame % self.ticks_per_frame == 0
+    }
+
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+        let label = self.expert.run_step(obs, world);
+        debug_assert_eq!(self.history.len() as u64, obs.frame, "one call per tick");
+        self.history.push(TickState {
+            position: obs.position.truncate(),
+            yaw: obs.yaw,
+            label,
+        });
+        let (executed, noise) = self.perturb(label);
+        if self.error.is_none()
+            && let Err(e) = self.record_tick(obs, label, executed, noise)
+        {
+            self.error = Some(e);
+        }
+        executed
+    }
+}

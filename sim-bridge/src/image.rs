@@ -1,0 +1,98 @@
+//! RGB8 images in and out of PNG: single frames (camera frames, dataset files) and animated
+//! PNG (a whole run). Decoding refuses anything but 8-bit RGB and images over
+//! [`MAX_IMAGE_PIXELS`], with an error that says why.
+
+use std::io::Write;
+
+/// Largest image decoded, pixels (six 1920x1080 cameras fit in one file's worth).
+pub const MAX_IMAGE_PIXELS: u64 = 16 * 1024 * 1024;
+
+/// An RGB8 image, row-major.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+}
+
+/// Why an image could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("not a readable PNG: {0}")]
+    Decode(#[from] png::DecodingError),
+    #[error("PNG encoding failed: {0}")]
+    Encode(#[from] png::EncodingError),
+    #[error("PNG is {0:?} at {1:?} bits; expected 8-bit RGB")]
+    Format(png::ColorType, png::BitDepth),
+    #[error("PNG of {0}x{1} is over the {MAX_IMAGE_PIXELS}-pixel limit")]
+    TooLarge(u32, u32),
+    #[error("{len} bytes of pixels for {width}x{height} RGB (expected {expected})")]
+    Size {
+        width: u32,
+        height: u32,
+        len: usize,
+        expected: usize,
+    },
+}
+
+fn check_size(width: u32, height: u32, len: usize) -> Result<(), ImageError> {
+    let expected = width as usize * height as usize * 3;
+    if len != expected {
+        return Err(ImageError::Size {
+            width,
+            height,
+            len,
+            expected,
+        });
+    }
+    Ok(())
+}
+
+/// Encode RGB8 pixels as PNG (fast compression: frames are written by the thousand).
+pub fn encode_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, ImageError> {
+    check_size(width, height, rgb.len())?;
+    let mut out = Vec::with_capacity(rgb.len() / 2);
+    let mut encoder = png::Encoder::new(&mut out, width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Fast);
+    encoder.write_header()?.write_image_data(rgb)?;
+    Ok(out)
+}
+
+/// Decode an 8-bit RGB PNG.
+pub fn decode_png(bytes: &[u8]) -> Result<RgbImage, ImageError> {
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info()?;
+    let info = reader.info();
+    let (width, height) = (info.width, info.height);
+    if width as u64 * height as u64 > MAX_IMAGE_PIXELS {
+        return Err(ImageError::TooLarge(width, height));
+    }
+    if info.color_type != png::ColorType::Rgb || info.bit_depth != png::BitDepth::Eight {
+        return Err(ImageError::Format(info.color_type, info.bit_depth));
+    }
+    let mut rgb = vec![0; width as usize * height as usize * 3];
+    reader.next_frame(&mut rgb)?;
+    Ok(RgbImage { width, height, rgb })
+}
+
+/// Write equally sized frames as one animated PNG, `delay_ms` per frame, looping.
+pub fn write_apng(out: impl Write, frames: &[RgbImage], delay_ms: u16) -> Result<(), ImageError> {
+    let Some(first) = frames.first() else {
+        return Ok(());
+    };
+    let mut encoder = png::Encoder::new(out, first.width, first.height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Fast);
+    encoder.set_animated(frames.len() as u32, 0)?;
+    encoder.set_frame_delay(delay_ms, 1000)?;
+    let mut writer = encoder.write_header()?;
+    for frame in frames {
+        check_size(first.width, first.height, frame.rgb.len())?;
+        writer.write_image_data(&frame.rgb)?;
+    }
+    writer.finish()?;
+    Ok(())
+}
