@@ -299,16 +299,15 @@ impl Rig {
 
     /// Parses a rig from JSON: either `[camera, ...]` or `{"cameras": [camera, ...]}`.
     pub fn from_json(text: &str) -> Result<Self, RigError> {
-        #[derive(Deserialize)]
-        #[serde(untagged)]
-        enum Form {
-            List(Vec<CameraSpec>),
-            Object { cameras: Vec<CameraSpec> },
-        }
-        let form: Form = serde_json::from_str(text).map_err(|e| RigError::Json(e.to_string()))?;
-        let cameras = match form {
-            Form::List(c) | Form::Object { cameras: c } => c,
+        let json = |e: serde_json::Error| RigError::Json(e.to_string());
+        let value: serde_json::Value = serde_json::from_str(text).map_err(json)?;
+        let list = match value {
+            serde_json::Value::Object(mut object) => object
+                .remove("cameras")
+                .ok_or_else(|| RigError::Json("the object has no \"cameras\" list".into()))?,
+            other => other,
         };
+        let cameras: Vec<CameraSpec> = serde_json::from_value(list).map_err(json)?;
         Self::new(cameras)
     }
 }

@@ -71,3 +71,192 @@ fn listings_and_help_explain() {
     let towns = sim_bridge(&["towns", "list"]);
     assert!(String::from_utf8_lossy(&towns.stdout).contains("ssr_town05"));
 }
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("sim-bridge-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn render_writes_camera_frames_and_an_animation() {
+    let dir = scratch("render");
+    let run = sim_bridge(&[
+        "render",
+        "--routes",
+        "town05-short-style",
+        "--limit",
+        "1",
+        "--rig",
+        "tcp-small",
+        "--max-frames",
+        "5",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let route = std::fs::read_dir(&dir)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let mut names: Vec<String> = std::fs::read_dir(&route)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 6, "{names:?}");
+    assert_eq!(names[0], "000000_rgb_front.png");
+    let frame = std::fs::read(route.join(&names[1])).unwrap();
+    let image = sim_bridge::image::decode_png(&frame).unwrap();
+    assert_eq!((image.width, image.height), (320, 96));
+    let animation = std::fs::read(route.join("run.png")).unwrap();
+    assert!(
+        animation.windows(4).any(|w| w == b"acTL"),
+        "run.png is not an animated PNG"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn malformed_rigs_are_refused_with_the_problem_named() {
+    let dir = scratch("bad-rig");
+    let cases = [
+        (
+            r#"[{"id":"front","x":0,"y":0,"z":2,"roll":0,"pitch":0,"yaw":0,"width":320,"height":96,"fov":200}]"#,
+            "fov",
+        ),
+        (
+            r#"[{"id":"front/../x","x":0,"y":0,"z":2,"roll":0,"pitch":0,"yaw":0,"width":320,"height":96,"fov":90}]"#,
+            "letters, digits",
+        ),
+        (r#"{"cameras": []}"#, "at least one camera"),
+        (r#"[{"id":"front"}]"#, "missing field"),
+    ];
+    for (k, (json, expected)) in cases.iter().enumerate() {
+        let path = dir.join(format!("rig{k}.json"));
+        std::fs::write(&path, json).unwrap();
+        let run = sim_bridge(&[
+            "bench",
+            "render",
+            "--frames",
+            "1",
+            "--rig",
+            path.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success());
+        assert!(
+            stderr.contains(expected) && stderr.contains("rig"),
+            "{stderr}"
+        );
+    }
+    let run = sim_bridge(&["bench", "render", "--rig", "no-such-rig"]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.contains("tcp-small"), "presets are listed: {stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every file of every episode folder under `root`, with its bytes.
+fn dataset_files(root: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![root.join("episodes")];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let rel = path
+                    .strip_prefix(root)
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned();
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_killed_collection_resumes_without_losing_or_duplicating_frames() {
+    let dir = scratch("resume");
+    let (killed, clean) = (dir.join("killed"), dir.join("clean"));
+    let args = |out: &std::path::Path| {
+        vec![
+            "collect".to_string(),
+            "--routes".into(),
+            "town05-short-style".into(),
+            "--limit".into(),
+            "6".into(),
+            "--rig".into(),
+            "tcp".into(),
+            "--jobs".into(),
+            "1".into(),
+            "--quiet".into(),
+            "--out".into(),
+            out.to_string_lossy().into_owned(),
+        ]
+    };
+    let complete = |out: &std::path::Path| {
+        std::fs::read_dir(out.join("episodes")).map_or(0, |entries| {
+            entries
+                .filter(|e| e.as_ref().unwrap().path().join("episode.json").exists())
+                .count()
+        })
+    };
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sim-bridge"))
+        .args(args(&killed))
+        .spawn()
+        .unwrap();
+    while complete(&killed) < 2 {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "finished before it could be killed"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = complete(&killed);
+    assert!(
+        (2..6).contains(&before),
+        "{before} episodes complete at the kill"
+    );
+
+    let resumed = sim_bridge(&args(&killed).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let said = String::from_utf8_lossy(&resumed.stdout);
+    assert!(
+        said.contains(&format!("skipped {before} already complete")),
+        "{said}"
+    );
+    let whole = sim_bridge(&args(&clean).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(whole.status.success());
+
+    let (a, b) = (dataset_files(&killed), dataset_files(&clean));
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (name, bytes) in &a {
+        if !name.ends_with("episode.json") {
+            assert!(bytes == &b[name], "{name} differs after the resume");
+        }
+    }
+    let manifest = |root: &std::path::Path| {
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(root.join("manifest.json")).unwrap()).unwrap();
+        (m["episodes"].clone(), m["frames"].clone())
+    };
+    assert_eq!(manifest(&killed), manifest(&clean));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,227 @@
+//! Expert datasets: a collection read back frame by frame, futures consistent with the poses,
+//! frames identical to what a driving agent is shown, and clear errors for broken files.
+
+use std::path::{Path, PathBuf};
+
+use sim_bridge::agent::{Agent, CameraFrame, Control, Observation, RouteContext};
+use sim_bridge::camera::Rig;
+use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect};
+use sim_bridge::dataset::{Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
+use sim_bridge::eval::run_route;
+use sim_bridge::expert::Expert;
+use sim_bridge::map::{Map, MapOptions};
+use sim_bridge::route::planner::plan_route;
+use sim_bridge::route::sets::RouteSet;
+use sim_bridge::route::xml;
+use sim_bridge::scoring::ScoringConfig;
+use sim_bridge::towngen::bundled;
+use sim_bridge::world::{World, WorldConfig};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("sim-bridge-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn small_town() -> (Map, RouteSet) {
+    let set = RouteSet::find("train-small").expect("bundled set");
+    let map = Map::from_str(set.town.name(), bundled(set.town), MapOptions::default()).unwrap();
+    (map, set)
+}
+
+fn world(seed: u64) -> WorldConfig {
+    WorldConfig {
+        vehicles: 20,
+        walkers: 5,
+        seed,
+        ..WorldConfig::default()
+    }
+}
+
+fn tasks<'m>(map: &'m Map, set: RouteSet, count: usize) -> Vec<EpisodeTask<'m>> {
+    let specs = xml::parse(set.name, set.bundled_xml()).unwrap();
+    specs
+        .into_iter()
+        .take(count)
+        .enumerate()
+        .map(|(k, spec)| EpisodeTask {
+            map,
+            route_set: set.name.to_string(),
+            dense: plan_route(map, &spec).unwrap(),
+            spec,
+            repetition: 0,
+            world: world(k as u64),
+        })
+        .collect()
+}
+
+fn config(out: &Path, noise: f64) -> CollectConfig {
+    CollectConfig {
+        out: out.to_path_buf(),
+        rig: Rig::tcp_small(),
+        rate_hz: 2.0,
+        noise: NoiseConfig {
+            rate: noise,
+            ..NoiseConfig::default()
+        },
+        jobs: 2,
+    }
+}
+
+#[test]
+fn a_collection_reads_back_with_consistent_futures() {
+    let out = scratch("dataset-roundtrip");
+    let (map, set) = small_town();
+    let tasks = tasks(&map, set, 3);
+    let summary = collect(&config(&out, 0.5), &tasks, |_| {}).unwrap();
+    assert_eq!(summary.recorded, 3);
+    let data = Dataset::open(&out).unwrap();
+    let m = &data.manifest;
+    assert_eq!(m.episodes, 3);
+    assert_eq!(m.rig, Rig::tcp_small());
+    assert_eq!(m.towns[&map.name].frames, m.frames);
+    let mut total = 0;
+    let mut noisy = 0;
+    for entry in &m.episode_list {
+        let info = data.episode(&entry.name).unwrap();
+        assert_eq!(info.route_set, "train-small");
+        let frames = data.frames(&entry.name).unwrap();
+        assert_eq!(frames.len(), entry.frames);
+        assert!(frames.len() > 20, "{} frames", frames.len());
+        total += frames.len();
+        for pair in frames.windows(2) {
+            let (a, b) = (&pair[0], &pair[1]);
+            assert_eq!(b.tick - a.tick, 10, "2 Hz");
+            noisy += a.noise as usize;
+            if a.future_complete {
+                assert_eq!(a.waypoints.len(), FUTURE_COUNT);
+                assert_eq!(a.future_controls.len(), FUTURE_COUNT);
+                assert_eq!(a.future_controls[0], b.control);
+                // The first waypoint (0.5 s ahead) is the next frame's position in this
+                // frame's ego frame.
+                let (s, c) = a.yaw.sin_cos();
+                let d = [b.position[0] - a.position[0], b.position[1] - a.position[1]];
+                let local = [c * d[0] + s * d[1], -s * d[0] + c * d[1]];
+                let w = a.waypoints[0];
+                assert!((w[0] - local[0]).abs() < 1e-9 && (w[1] - local[1]).abs() < 1e-9);
+            }
+        }
+        let last = frames.last().unwrap();
+        assert!(!last.future_complete && last.waypoints.len() < FUTURE_COUNT);
+        assert_eq!(
+            info.truncated_frames,
+            frames.iter().filter(|f| !f.future_complete).count()
+        );
+        let images = data.images(&entry.name, &frames[3]).unwrap();
+        assert_eq!((images[0].width, images[0].height), (320, 96));
+    }
+    assert_eq!(total, m.frames);
+    assert!(noisy > 0, "noise at 0.5 per second must show up");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The expert with a camera, keeping every frame it is shown at 2 Hz.
+struct Watcher {
+    expert: Expert,
+    seen: Vec<CameraFrame>,
+}
+
+impl Agent for Watcher {
+    fn name(&self) -> String {
+        "watcher".into()
+    }
+    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+        self.expert.start_route(ctx);
+    }
+    fn sensors(&self) -> Option<Rig> {
+        Some(Rig::tcp_small())
+    }
+    fn wants_frames(&self, frame: u64) -> bool {
+        frame % 10 == 0
+    }
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+        self.seen.extend(obs.frames.iter().cloned());
+        self.expert.run_step(obs, world)
+    }
+}
+
+#[test]
+fn the_dataset_stores_exactly_the_frames_an_agent_is_shown() {
+    let out = scratch("dataset-same-frames");
+    let (map, set) = small_town();
+    let tasks = tasks(&map, set, 1);
+    collect(&config(&out, 0.0), &tasks, |_| {}).unwrap();
+    let data = Dataset::open(&out).unwrap();
+    let name = &data.manifest.episode_list[0].name;
+    let frames = data.frames(name).unwrap();
+
+    let mut watcher = Watcher {
+        expert: Expert::new(),
+        seen: Vec::new(),
+    };
+    let task = &tasks[0];
+    run_route(
+        &map,
+        &task.spec,
+        &task.dense,
+        &mut watcher,
+        task.world,
+        ScoringConfig::default(),
+        0,
+        0,
+        |_| {},
+    );
+    assert_eq!(watcher.seen.len(), frames.len());
+    for (record, shown) in frames.iter().zip(&watcher.seen).step_by(7) {
+        let stored = &data.images(name, record).unwrap()[0];
+        assert_eq!(stored.rgb, shown.rgb, "frame {}", record.index);
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn broken_datasets_give_errors_that_name_the_file_and_problem() {
+    let out = scratch("dataset-broken");
+    let missing = Dataset::open(&out).unwrap_err();
+    assert!(matches!(missing, DatasetError::Io { .. }));
+    assert!(missing.to_string().contains("manifest.json"), "{missing}");
+
+    let (map, set) = small_town();
+    let tasks = tasks(&map, set, 1);
+    collect(&config(&out, 0.0), &tasks, |_| {}).unwrap();
+    let data = Dataset::open(&out).unwrap();
+    let name = data.manifest.episode_list[0].name.clone();
+    let dir = data.episode_dir(&name);
+    let frames = data.frames(&name).unwrap();
+
+    // A measurements file cut in the middle of a line.
+    let path = dir.join("measurements.jsonl");
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, &text[..text.len() * 2 / 3]).unwrap();
+    let err = data.frames(&name).unwrap_err().to_string();
+    assert!(
+        err.contains("measurements.jsonl") && err.contains("line"),
+        "{err}"
+    );
+
+    // A truncated PNG.
+    let image = dir.join(&frames[0].images[0]);
+    let bytes = std::fs::read(&image).unwrap();
+    std::fs::write(&image, &bytes[..bytes.len() / 2]).unwrap();
+    let err = data.images(&name, &frames[0]).unwrap_err().to_string();
+    assert!(err.contains("000000.png"), "{err}");
+
+    // Another rig is refused rather than mixed in.
+    let mut other = config(&out, 0.0);
+    other.rig = Rig::tcp();
+    let err = collect(&other, &tasks, |_| {}).unwrap_err().to_string();
+    assert!(err.contains("another rig"), "{err}");
+
+    // A manifest of another format.
+    let manifest = out.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(&manifest, text.replace("\"version\": 1", "\"version\": 99")).unwrap();
+    let err = Dataset::open(&out).unwrap_err().to_string();
+    assert!(err.contains("version 99"), "{err}");
+    let _ = std::fs::remove_dir_all(&out);
+}
