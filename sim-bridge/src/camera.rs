@@ -18,6 +18,8 @@ use serde::{Deserialize, Serialize};
 pub const MAX_CAMERAS: usize = 6;
 /// Largest image side accepted in a rig, pixels.
 pub const MAX_IMAGE_SIDE: u32 = 8192;
+/// Most pixels in one camera image (a 4096x4096 frame; 4K video is half of it).
+pub const MAX_IMAGE_PIXELS: u64 = 16 * 1024 * 1024;
 
 /// One camera in CARLA's sensor description.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -117,6 +119,13 @@ impl CameraSpec {
             if side == 0 || side > MAX_IMAGE_SIDE {
                 return Err(format!("{name} = {side} px is outside 1..{MAX_IMAGE_SIDE}"));
             }
+        }
+        let pixels = self.width as u64 * self.height as u64;
+        if pixels > MAX_IMAGE_PIXELS {
+            return Err(format!(
+                "{}x{} is {pixels} pixels, over the {MAX_IMAGE_PIXELS}-pixel limit",
+                self.width, self.height
+            ));
         }
         Ok(())
     }

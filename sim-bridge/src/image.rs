@@ -4,8 +4,8 @@
 
 use std::io::Write;
 
-/// Largest image decoded, pixels (six 1920x1080 cameras fit in one file's worth).
-pub const MAX_IMAGE_PIXELS: u64 = 16 * 1024 * 1024;
+/// Largest image decoded, pixels: the largest camera image a rig allows.
+pub use crate::camera::MAX_IMAGE_PIXELS;
 
 /// An RGB8 image, row-major.
 #[derive(Debug, Clone, PartialEq, Eq)]

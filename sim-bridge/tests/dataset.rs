@@ -217,6 +217,26 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     let err = collect(&other, &tasks, |_| {}).unwrap_err().to_string();
     assert!(err.contains("another rig"), "{err}");
 
+    // The same run listed twice would write one folder from two threads.
+    let (map2, set2) = small_town();
+    let mut twice = self::tasks(&map2, set2, 1);
+    twice.extend(self::tasks(&map2, set2, 1));
+    let err = collect(&config(&out, 0.0), &twice, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("listed twice"), "{err}");
+
+    // Resuming with another seed for a recorded run is refused, not silently skipped.
+    let mut reseeded = self::tasks(&map2, set2, 1);
+    reseeded[0].world.seed = 99;
+    let err = collect(&config(&out, 0.0), &reseeded, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("another seed") && err.contains("episode.json"),
+        "{err}"
+    );
+
     // A manifest of another format.
     let manifest = out.join("manifest.json");
     let text = std::fs::read_to_string(&manifest).unwrap();

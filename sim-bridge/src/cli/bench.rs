@@ -42,10 +42,10 @@ pub enum BenchCommand {
         #[arg(long, default_value = "tcp")]
         rig: String,
         /// Frames to render.
-        #[arg(long, default_value_t = 200)]
-        frames: usize,
+        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..))]
+        frames: u64,
         /// Ticks between captures (20 Hz ticks).
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
         every: u64,
         /// Background vehicles.
         #[arg(long, default_value_t = 120)]
@@ -106,7 +106,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
 }
 
 /// Captures world states while the expert drives, then times rendering each through the rig.
-fn bench_render(rig: &str, frames: usize, every: u64, vehicles: usize) -> anyhow::Result<()> {
+fn bench_render(rig: &str, frames: u64, every: u64, vehicles: usize) -> anyhow::Result<()> {
     let rig = Rig::from_name_or_file(rig)?;
     let set = RouteSet::find("town05-long-style").expect("bundled set");
     let map = super::load_map(set.town.name(), MapOptions::default())?;
@@ -118,8 +118,8 @@ fn bench_render(rig: &str, frames: usize, every: u64, vehicles: usize) -> anyhow
     };
     let mut capture = Capture {
         expert: Expert::new(),
-        every: every.max(1),
-        wanted: frames.max(1),
+        every,
+        wanted: frames as usize,
         states: Vec::new(),
     };
     run_route(

@@ -9,7 +9,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim_bridge::camera::Rig;
 use sim_bridge::dataset::NoiseConfig;
-use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect};
+use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
 use sim_bridge::map::Map;
 
 use super::args::{PlannedRoute, RouteArgs, WorldArgs};
@@ -31,23 +31,32 @@ pub struct CollectArgs {
     /// Stored frames per simulated second (20 Hz divided by a whole number).
     #[arg(long, default_value_t = 2.0)]
     rate: f64,
-    /// Runs of each route. Every run gets its own world seed: --seed plus its position in the
-    /// run list (repetitions after all routes), so a resumed collection replays the same runs.
+    /// Runs of each route. Every run gets its own world seed, derived from --seed, the set,
+    /// the route id and the repetition, so a resumed collection replays the same runs.
     #[arg(long, default_value_t = 1)]
     repetitions: usize,
     /// Steering perturbations per simulated second (0 disables noise injection).
     #[arg(long, default_value_t = NoiseConfig::default().rate)]
     noise_rate: f64,
     /// Worker threads (one route run each).
-    #[arg(long, default_value_t = default_jobs())]
-    jobs: usize,
+    #[arg(long, default_value_t = default_jobs(), value_parser = clap::value_parser!(u64).range(1..=256))]
+    jobs: u64,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
 }
 
-fn default_jobs() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+fn default_jobs() -> u64 {
+    std::thread::available_parallelism().map_or(1, |n| n.get() as u64)
+}
+
+/// The world seed of one run: FNV-1a of (set, route id, repetition), offset by `base`.
+fn run_seed(base: u64, set: &str, route: &str, repetition: usize) -> u64 {
+    let key = format!("{set}\u{1f}{route}\u{1f}{repetition}");
+    let hash = key.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    });
+    base.wrapping_add(hash)
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<()> {
@@ -56,6 +65,12 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     }
     if !(args.noise_rate >= 0.0 && args.noise_rate.is_finite()) {
         bail!("--noise-rate must be a finite number >= 0");
+    }
+    if ticks_per_frame(args.rate).is_none() {
+        bail!(
+            "--rate {}: must be 20 Hz divided by a whole number (20, 10, 5, 4, 2, 1, ...)",
+            args.rate
+        );
     }
     let rig = Rig::from_name_or_file(&args.rig)?;
     let mut sets: Vec<(String, Map, Vec<PlannedRoute>)> = Vec::new();
@@ -77,7 +92,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     for repetition in 0..args.repetitions {
         for (set, map, planned) in &sets {
             for PlannedRoute { spec, dense } in planned {
-                let seed = args.world.seed + tasks.len() as u64;
+                let seed = run_seed(args.world.seed, set, &spec.id, repetition);
                 tasks.push(EpisodeTask {
                     map,
                     route_set: set.clone(),
@@ -97,7 +112,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             rate: args.noise_rate,
             ..NoiseConfig::default()
         },
-        jobs: args.jobs,
+        jobs: args.jobs as usize,
     };
     let bar = if args.quiet {
         ProgressBar::hidden()

@@ -54,7 +54,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let mut records = Vec::with_capacity(total);
     for repetition in 0..args.repetitions {
         for PlannedRoute { spec, dense } in &planned {
-            let world = args.world.config(&map, args.world.seed + repetition as u64);
+            let world = args
+                .world
+                .config(&map, args.world.seed.wrapping_add(repetition as u64));
             let bar = progress_bar(args.quiet, &format!("route {} rep {repetition}", spec.id));
             let index = records.len();
             let run = run_route(

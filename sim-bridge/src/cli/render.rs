@@ -8,6 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use sim_bridge::agent::{Agent, Control, Observation, RouteContext};
 use sim_bridge::camera::Rig;
+use sim_bridge::dataset::safe_name;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::image::{RgbImage, encode_png, write_apng};
@@ -29,13 +30,13 @@ pub struct RenderArgs {
     #[arg(long, default_value = "tcp")]
     rig: String,
     /// Ticks (20 Hz) between two rendered frames: 10 gives 2 Hz.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     every: u64,
     /// Render at most this many frames per route (the run goes on unrendered).
     #[arg(long, default_value_t = 400)]
     max_frames: usize,
     /// Side of the top-down panel in the animation, pixels (0: as tall as the cameras).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=2048))]
     topdown: u32,
     /// Metres from the ego to the edge of the top-down panel.
     #[arg(long, default_value_t = 30.0)]
@@ -49,13 +50,13 @@ pub struct RenderArgs {
 }
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    if args.every == 0 {
-        bail!("--every must be at least 1 tick");
+    if !(args.topdown_radius.is_finite() && args.topdown_radius > 0.0) {
+        bail!("--topdown-radius must be a positive number of metres");
     }
     let rig = Rig::from_name_or_file(&args.rig)?;
     let (map, planned) = args.route.load()?;
     for PlannedRoute { spec, dense } in &planned {
-        let dir = args.out.join(format!("route_{}", spec.id));
+        let dir = args.out.join(safe_name(&format!("route_{}", spec.id)));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut film = Film {
             driver: Expert::new(),
@@ -145,10 +146,11 @@ impl Film<'_> {
             side,
         );
         let (width, height) = (cameras_width + side, cameras_height.max(side));
-        let mut rgb = vec![0u8; (width * height * 3) as usize];
+        let stride = width as usize * 3;
+        let mut rgb = vec![0u8; stride * height as usize];
         let mut blit = |x0: u32, y0: u32, w: u32, pixels: &[u8]| {
             for (row, line) in pixels.chunks_exact(w as usize * 3).enumerate() {
-                let at = (((y0 + row as u32) * width + x0) * 3) as usize;
+                let at = (y0 as usize + row) * stride + x0 as usize * 3;
                 rgb[at..at + line.len()].copy_from_slice(line);
             }
         };

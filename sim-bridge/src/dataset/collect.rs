@@ -2,9 +2,10 @@
 //! resuming where an interrupted collection stopped.
 //!
 //! Each run is an [`EpisodeTask`] with a deterministic folder name. Complete episodes already
-//! on disk are skipped; leftover `.partial` folders (episodes that were in flight when the
-//! last collection died) are deleted and their runs redone, which reproduces them exactly since
-//! a run depends only on its map, route and world config. A dataset collected with another rig
+//! on disk are skipped (after checking they were recorded with the same seed, rig, rate, noise
+//! and look); leftover `.partial` folders (episodes that were in flight when the last
+//! collection died) are deleted and their runs redone, which reproduces them exactly since a
+//! run depends only on its map, route and world config. A dataset collected with another rig
 //! or rate is refused rather than mixed.
 
 use std::path::{Path, PathBuf};
@@ -15,7 +16,7 @@ use std::time::Instant;
 use super::recorder::EpisodeRecorder;
 use super::{
     Dataset, DatasetError, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FORMAT, FUTURE_COUNT,
-    FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, write_atomic,
+    FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, safe_name, write_atomic,
 };
 use crate::camera::Rig;
 use crate::eval::run_route;
@@ -51,19 +52,10 @@ pub struct EpisodeTask<'m> {
 impl EpisodeTask<'_> {
     /// Folder name: town, set, route and repetition, in file-name-safe characters.
     pub fn name(&self) -> String {
-        let raw = format!(
+        safe_name(&format!(
             "{}__{}__{}__r{}",
             self.map.name, self.route_set, self.spec.id, self.repetition
-        );
-        raw.chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
-                    c
-                } else {
-                    '-'
-                }
-            })
-            .collect()
+        ))
     }
 }
 
@@ -102,6 +94,21 @@ pub fn collect(
             ),
         )
     })?;
+    config
+        .rig
+        .validate()
+        .map_err(|e| DatasetError::invalid(&config.out, format!("rig: {e}")))?;
+    let mut names: Vec<String> = tasks.iter().map(EpisodeTask::name).collect();
+    names.sort();
+    if let Some(pair) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(DatasetError::invalid(
+            &config.out,
+            format!(
+                "two runs would both be episode {} (a route listed twice?)",
+                pair[0]
+            ),
+        ));
+    }
     let episodes = config.out.join("episodes");
     let io = |path: &Path| {
         let path = path.to_path_buf();
@@ -170,8 +177,21 @@ fn collect_one(
     let dir = episodes.join(&name);
     let info_path = dir.join("episode.json");
     if info_path.exists() {
+        let info: EpisodeInfo = read_json(&info_path)?;
+        let same = info.seed == task.world.seed
+            && info.rig == config.rig
+            && info.ticks_per_frame == ticks_per_frame
+            && info.noise == config.noise
+            && info.randomise_appearance == task.world.randomise_appearance;
+        if !same {
+            return Err(DatasetError::invalid(
+                &info_path,
+                "recorded with another seed, rig, rate, noise or look than this collection \
+                 asks for; collect into a new folder (or repeat the original command)",
+            ));
+        }
         return Ok(EpisodeDone {
-            info: read_json(&info_path)?,
+            info,
             skipped: true,
         });
     }
@@ -281,7 +301,11 @@ pub fn write_manifest(config: &CollectConfig) -> Result<Manifest, DatasetError> 
     };
     let mut infos: Vec<EpisodeInfo> = Vec::new();
     for entry in std::fs::read_dir(&episodes).map_err(io)? {
-        let path = entry.map_err(io)?.path().join("episode.json");
+        let entry = entry.map_err(io)?;
+        if entry.file_name().to_string_lossy().starts_with('.') {
+            continue; // in flight
+        }
+        let path = entry.path().join("episode.json");
         if path.exists() {
             infos.push(read_json(&path)?);
         }

@@ -248,9 +248,9 @@ impl Dataset {
         })
     }
 
-    /// Folder of an episode.
+    /// Folder of an episode (the name is made file-name-safe first, as collection made it).
     pub fn episode_dir(&self, name: &str) -> PathBuf {
-        self.root.join("episodes").join(name)
+        self.root.join("episodes").join(safe_name(name))
     }
 
     /// An episode's `episode.json`.
@@ -308,6 +308,20 @@ impl Dataset {
             })
             .collect()
     }
+}
+
+/// `raw` with every character other than ASCII letters, digits, `_` and `-` replaced by `-`,
+/// so it can name a file or folder and never leave its parent.
+pub fn safe_name(raw: &str) -> String {
+    raw.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
 }
 
 /// Write `bytes` to `path` through a temporary file and a rename, so readers never see half.

@@ -2,6 +2,8 @@
 //! every `ticks_per_frame` ticks, writes them as PNG, injects steering noise into the executed
 //! control while labelling each frame with the expert's own control, and fills in each frame's
 //! future (waypoints and controls every 0.5 s for 3 s) once that future has been driven.
+//! One recorder records one route run: a second `start_route` is refused (an error at
+//! [`EpisodeRecorder::finish`]), since the episode folder holds one run.
 
 use std::collections::VecDeque;
 use std::io::Write;
@@ -16,6 +18,7 @@ use crate::agent::{Agent, Control, Observation, RouteContext};
 use crate::camera::Rig;
 use crate::expert::Expert;
 use crate::image::encode_png;
+use crate::route::plan::to_ego_frame;
 use crate::world::{DT, World};
 
 /// The ego on one tick, kept to compute earlier frames' futures.
@@ -145,17 +148,18 @@ impl EpisodeRecorder {
         let step = self.future_ticks();
         let start = record.tick as usize;
         let origin = self.history[start];
-        let (sin, cos) = origin.yaw.sin_cos();
         record.waypoints.clear();
         record.future_controls.clear();
         for k in 1..=FUTURE_COUNT as u64 {
             let Some(future) = self.history.get(start + (k * step) as usize) else {
                 break;
             };
-            let d = future.position - origin.position;
-            record
-                .waypoints
-                .push([cos * d.x + sin * d.y, -sin * d.x + cos * d.y]);
+            let local = to_ego_frame(
+                future.position.extend(0.0),
+                origin.position.extend(0.0),
+                origin.yaw,
+            );
+            record.waypoints.push([local.x, local.y]);
             record.future_controls.push(future.label);
         }
         record.future_complete = record.waypoints.len() == FUTURE_COUNT;
@@ -217,6 +221,11 @@ impl Agent for EpisodeRecorder {
     }
 
     fn start_route(&mut self, ctx: &RouteContext<'_>) {
+        if !self.history.is_empty() && self.error.is_none() {
+            self.error = Some(std::io::Error::other(
+                "an episode recorder records one route run; this one was started twice",
+            ));
+        }
         self.expert.start_route(ctx);
     }
 
@@ -230,7 +239,13 @@ impl Agent for EpisodeRecorder {
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
         let label = self.expert.run_step(obs, world);
-        debug_assert_eq!(self.history.len() as u64, obs.frame, "one call per tick");
+        if self.history.len() as u64 != obs.frame && self.error.is_none() {
+            self.error = Some(std::io::Error::other(format!(
+                "tick {} arrived after {} ticks: recording needs every tick from 0",
+                obs.frame,
+                self.history.len()
+            )));
+        }
         self.history.push(TickState {
             position: obs.position.truncate(),
             yaw: obs.yaw,

@@ -62,7 +62,16 @@ pub fn run_route(
         plan: &plan,
     });
     let mut world = World::new(map, dense, world_config);
-    let rig = agent.sensors();
+    let rig = agent.sensors().filter(|rig| match rig.validate() {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!(
+                "agent {}: its camera rig is unusable ({e}); no frames",
+                agent.name()
+            );
+            false
+        }
+    });
     let mut cameras = rig
         .as_ref()
         .map(|_| CameraRenderer::new(map, world_config.appearance()));

@@ -8,6 +8,8 @@
 use glam::Vec3;
 use xodr::LaneType;
 
+use super::LaneKind;
+
 /// What a surface triangle is made of, for colouring.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Material {
@@ -24,22 +26,19 @@ pub enum Material {
 }
 
 impl Material {
+    /// The material of a lane type: the lane graph's [`LaneKind`], with bus, taxi and HOV
+    /// lanes drawn as driving, curbs as sidewalk, medians as grass, and the other paved kinds
+    /// (`none`, biking, shared, road works) as shoulder.
     fn of(kind: LaneType) -> Self {
-        match kind {
-            LaneType::Driving
-            | LaneType::Entry
-            | LaneType::Exit
-            | LaneType::OnRamp
-            | LaneType::OffRamp
-            | LaneType::ConnectingRamp
-            | LaneType::SlipLane
-            | LaneType::Bidirectional => Material::Driving,
-            LaneType::Parking => Material::Parking,
-            LaneType::Sidewalk | LaneType::Curb => Material::Sidewalk,
-            LaneType::Shoulder | LaneType::Border | LaneType::Stop | LaneType::Biking => {
-                Material::Shoulder
-            }
-            _ => Material::Grass,
+        match (LaneKind::from_xodr(kind), kind) {
+            (LaneKind::Driving, _) => Material::Driving,
+            (LaneKind::Parking, _) => Material::Parking,
+            (_, LaneType::Bus | LaneType::Taxi | LaneType::Hov) => Material::Driving,
+            (LaneKind::Sidewalk, _) | (_, LaneType::Curb) => Material::Sidewalk,
+            (_, LaneType::Median) => Material::Grass,
+            (LaneKind::Shoulder, _)
+            | (_, LaneType::Biking | LaneType::Shared | LaneType::RoadWorks) => Material::Shoulder,
+            (LaneKind::Other, _) => Material::Grass,
         }
     }
 }

@@ -97,8 +97,11 @@ impl Target {
                         n += 1;
                     }
                     if inside[k] != inside[(k + 1) % 3] {
-                        let t = (NEAR - a.z) / (b.z - a.z);
-                        poly[n] = a + (b - a) * t;
+                        // From the inside corner outwards, so a neighbour sharing the edge
+                        // computes the same point whichever way its winding runs it.
+                        let (i, o) = if inside[k] { (a, b) } else { (b, a) };
+                        let t = (NEAR - i.z) / (o.z - i.z);
+                        poly[n] = i + (o - i) * t;
                         n += 1;
                     }
                 }

@@ -154,9 +154,10 @@ impl StaticScene {
         mut draw: impl FnMut(&[Tri]),
     ) {
         let slack = CELL * std::f32::consts::FRAC_1_SQRT_2 + MAX_EDGE;
+        let reach = range + MAX_EDGE;
         let cell_range = |centre: f32, lo: f32, n: usize| {
-            let a = ((centre - range - lo) / CELL).floor().max(0.0) as usize;
-            let b = (((centre + range - lo) / CELL).floor() as isize).min(n as isize - 1);
+            let a = ((centre - reach - lo) / CELL).floor().max(0.0) as usize;
+            let b = (((centre + reach - lo) / CELL).floor() as isize).min(n as isize - 1);
             a..(b + 1).max(0) as usize
         };
         for row in cell_range(eye.y, self.lo.y, self.rows) {

@@ -149,10 +149,13 @@ impl Appearance {
         }
     }
 
-    /// Body colour of the vehicle with this id.
+    /// Body colour of the vehicle with this id (grey with an empty palette).
     pub fn car(&self, id: u32) -> Rgb {
         let k = (id as usize).wrapping_mul(2_654_435_761) >> 7;
-        self.car_colours[k % self.car_colours.len().max(1)]
+        match self.car_colours.len() {
+            0 => Vec3::splat(0.5),
+            n => self.car_colours[k % n],
+        }
     }
 
     /// A colour lit by the sun on a face with unit normal `normal`, packed as 0x00RRGGBB.
