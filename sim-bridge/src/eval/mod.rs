@@ -3,8 +3,7 @@
 //!
 //! One tick, in the leaderboard's order: read the state, update the route follower and the
 //! scenario triggers, render the agent's cameras (if it has any), ask the agent, evaluate the
-//! criteria (with the contacts of the previous
-//! world step), then step the world.
+//! criteria (with the contacts of the previous world step), then step the world.
 
 use std::time::Instant;
 
@@ -62,19 +61,16 @@ pub fn run_route(
         plan: &plan,
     });
     let mut world = World::new(map, dense, world_config);
-    let rig = agent.sensors().filter(|rig| match rig.validate() {
-        Ok(()) => true,
+    let mut cameras = agent.sensors().and_then(|rig| match rig.validate() {
+        Ok(()) => Some((rig, CameraRenderer::new(map, world_config.appearance()))),
         Err(e) => {
             tracing::error!(
-                "agent {}: its camera rig is unusable ({e}); no frames",
+                "agent {}: camera rig unusable ({e}); no frames",
                 agent.name()
             );
-            false
+            None
         }
     });
-    let mut cameras = rig
-        .as_ref()
-        .map(|_| CameraRenderer::new(map, world_config.appearance()));
     let mut scorer = RouteScorer::new(map, dense, scoring);
     let mut contacts = Vec::new();
     let mut progress = 0;
@@ -86,8 +82,8 @@ pub fn run_route(
         world.trigger_scenarios(progress);
         let node = follower.step(ego.position.truncate());
         let target = to_ego_frame(node.position, ego.position, ego.yaw);
-        let frames = match (&rig, &mut cameras) {
-            (Some(rig), Some(renderer)) if agent.wants_frames(frame) => {
+        let frames = match &mut cameras {
+            Some((rig, renderer)) if agent.wants_frames(frame) => {
                 let actors = world.actors();
                 let scene = SceneState {
                     ego,
