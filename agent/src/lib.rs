@@ -9,6 +9,7 @@
 //! - [`policy`]: per-episode state and the step / batched-step API.
 //! - [`checkpoint`]: weights with their config in one safetensors file.
 //! - [`train`]: losses (imitation + future-BEV) used by training.
+//! - [`serve`]: the gRPC agent server (sessions, batching, health, metrics).
 //! - [`device`]: backend selection (CPU by default, wgpu behind the `wgpu` feature).
 //!
 //! Conventions: world frame = OpenDRIVE map frame (x east, y north, z up, m); ego frame = x
@@ -22,4 +23,5 @@ pub mod device;
 pub mod model;
 pub mod policy;
 pub mod pose;
+pub mod serve;
 pub mod train;

@@ -1,6 +1,8 @@
-//! `ssr-agent`: benchmark the SSR network, show model configs, inspect checkpoints.
+//! `ssr-agent`: serve the SSR network over gRPC, benchmark it, show model configs, inspect
+//! checkpoints.
 
 mod bench;
+mod serve_args;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -8,13 +10,15 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 use ssr_agent::checkpoint;
+use ssr_agent::device::Backend;
 use ssr_agent::model::config::SsrConfig;
+use ssr_agent::serve::{self, LogFormat};
 
 #[derive(Parser)]
 #[command(
     name = "ssr-agent",
     version,
-    about = "SSR end-to-end driving network (Burn): benchmarks, configs, checkpoints"
+    about = "SSR end-to-end driving network (Burn): gRPC agent server, benchmarks, configs, checkpoints"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -23,6 +27,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Serve the network over gRPC (ssrdrive.v1.AgentService, see proto/): per-episode
+    /// temporal state, dynamic batching, health, reflection, Prometheus metrics. Settings come
+    /// from --config FILE, then SSR_AGENT_* variables, then flags. Stops on Ctrl-C or SIGTERM
+    /// after draining in-flight requests.
+    Serve(serve_args::ServeArgs),
     /// Time the network: forward latency with a per-stage breakdown (backbone, BEV encoder,
     /// STL, head), a full policy step from 900x256 camera frames, and optionally a training step.
     /// Without --config it runs the standard set: cpu-default at batch 1 and 8, paper at batch 1.
@@ -37,15 +46,72 @@ enum Command {
     Inspect { checkpoint: PathBuf },
 }
 
+fn init_logs(format: LogFormat) {
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    let logs = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    match format {
+        LogFormat::Human => logs.init(),
+        LogFormat::Json => logs.json().init(),
+    }
+}
+
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Serve(args) => serve(&args),
+        command => {
+            init_logs(LogFormat::Human);
+            run_tool(command)
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn serve(args: &serve_args::ServeArgs) -> anyhow::Result<()> {
+    let config = args.resolve()?;
+    init_logs(config.log_format);
+    let device = Backend::Cpu.device()?;
+    let (policy, info) = serve::load_policy(&config, &device)?;
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?
+        .block_on(serve::run(config, policy, info, shutdown_signal()))
+}
+
+/// Ctrl-C, or SIGTERM on Unix (what container runtimes send).
+async fn shutdown_signal() {
+    let interrupt = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut signal) => {
+                signal.recv().await;
+            }
+            Err(_) => std::future::pending().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = interrupt => {}
+        () = terminate => {}
+    }
+}
+
+fn run_tool(command: Command) -> anyhow::Result<()> {
+    match command {
+        Command::Serve(_) => unreachable!("served by main"),
         Command::Bench(args) => bench::run(&args),
         Command::Config { preset } => {
             let config = SsrConfig::preset(&preset).expect("clap checked the name");
@@ -71,13 +137,6 @@ fn main() -> ExitCode {
                     serde_json::to_string_pretty(&info.config).expect("configs serialise")
                 );
             })
-        }
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            eprintln!("error: {error:#}");
-            ExitCode::FAILURE
         }
     }
 }

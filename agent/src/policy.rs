@@ -48,47 +48,41 @@ pub struct StepInput {
     pub debug: bool,
 }
 
-/// A bad input, naming the episode (its index in the batch) and what is wrong.
+/// What is wrong with one step input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum StepError {
-    #[error("episode {episode}: {source}")]
-    Rig { episode: usize, source: RigError },
-    #[error("episode {episode}: the rig has {expected} cameras but {got} frames came")]
-    FrameCount {
-        episode: usize,
-        expected: usize,
-        got: usize,
-    },
-    #[error(
-        "episode {episode}, camera '{camera}': frame is {got_w}x{got_h} but the rig says {want_w}x{want_h}"
-    )]
+pub enum InputError {
+    #[error(transparent)]
+    Rig(#[from] RigError),
+    #[error("the rig has {expected} cameras but {got} frames came")]
+    FrameCount { expected: usize, got: usize },
+    #[error("camera '{camera}': frame is {got_w}x{got_h} but the rig says {want_w}x{want_h}")]
     FrameSize {
-        episode: usize,
         camera: String,
         want_w: u32,
         want_h: u32,
         got_w: u32,
         got_h: u32,
     },
-    #[error(
-        "episode {episode}, camera '{camera}': a {w}x{h} RGB8 frame needs {want} bytes, got {got}"
-    )]
+    #[error("camera '{camera}': a {w}x{h} RGB8 frame needs {want} bytes, got {got}")]
     FrameBytes {
-        episode: usize,
         camera: String,
         w: u32,
         h: u32,
         want: usize,
         got: usize,
     },
-    #[error("episode {episode}: {field} = {value} is not a finite number in range")]
-    BadNumber {
-        episode: usize,
-        field: &'static str,
-        value: f32,
-    },
-    #[error("episode {episode}: command {command} is not a RoadOption (-1 or 1..=6)")]
-    BadCommand { episode: usize, command: i32 },
+    #[error("{field} = {value} is not a finite number in range")]
+    BadNumber { field: &'static str, value: f32 },
+    #[error("command {command} is not a RoadOption (-1 or 1..=6)")]
+    BadCommand { command: i32 },
+}
+
+/// Why a (batched) step was refused before anything ran.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepError {
+    /// A bad input, naming the episode (its index in the batch).
+    #[error("episode {episode}: {source}")]
+    Input { episode: usize, source: InputError },
     #[error("step_batch got {episodes} episode states for {inputs} inputs")]
     BatchShape { episodes: usize, inputs: usize },
 }
@@ -131,6 +125,9 @@ pub struct StepDebug {
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepOutput {
     pub decision: ControlDecision,
+    /// Time spent in this episode's PID and fusion (the rest of a step is the shared forward
+    /// pass).
+    pub control_time: std::time::Duration,
     /// Planned waypoints, ego frame, 0.5 s apart.
     pub waypoints: Vec<[f32; 2]>,
     pub debug: Option<StepDebug>,
@@ -154,22 +151,17 @@ pub fn command_index(command: i32) -> Option<usize> {
     }
 }
 
-fn check_input(episode: usize, input: &StepInput) -> Result<(), StepError> {
-    input
-        .rig
-        .validate()
-        .map_err(|source| StepError::Rig { episode, source })?;
+fn check_input(input: &StepInput) -> Result<(), InputError> {
+    input.rig.validate()?;
     if input.frames.len() != input.rig.cameras.len() {
-        return Err(StepError::FrameCount {
-            episode,
+        return Err(InputError::FrameCount {
             expected: input.rig.cameras.len(),
             got: input.frames.len(),
         });
     }
     for (frame, camera) in input.frames.iter().zip(&input.rig.cameras) {
         if (frame.width, frame.height) != (camera.width, camera.height) {
-            return Err(StepError::FrameSize {
-                episode,
+            return Err(InputError::FrameSize {
                 camera: camera.id.clone(),
                 want_w: camera.width,
                 want_h: camera.height,
@@ -179,8 +171,7 @@ fn check_input(episode: usize, input: &StepInput) -> Result<(), StepError> {
         }
         let want = frame.width as usize * frame.height as usize * 3;
         if frame.rgb.len() != want {
-            return Err(StepError::FrameBytes {
-                episode,
+            return Err(InputError::FrameBytes {
                 camera: camera.id.clone(),
                 w: frame.width,
                 h: frame.height,
@@ -199,16 +190,11 @@ fn check_input(episode: usize, input: &StepInput) -> Result<(), StepError> {
     ];
     for (field, value, limit) in numbers {
         if !value.is_finite() || value.abs() > limit {
-            return Err(StepError::BadNumber {
-                episode,
-                field,
-                value,
-            });
+            return Err(InputError::BadNumber { field, value });
         }
     }
     if command_index(input.command).is_none() {
-        return Err(StepError::BadCommand {
-            episode,
+        return Err(InputError::BadCommand {
             command: input.command,
         });
     }
@@ -230,13 +216,29 @@ impl SsrPolicy {
         &self.config
     }
 
+    /// The controller settings new episodes get.
+    pub fn control(&self) -> &ControlConfig {
+        &self.control
+    }
+
     /// A fresh episode: no previous BEV, empty controller windows.
     pub fn new_episode(&self) -> EpisodeState {
+        self.new_episode_with(self.control.clone())
+    }
+
+    /// A fresh episode with its own controller settings (e.g. another fusion alpha).
+    pub fn new_episode_with(&self, control: ControlConfig) -> EpisodeState {
         EpisodeState {
             previous: None,
-            controller: EpisodeController::new(self.control.clone()),
+            controller: EpisodeController::new(control),
             ticks: 0,
         }
+    }
+
+    /// Checks one input as [`SsrPolicy::step_batch`] does, so a caller batching independent
+    /// requests can refuse a bad one alone.
+    pub fn check(&self, input: &StepInput) -> Result<(), InputError> {
+        check_input(input)
     }
 
     /// Bytes of tensor state one episode keeps (its previous BEV).
@@ -268,8 +270,8 @@ impl SsrPolicy {
                 inputs: inputs.len(),
             });
         }
-        for (index, input) in inputs.iter().enumerate() {
-            check_input(index, input)?;
+        for (episode, input) in inputs.iter().enumerate() {
+            check_input(input).map_err(|source| StepError::Input { episode, source })?;
         }
         let mut outputs: Vec<Option<StepOutput>> = vec![None; inputs.len()];
         let mut camera_counts: Vec<usize> = inputs.iter().map(|i| i.rig.cameras.len()).collect();
@@ -395,9 +397,11 @@ impl SsrPolicy {
                 .collect();
             let a = [alpha[2 * i], alpha[2 * i + 1]];
             let bt = [beta[2 * i], beta[2 * i + 1]];
+            let control_started = std::time::Instant::now();
             let decision = state
                 .controller
                 .act(&path, input.target_point, input.speed, a, bt);
+            let control_time = control_started.elapsed();
             let debug = (input.debug).then(|| {
                 let maps = attention
                     .as_ref()
@@ -417,6 +421,7 @@ impl SsrPolicy {
             state.ticks += 1;
             results.push(StepOutput {
                 decision,
+                control_time,
                 waypoints: path,
                 debug,
             });

@@ -8,7 +8,7 @@ use burn::tensor::Device;
 use common::{rig, step_input, tiny_config};
 use ssr_agent::control::ControlConfig;
 use ssr_agent::model::SsrModel;
-use ssr_agent::policy::{SsrPolicy, StepError};
+use ssr_agent::policy::{InputError, SsrPolicy, StepError};
 
 fn policy() -> SsrPolicy {
     let device = Device::flex();
@@ -89,24 +89,29 @@ fn bad_inputs_are_named_and_change_nothing() {
     input.speed = f32::NAN;
     assert!(matches!(
         policy.step(&mut episode, &input),
-        Err(StepError::BadNumber { field: "speed", .. })
+        Err(StepError::Input {
+            source: InputError::BadNumber { field: "speed", .. },
+            ..
+        })
     ));
     let mut input = step_input(&rig, 1, 1);
     input.command = 9;
     assert_eq!(
         policy.step(&mut episode, &input).unwrap_err(),
-        StepError::BadCommand {
+        StepError::Input {
             episode: 0,
-            command: 9
+            source: InputError::BadCommand { command: 9 }
         }
     );
     let mut input = step_input(&rig, 1, 1);
     input.frames.clear();
     assert!(matches!(
         policy.step(&mut episode, &input),
-        Err(StepError::FrameCount {
-            expected: 1,
-            got: 0,
+        Err(StepError::Input {
+            source: InputError::FrameCount {
+                expected: 1,
+                got: 0
+            },
             ..
         })
     ));
@@ -121,13 +126,19 @@ fn bad_inputs_are_named_and_change_nothing() {
     input.frames[0].width = 800;
     assert!(matches!(
         policy.step(&mut episode, &input),
-        Err(StepError::FrameSize { .. })
+        Err(StepError::Input {
+            source: InputError::FrameSize { .. },
+            ..
+        })
     ));
     let mut input = step_input(&rig, 1, 1);
     input.rig.cameras[0].fov = -5.0;
     assert!(matches!(
         policy.step(&mut episode, &input),
-        Err(StepError::Rig { .. })
+        Err(StepError::Input {
+            source: InputError::Rig(_),
+            ..
+        })
     ));
 
     // A bad second episode fails the whole batch before anything runs.
@@ -143,10 +154,12 @@ fn bad_inputs_are_named_and_change_nothing() {
     assert!(
         matches!(
             err,
-            StepError::BadNumber {
+            StepError::Input {
                 episode: 1,
-                field: "target_point.x",
-                ..
+                source: InputError::BadNumber {
+                    field: "target_point.x",
+                    ..
+                }
             }
         ),
         "{err}"

@@ -70,12 +70,20 @@ pub struct RouteContext<'a> {
     pub plan: &'a [PlanNode],
 }
 
+/// An agent that cannot go on (a lost server connection, a refused request). The route ends
+/// as the leaderboard ends it when an agent raises: "Failed - Agent crashed".
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct AgentError(pub String);
+
 /// Something that drives the ego.
 pub trait Agent {
     /// A short name for results and logs.
     fn name(&self) -> String;
     /// Called once before the first tick of a route.
-    fn start_route(&mut self, ctx: &RouteContext<'_>);
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError>;
+    /// Called once after the last tick of a route (CARLA's `destroy`), crashed or not.
+    fn end_route(&mut self) {}
     /// The cameras this agent drives from (CARLA's `sensors()`); `None` renders nothing.
     fn sensors(&self) -> Option<Rig> {
         None
@@ -88,5 +96,5 @@ pub trait Agent {
     }
     /// Decide this tick's control. `world` is privileged ground truth: only in-process agents
     /// such as the expert may read it; sensor-based agents use `obs` alone.
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control;
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError>;
 }

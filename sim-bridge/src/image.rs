@@ -1,5 +1,5 @@
 //! RGB8 images in and out of PNG: single frames (camera frames, dataset files) and animated
-//! PNG (a whole run). Decoding refuses anything but 8-bit RGB and images over
+//! PNG (a whole run). Decoding refuses anything but 8-bit RGB(A) and images over
 //! [`MAX_IMAGE_PIXELS`], with an error that says why.
 
 use std::io::Write;
@@ -22,10 +22,17 @@ pub enum ImageError {
     Decode(#[from] png::DecodingError),
     #[error("PNG encoding failed: {0}")]
     Encode(#[from] png::EncodingError),
-    #[error("PNG is {0:?} at {1:?} bits; expected 8-bit RGB")]
+    #[error("PNG is {0:?} at {1:?} bits; expected 8-bit RGB or RGBA")]
     Format(png::ColorType, png::BitDepth),
     #[error("PNG of {0}x{1} is over the {MAX_IMAGE_PIXELS}-pixel limit")]
     TooLarge(u32, u32),
+    #[error("PNG is {width}x{height} but {want_w}x{want_h} was expected")]
+    Dimensions {
+        width: u32,
+        height: u32,
+        want_w: u32,
+        want_h: u32,
+    },
     #[error("{len} bytes of pixels for {width}x{height} RGB (expected {expected})")]
     Size {
         width: u32,
@@ -60,8 +67,18 @@ pub fn encode_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, ImageE
     Ok(out)
 }
 
-/// Decode an 8-bit RGB PNG.
+/// Decode an 8-bit RGB or RGBA PNG (alpha is dropped).
 pub fn decode_png(bytes: &[u8]) -> Result<RgbImage, ImageError> {
+    decode(bytes, None)
+}
+
+/// [`decode_png`] of an image that must be `width` x `height`; the header is checked before
+/// any pixel memory is allocated.
+pub fn decode_png_sized(bytes: &[u8], width: u32, height: u32) -> Result<RgbImage, ImageError> {
+    decode(bytes, Some((width, height)))
+}
+
+fn decode(bytes: &[u8], expected: Option<(u32, u32)>) -> Result<RgbImage, ImageError> {
     let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     let mut reader = decoder.read_info()?;
     let info = reader.info();
@@ -69,11 +86,31 @@ pub fn decode_png(bytes: &[u8]) -> Result<RgbImage, ImageError> {
     if width as u64 * height as u64 > MAX_IMAGE_PIXELS {
         return Err(ImageError::TooLarge(width, height));
     }
-    if info.color_type != png::ColorType::Rgb || info.bit_depth != png::BitDepth::Eight {
-        return Err(ImageError::Format(info.color_type, info.bit_depth));
+    if let Some((want_w, want_h)) = expected
+        && (want_w, want_h) != (width, height)
+    {
+        return Err(ImageError::Dimensions {
+            width,
+            height,
+            want_w,
+            want_h,
+        });
     }
-    let mut rgb = vec![0; width as usize * height as usize * 3];
-    reader.next_frame(&mut rgb)?;
+    let channels = match (info.color_type, info.bit_depth) {
+        (png::ColorType::Rgb, png::BitDepth::Eight) => 3,
+        (png::ColorType::Rgba, png::BitDepth::Eight) => 4,
+        (color, depth) => return Err(ImageError::Format(color, depth)),
+    };
+    let mut pixels = vec![0; width as usize * height as usize * channels];
+    reader.next_frame(&mut pixels)?;
+    let rgb = if channels == 4 {
+        pixels
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect()
+    } else {
+        pixels
+    };
     Ok(RgbImage { width, height, rgb })
 }
 

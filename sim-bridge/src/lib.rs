@@ -8,6 +8,7 @@
 
 pub mod agent;
 pub mod camera;
+pub mod client;
 pub mod dataset;
 pub mod eval;
 pub mod expert;

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use sim_bridge::agent::{Agent, CameraFrame, Control, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, CameraFrame, Control, Observation, RouteContext};
 use sim_bridge::camera::Rig;
 use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect};
 use sim_bridge::dataset::{Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
@@ -130,8 +130,8 @@ impl Agent for Watcher {
     fn name(&self) -> String {
         "watcher".into()
     }
-    fn start_route(&mut self, ctx: &RouteContext<'_>) {
-        self.expert.start_route(ctx);
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
+        self.expert.start_route(ctx)
     }
     fn sensors(&self) -> Option<Rig> {
         Some(Rig::tcp_small())
@@ -139,7 +139,7 @@ impl Agent for Watcher {
     fn wants_frames(&self, frame: u64) -> bool {
         frame % 10 == 0
     }
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         self.seen.extend(obs.frames.iter().cloned());
         self.expert.run_step(obs, world)
     }

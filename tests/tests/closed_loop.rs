@@ -1,7 +1,7 @@
 //! Closed loop through the public API: agents drive bundled routes in the simulator and the
 //! scorer judges them, the way `sim-bridge eval` does.
 
-use sim_bridge::agent::{Agent, Control, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{Map, MapOptions};
@@ -29,13 +29,15 @@ impl Agent for Parked {
     fn name(&self) -> String {
         "parked".into()
     }
-    fn start_route(&mut self, _ctx: &RouteContext<'_>) {}
-    fn run_step(&mut self, _obs: &Observation, _world: &World<'_>) -> Control {
-        Control {
+    fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
+        Ok(())
+    }
+    fn run_step(&mut self, _obs: &Observation, _world: &World<'_>) -> Result<Control, AgentError> {
+        Ok(Control {
             steer: 0.0,
             throttle: 0.0,
             brake: 1.0,
-        }
+        })
     }
 }
 

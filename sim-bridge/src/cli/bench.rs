@@ -3,7 +3,7 @@
 use std::time::Instant;
 
 use clap::Subcommand;
-use sim_bridge::agent::{Agent, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
 use sim_bridge::camera::Rig;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
@@ -13,7 +13,6 @@ use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::RouteSet;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::ActorView;
-use sim_bridge::world::ego::Control;
 use sim_bridge::world::state::{EgoState, LightState};
 use sim_bridge::world::{DT, World, WorldConfig};
 
@@ -185,11 +184,11 @@ impl Agent for Capture {
         "expert (capturing)".into()
     }
 
-    fn start_route(&mut self, ctx: &RouteContext<'_>) {
-        self.expert.start_route(ctx);
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
+        self.expert.start_route(ctx)
     }
 
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         if obs.frame % self.every == 0 && self.states.len() < self.wanted {
             self.states.push((
                 world.ego_state(),

@@ -3,11 +3,15 @@
 //! on request, a top-down picture of each run.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim_bridge::agent::Agent;
+use sim_bridge::camera::Rig;
+use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
+use sim_bridge::client::local::LocalServer;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::render::topdown::write_run_png;
@@ -17,9 +21,18 @@ use super::args::{PlannedRoute, RouteArgs, WorldArgs};
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// Who drives: `expert` (the privileged rule-based expert).
+    /// Who drives: `expert` (the privileged rule-based expert), `grpc://HOST:PORT` (an
+    /// agent server, e.g. `ssr-agent serve`), or `local` (starts `ssr-agent serve` on a free
+    /// loopback port for the run; SSR_AGENT_* variables configure it).
     #[arg(long, default_value = "expert")]
     agent: String,
+    /// Camera rig sent to a gRPC agent: a preset or a JSON file [default: the rig the server
+    /// expects].
+    #[arg(long)]
+    rig: Option<String>,
+    /// Deadline of each gRPC call, seconds.
+    #[arg(long, default_value_t = 30.0)]
+    call_timeout: f64,
     #[command(flatten)]
     route: RouteArgs,
     #[command(flatten)]
@@ -42,15 +55,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if args.repetitions == 0 {
         bail!("--repetitions must be at least 1");
     }
-    let mut agent: Box<dyn Agent> = match args.agent.as_str() {
-        "expert" => Box::new(Expert::new()),
-        other => bail!("--agent {other}: unknown agent (available: expert)"),
-    };
+    let (mut agent, _local_server) = build_agent(&args)?;
+    eprintln!("agent: {}", agent.name());
     let (map, planned) = args.route.load()?;
     if let Some(dir) = &args.pictures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let total = planned.len() * args.repetitions;
+    let mut crashes = 0;
     let mut records = Vec::with_capacity(total);
     for repetition in 0..args.repetitions {
         for PlannedRoute { spec, dense } in &planned {
@@ -71,6 +83,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 |rc| bar.set_position(rc.round() as u64),
             );
             bar.finish_and_clear();
+            if let Some(error) = &run.agent_error {
+                crashes += 1;
+                eprintln!(
+                    "route {} rep {repetition}: the agent crashed: {error}",
+                    spec.id
+                );
+            }
             let s = run.record.scores;
             eprintln!(
                 "route {:>4} rep {repetition}: DS {:6.2} RC {:6.2} IS {:.3}  {}  ({:.0} s sim in {:.1} s)",
@@ -103,7 +122,46 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let results = Results::new(records, total, Vec::new());
     println!("{}", summary_table(&results));
     println!("results written to {}", args.out.display());
+    if crashes > 0 {
+        bail!("the agent crashed on {crashes} of {total} runs (see above)");
+    }
     Ok(())
+}
+
+/// The agent `--agent` names, and the local server process behind it, if any.
+fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalServer>)> {
+    let target = match args.agent.as_str() {
+        "expert" => return Ok((Box::new(Expert::new()), None)),
+        "local" => None,
+        remote if remote.starts_with("grpc://") || remote.starts_with("http://") => {
+            Some(remote.to_string())
+        }
+        other => {
+            bail!("--agent {other}: unknown agent (expected expert, local or grpc://HOST:PORT)")
+        }
+    };
+    if !(args.call_timeout.is_finite() && args.call_timeout > 0.0) {
+        bail!("--call-timeout must be a positive number of seconds");
+    }
+    let options = GrpcOptions {
+        rig: args
+            .rig
+            .as_deref()
+            .map(Rig::from_name_or_file)
+            .transpose()?,
+        call_timeout: Duration::from_secs_f64(args.call_timeout),
+        client: "sim-bridge eval".into(),
+        ..GrpcOptions::default()
+    };
+    let (target, server) = match target {
+        Some(target) => (target, None),
+        None => {
+            let server = LocalServer::start()?;
+            (server.target(), Some(server))
+        }
+    };
+    let agent = GrpcAgent::connect(&target, options)?;
+    Ok((Box::new(agent), server))
 }
 
 fn progress_bar(quiet: bool, label: &str) -> ProgressBar {

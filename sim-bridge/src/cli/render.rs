@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use sim_bridge::agent::{Agent, Control, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
 use sim_bridge::camera::Rig;
 use sim_bridge::dataset::safe_name;
 use sim_bridge::eval::run_route;
@@ -174,9 +174,9 @@ impl Agent for Film<'_> {
         self.driver.name()
     }
 
-    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.route = Some(ctx.route.clone());
-        self.driver.start_route(ctx);
+        self.driver.start_route(ctx)
     }
 
     fn sensors(&self) -> Option<Rig> {
@@ -187,7 +187,7 @@ impl Agent for Film<'_> {
         frame % self.args.every == 0 && self.written < self.args.max_frames
     }
 
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         if !obs.frames.is_empty()
             && self.error.is_none()
             && let Err(e) = self.record(obs, world)

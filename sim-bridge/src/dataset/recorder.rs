@@ -14,7 +14,7 @@ use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::{FUTURE_COUNT, FUTURE_STEP, FrameRecord, NoiseConfig};
-use crate::agent::{Agent, Control, Observation, RouteContext};
+use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
 use crate::camera::Rig;
 use crate::expert::Expert;
 use crate::image::encode_png;
@@ -220,13 +220,13 @@ impl Agent for EpisodeRecorder {
         "expert (recording)".into()
     }
 
-    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         if !self.history.is_empty() && self.error.is_none() {
             self.error = Some(std::io::Error::other(
                 "an episode recorder records one route run; this one was started twice",
             ));
         }
-        self.expert.start_route(ctx);
+        self.expert.start_route(ctx)
     }
 
     fn sensors(&self) -> Option<Rig> {
@@ -237,8 +237,8 @@ impl Agent for EpisodeRecorder {
         frame % self.ticks_per_frame == 0
     }
 
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
-        let label = self.expert.run_step(obs, world);
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
+        let label = self.expert.run_step(obs, world)?;
         if self.history.len() as u64 != obs.frame && self.error.is_none() {
             self.error = Some(std::io::Error::other(format!(
                 "tick {} arrived after {} ticks: recording needs every tick from 0",
@@ -257,6 +257,6 @@ impl Agent for EpisodeRecorder {
         {
             self.error = Some(e);
         }
-        executed
+        Ok(executed)
     }
 }

@@ -9,13 +9,13 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use crate::agent::{Agent, Observation, RouteContext};
+use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::map::Map;
 use crate::render::{CameraRenderer, SceneState};
 use crate::route::DenseRoute;
 use crate::route::plan::{RouteFollower, global_plan, to_ego_frame};
 use crate::route::xml::RouteSpec;
-use crate::scoring::{Infraction, RouteRecord, RouteScorer, ScoringConfig};
+use crate::scoring::{Infraction, RouteEnd, RouteRecord, RouteScorer, ScoringConfig};
 use crate::world::{ActorView, World, WorldConfig};
 
 /// Ticks between two samples of the ego trace kept for pictures.
@@ -36,6 +36,8 @@ pub struct RouteRun {
     pub ticks: u64,
     /// Wall time, seconds.
     pub wall_seconds: f64,
+    /// Why the agent stopped the route, when it crashed.
+    pub agent_error: Option<AgentError>,
 }
 
 /// One route run: `spec` planned as `dense`, `repetition` and world seed recorded in the
@@ -55,28 +57,32 @@ pub fn run_route(
     let started = Instant::now();
     let plan = global_plan(dense);
     let mut follower = RouteFollower::new(plan.clone());
-    agent.start_route(&RouteContext {
-        map,
-        route: dense,
-        plan: &plan,
-    });
+    let mut agent_error = agent
+        .start_route(&RouteContext {
+            map,
+            route: dense,
+            plan: &plan,
+        })
+        .err();
     let mut world = World::new(map, dense, world_config);
-    let mut cameras = agent.sensors().and_then(|rig| match rig.validate() {
-        Ok(()) => Some((rig, CameraRenderer::new(map, world_config.appearance()))),
-        Err(e) => {
-            tracing::error!(
-                "agent {}: camera rig unusable ({e}); no frames",
-                agent.name()
-            );
-            None
+    let mut cameras = None;
+    if agent_error.is_none()
+        && let Some(rig) = agent.sensors()
+    {
+        match rig.validate() {
+            Ok(()) => cameras = Some((rig, CameraRenderer::new(map, world_config.appearance()))),
+            Err(e) => agent_error = Some(AgentError(format!("its camera rig is unusable: {e}"))),
         }
-    });
+    }
     let mut scorer = RouteScorer::new(map, dense, scoring);
     let mut contacts = Vec::new();
     let mut progress = 0;
     let mut trace = Vec::new();
     let mut frame: u64 = 0;
     let end = loop {
+        if agent_error.is_some() {
+            break RouteEnd::AgentCrashed;
+        }
         let ego = world.ego_state();
         progress = dense.advance_index(progress, ego.position.truncate(), 5);
         world.trigger_scenarios(progress);
@@ -105,7 +111,13 @@ pub fn run_route(
             target_point: target.truncate(),
             frames,
         };
-        let control = agent.run_step(&obs, &world);
+        let control = match agent.run_step(&obs, &world) {
+            Ok(control) => control,
+            Err(error) => {
+                agent_error = Some(error);
+                continue;
+            }
+        };
         if let Some(end) = scorer.tick(world.time, &ego, &contacts, world.light_states()) {
             break end;
         }
@@ -118,6 +130,7 @@ pub fn run_route(
         contacts = world.step(control);
         frame += 1;
     };
+    agent.end_route();
     let wall_seconds = started.elapsed().as_secs_f64();
     let mut infractions = scorer.infractions().to_vec();
     infractions.sort_by(|a, b| a.time.total_cmp(&b.time));
@@ -132,5 +145,6 @@ pub fn run_route(
         final_actors,
         ticks: frame,
         wall_seconds,
+        agent_error,
     }
 }

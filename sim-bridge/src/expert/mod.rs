@@ -16,7 +16,7 @@ pub use hazards::BrakeReason;
 
 use glam::DVec2;
 
-use crate::agent::{Agent, Control, Observation, RouteContext};
+use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
 use crate::map::angle_diff;
 use crate::route::DenseRoute;
 use crate::world::World;
@@ -66,15 +66,23 @@ impl Agent for Expert {
         "expert".into()
     }
 
-    fn start_route(&mut self, ctx: &RouteContext<'_>) {
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.route = Some(ctx.route.clone());
         self.index = 0;
         self.hazards = hazards::HazardMemory::default();
         self.params = EgoParams::default();
         self.reason = None;
+        Ok(())
     }
 
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Control {
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
+        Ok(self.drive(obs, world))
+    }
+}
+
+impl Expert {
+    /// This tick's control (the expert never fails).
+    fn drive(&mut self, obs: &Observation, world: &World<'_>) -> Control {
         let Some(route) = self.route.as_ref() else {
             return Control {
                 steer: 0.0,

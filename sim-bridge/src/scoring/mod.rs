@@ -178,6 +178,8 @@ pub enum RouteEnd {
     Blocked,
     /// The route's TimeOut node expired.
     TimedOut,
+    /// The agent failed (LB1.0's AgentError: "Agent crashed").
+    AgentCrashed,
 }
 
 impl RouteEnd {
@@ -188,6 +190,7 @@ impl RouteEnd {
             RouteEnd::Deviated => "Failed - Agent deviated from the route",
             RouteEnd::Blocked => "Failed - Agent got blocked",
             RouteEnd::TimedOut => "Failed - Agent timed out",
+            RouteEnd::AgentCrashed => "Failed - Agent crashed",
         }
     }
 }

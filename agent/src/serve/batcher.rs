@@ -1,0 +1,156 @@
+//! Dynamic batching: steps of concurrent episodes share one forward pass.
+//!
+//! Requests enter a bounded queue ([`Batcher::submit`] refuses when it is full, so the server
+//! sheds load instead of growing latency without bound). One model thread takes the oldest step,
+//! waits at most `max_queue_delay` for up to `max_batch - 1` more, drops steps whose caller has
+//! gone (deadline passed or cancelled; their episode state goes back untouched), runs
+//! [`SsrPolicy::step_batch`] and answers each caller. `max_batch = 1` serves steps one by one.
+
+use std::panic::AssertUnwindSafe;
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::time::{Duration, Instant};
+
+use tokio::sync::oneshot;
+
+use super::episodes::StepLease;
+use super::metrics::Metrics;
+use crate::policy::{SsrPolicy, StepInput, StepOutput};
+
+/// Batch shape limits.
+#[derive(Debug, Clone, Copy)]
+pub struct BatchSettings {
+    pub max_batch: usize,
+    pub max_queue_delay: Duration,
+    pub max_queue: usize,
+}
+
+/// One step waiting for the network.
+pub struct StepJob {
+    pub lease: StepLease,
+    pub input: StepInput,
+    pub enqueued: Instant,
+    pub reply: oneshot::Sender<Result<BatchedStep, String>>,
+}
+
+/// A step's result and how its batch went.
+#[derive(Debug)]
+pub struct BatchedStep {
+    pub output: StepOutput,
+    /// Enqueued to batch start.
+    pub queue: Duration,
+    /// The batch's forward pass (image resize and normalisation included), control excluded.
+    pub model: Duration,
+    pub batch_size: usize,
+}
+
+/// Why a step could not be queued.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SubmitError {
+    #[error("the step queue is full ({0} steps waiting); retry later or add replicas")]
+    QueueFull(usize),
+    #[error("the model thread has stopped")]
+    Stopped,
+}
+
+/// The queue in front of the model thread.
+pub struct Batcher {
+    queue: SyncSender<StepJob>,
+    capacity: usize,
+}
+
+impl Batcher {
+    /// Starts the model thread.
+    pub fn start(policy: Arc<SsrPolicy>, settings: BatchSettings, metrics: Arc<Metrics>) -> Self {
+        let (queue, jobs) = std::sync::mpsc::sync_channel(settings.max_queue);
+        std::thread::Builder::new()
+            .name("ssr-model".into())
+            .spawn(move || model_loop(&policy, settings, &metrics, &jobs))
+            .expect("spawning the model thread");
+        Self {
+            queue,
+            capacity: settings.max_queue,
+        }
+    }
+
+    /// Queues a step; its answer arrives on the job's reply channel.
+    pub fn submit(&self, job: StepJob) -> Result<(), SubmitError> {
+        self.queue.try_send(job).map_err(|e| match e {
+            TrySendError::Full(_) => SubmitError::QueueFull(self.capacity),
+            TrySendError::Disconnected(_) => SubmitError::Stopped,
+        })
+    }
+}
+
+fn model_loop(
+    policy: &SsrPolicy,
+    settings: BatchSettings,
+    metrics: &Metrics,
+    jobs: &Receiver<StepJob>,
+) {
+    while let Ok(first) = jobs.recv() {
+        let window_end = Instant::now() + settings.max_queue_delay;
+        let mut batch = vec![first];
+        while batch.len() < settings.max_batch {
+            let wait = window_end.saturating_duration_since(Instant::now());
+            match jobs.recv_timeout(wait) {
+                Ok(job) => batch.push(job),
+                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        // A caller that gave up gets nothing; dropping its job returns its state unchanged.
+        batch.retain(|job| !job.reply.is_closed());
+        if !batch.is_empty() {
+            run_batch(policy, metrics, batch);
+        }
+    }
+}
+
+fn run_batch(policy: &SsrPolicy, metrics: &Metrics, batch: Vec<StepJob>) {
+    let started = Instant::now();
+    let size = batch.len();
+    metrics.observe_batch(size);
+    let (mut waiting, inputs): (Vec<Waiting>, Vec<StepInput>) = batch
+        .into_iter()
+        .map(|job| ((job.lease, job.enqueued, job.reply), job.input))
+        .unzip();
+    let result = {
+        let mut states: Vec<_> = waiting
+            .iter_mut()
+            .map(|(lease, ..)| lease.state())
+            .collect();
+        std::panic::catch_unwind(AssertUnwindSafe(|| policy.step_batch(&mut states, &inputs)))
+    };
+    let elapsed = started.elapsed();
+    let outputs = match result {
+        Ok(Ok(outputs)) => outputs,
+        Ok(Err(error)) => return fail(waiting, &error.to_string()),
+        Err(_) => return fail(waiting, "the forward pass panicked; see the server log"),
+    };
+    let control: Duration = outputs.iter().map(|o| o.control_time).sum();
+    let model = elapsed.saturating_sub(control);
+    for ((lease, enqueued, reply), output) in waiting.into_iter().zip(outputs) {
+        lease.finish();
+        let _ = reply.send(Ok(BatchedStep {
+            output,
+            queue: started.saturating_duration_since(enqueued),
+            model,
+            batch_size: size,
+        }));
+    }
+}
+
+/// A batched step's lease, enqueue time and reply channel.
+type Waiting = (
+    StepLease,
+    Instant,
+    oneshot::Sender<Result<BatchedStep, String>>,
+);
+
+/// Answers every step of a failed batch; dropping the leases returns the states unchanged.
+fn fail(waiting: Vec<Waiting>, message: &str) {
+    tracing::error!("batch of {} failed: {message}", waiting.len());
+    for (_, _, reply) in waiting {
+        let _ = reply.send(Err(message.to_string()));
+    }
+}

@@ -1,0 +1,199 @@
+//! Server settings: every knob of `ssr-agent serve`, with defaults, read from a TOML file and
+//! then overridden by the environment and the command line (in that order of precedence,
+//! lowest first). [`ServeConfig::validate`] names the first bad field.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+/// Largest config file read, bytes.
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// How logs are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    /// One readable line per event.
+    #[default]
+    Human,
+    /// One JSON object per event (for log collectors).
+    Json,
+}
+
+/// Settings of one server process.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServeConfig {
+    /// gRPC address; port 0 picks a free port (printed on stdout as `listening on ADDR`).
+    pub listen: SocketAddr,
+    /// Prometheus `/metrics` address; `None` serves no metrics.
+    pub metrics_listen: Option<SocketAddr>,
+    /// A checkpoint file; `None` loads the embedded one.
+    pub checkpoint: Option<PathBuf>,
+    /// Serve a network with random weights of this config preset instead of a checkpoint
+    /// (for tests and benchmarks; it does not drive).
+    pub untrained_config: Option<String>,
+    /// Most episodes open at once; more get RESOURCE_EXHAUSTED.
+    pub max_episodes: usize,
+    /// An episode with no request for this long is closed, seconds.
+    pub idle_timeout_s: f64,
+    /// Largest forward pass formed from concurrent steps; 1 turns batching off.
+    pub max_batch: usize,
+    /// How long the first step of a batch waits for others, milliseconds.
+    pub max_queue_delay_ms: f64,
+    /// Steps waiting for the network at most; more get RESOURCE_EXHAUSTED.
+    pub max_queue: usize,
+    /// Longest a request may take, seconds (a client deadline that is shorter wins).
+    pub request_timeout_s: f64,
+    /// Largest request accepted, MiB.
+    pub max_message_mib: usize,
+    /// After a shutdown signal: seconds to report NOT_SERVING before refusing new
+    /// connections, so load balancers move away.
+    pub drain_grace_s: f64,
+    /// After that, longest wait for in-flight requests, seconds.
+    pub drain_timeout_s: f64,
+    /// Log format.
+    pub log_format: LogFormat,
+}
+
+impl Default for ServeConfig {
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 50051)),
+            metrics_listen: Some(SocketAddr::from(([127, 0, 0, 1], 9090))),
+            checkpoint: None,
+            untrained_config: None,
+            max_episodes: 64,
+            idle_timeout_s: 60.0,
+            max_batch: 8,
+            max_queue_delay_ms: 2.0,
+            max_queue: 256,
+            request_timeout_s: 30.0,
+            // Six 1600x900 RGB cameras are 25.9 MB; a 900x256 frame is 0.7 MB.
+            max_message_mib: 64,
+            drain_grace_s: 0.0,
+            drain_timeout_s: 30.0,
+            log_format: LogFormat::Human,
+        }
+    }
+}
+
+/// Why a config cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeConfigError {
+    #[error("reading {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path} is {bytes} bytes; a server config is at most {MAX_CONFIG_BYTES}")]
+    TooLarge { path: PathBuf, bytes: u64 },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{field} = {value}: {rule}")]
+    Invalid {
+        field: &'static str,
+        value: String,
+        rule: &'static str,
+    },
+}
+
+impl ServeConfig {
+    /// Reads a TOML file; fields it leaves out keep their defaults.
+    pub fn from_file(path: &Path) -> Result<Self, ServeConfigError> {
+        let io = |source| ServeConfigError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let bytes = std::fs::metadata(path).map_err(io)?.len();
+        if bytes > MAX_CONFIG_BYTES {
+            return Err(ServeConfigError::TooLarge {
+                path: path.to_path_buf(),
+                bytes,
+            });
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
+        toml::from_str(&text).map_err(|e| ServeConfigError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Checks every field against its rule.
+    pub fn validate(&self) -> Result<(), ServeConfigError> {
+        fn invalid(
+            field: &'static str,
+            value: impl ToString,
+            rule: &'static str,
+        ) -> Result<(), ServeConfigError> {
+            Err(ServeConfigError::Invalid {
+                field,
+                value: value.to_string(),
+                rule,
+            })
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if !(1..=100_000).contains(&self.max_episodes) {
+            return invalid("max_episodes", self.max_episodes, "must be in 1..=100000");
+        }
+        if !positive(self.idle_timeout_s) {
+            return invalid("idle_timeout_s", self.idle_timeout_s, "must be > 0");
+        }
+        if !(1..=256).contains(&self.max_batch) {
+            return invalid("max_batch", self.max_batch, "must be in 1..=256");
+        }
+        if !non_negative(self.max_queue_delay_ms) || self.max_queue_delay_ms > 1000.0 {
+            return invalid(
+                "max_queue_delay_ms",
+                self.max_queue_delay_ms,
+                "must be in [0, 1000]",
+            );
+        }
+        if !(1..=100_000).contains(&self.max_queue) {
+            return invalid("max_queue", self.max_queue, "must be in 1..=100000");
+        }
+        if !positive(self.request_timeout_s) {
+            return invalid("request_timeout_s", self.request_timeout_s, "must be > 0");
+        }
+        if !(1..=1024).contains(&self.max_message_mib) {
+            return invalid(
+                "max_message_mib",
+                self.max_message_mib,
+                "must be in 1..=1024",
+            );
+        }
+        if !non_negative(self.drain_grace_s) {
+            return invalid("drain_grace_s", self.drain_grace_s, "must be >= 0");
+        }
+        if !non_negative(self.drain_timeout_s) {
+            return invalid("drain_timeout_s", self.drain_timeout_s, "must be >= 0");
+        }
+        if self.checkpoint.is_some() && self.untrained_config.is_some() {
+            return invalid(
+                "untrained_config",
+                self.untrained_config.as_deref().unwrap_or_default(),
+                "cannot be combined with checkpoint",
+            );
+        }
+        Ok(())
+    }
+
+    pub fn idle_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.idle_timeout_s)
+    }
+
+    pub fn max_queue_delay(&self) -> Duration {
+        Duration::from_secs_f64(self.max_queue_delay_ms / 1000.0)
+    }
+
+    pub fn request_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.request_timeout_s)
+    }
+
+    pub fn max_message_bytes(&self) -> usize {
+        self.max_message_mib << 20
+    }
+}

@@ -1,0 +1,319 @@
+//! The agent service's logic, free of gRPC plumbing: open, step and end episodes; the tonic
+//! layer in `service.rs` only converts [`ServeError`]s into status codes and counts requests.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use sim_bridge::camera::{CameraSpec, Rig};
+use sim_bridge::client::wire;
+use ssrdrive_proto::v1;
+use tokio::sync::oneshot;
+
+use super::batcher::{BatchSettings, BatchedStep, Batcher, StepJob, SubmitError};
+use super::config::ServeConfig;
+use super::decode;
+use super::episodes::{EpisodeError, EpisodeTable};
+use super::metrics::{Metrics, StepPhases};
+use crate::control::Control;
+use crate::model::config::SsrConfig;
+use crate::policy::{SsrPolicy, StepOutput};
+
+/// What the server runs, for `GetAgentInfo`.
+#[derive(Debug, Clone)]
+pub struct ModelInfo {
+    pub config: SsrConfig,
+    /// Checkpoint file name, "embedded", or "untrained (random weights)".
+    pub checkpoint: String,
+    /// The rig the network was trained with.
+    pub expected_rig: Rig,
+}
+
+impl ModelInfo {
+    /// TCP's front camera at the network's input size: the rig the bundled data is rendered
+    /// with (`tcp-small` for cpu-default, `tcp` for paper).
+    pub fn default_rig(config: &SsrConfig) -> Rig {
+        Rig {
+            cameras: vec![CameraSpec {
+                width: config.image_width as u32,
+                height: config.image_height as u32,
+                ..CameraSpec::tcp_front()
+            }],
+        }
+    }
+}
+
+/// Why a request was refused; each maps to one gRPC status code.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// NOT_FOUND, RESOURCE_EXHAUSTED or FAILED_PRECONDITION.
+    #[error(transparent)]
+    Episode(#[from] EpisodeError),
+    /// INVALID_ARGUMENT.
+    #[error("{0}")]
+    BadRequest(String),
+    /// RESOURCE_EXHAUSTED (queue full) or UNAVAILABLE (shutting down).
+    #[error(transparent)]
+    Submit(#[from] SubmitError),
+    /// INTERNAL.
+    #[error("{0}")]
+    Internal(String),
+}
+
+impl From<ServeError> for tonic::Status {
+    fn from(error: ServeError) -> Self {
+        use tonic::Code;
+        let code = match &error {
+            ServeError::Episode(EpisodeError::NotFound(_)) => Code::NotFound,
+            ServeError::Episode(EpisodeError::TooMany { .. }) => Code::ResourceExhausted,
+            ServeError::Episode(EpisodeError::OutOfOrder { .. } | EpisodeError::Busy(_)) => {
+                Code::FailedPrecondition
+            }
+            ServeError::BadRequest(_) => Code::InvalidArgument,
+            ServeError::Submit(SubmitError::QueueFull(_)) => Code::ResourceExhausted,
+            ServeError::Submit(SubmitError::Stopped) => Code::Unavailable,
+            ServeError::Internal(_) => Code::Internal,
+        };
+        tonic::Status::new(code, error.to_string())
+    }
+}
+
+fn bad(message: impl ToString) -> ServeError {
+    ServeError::BadRequest(message.to_string())
+}
+
+/// Episodes, the batcher and the model behind them.
+pub struct Engine {
+    policy: Arc<SsrPolicy>,
+    info: ModelInfo,
+    episodes: Arc<EpisodeTable>,
+    batcher: Batcher,
+    metrics: Arc<Metrics>,
+    config: ServeConfig,
+}
+
+impl Engine {
+    /// Starts the model thread.
+    pub fn new(policy: SsrPolicy, info: ModelInfo, config: &ServeConfig) -> Arc<Self> {
+        let policy = Arc::new(policy);
+        let metrics = Metrics::new();
+        let batcher = Batcher::start(
+            Arc::clone(&policy),
+            BatchSettings {
+                max_batch: config.max_batch,
+                max_queue_delay: config.max_queue_delay(),
+                max_queue: config.max_queue,
+            },
+            Arc::clone(&metrics),
+        );
+        Arc::new(Self {
+            policy,
+            info,
+            episodes: EpisodeTable::new(config.max_episodes, config.idle_timeout()),
+            batcher,
+            metrics,
+            config: config.clone(),
+        })
+    }
+
+    pub fn metrics(&self) -> &Arc<Metrics> {
+        &self.metrics
+    }
+
+    pub fn agent_info(&self) -> v1::AgentInfo {
+        v1::AgentInfo {
+            model: "ssr".into(),
+            config_name: self.info.config.name.clone(),
+            config_json: serde_json::to_string(&self.info.config).expect("configs serialise"),
+            expected_rig: Some(wire::rig_to_proto(&self.info.expected_rig)),
+            version: env!("CARGO_PKG_VERSION").into(),
+            checkpoint: self.info.checkpoint.clone(),
+            max_batch: self.config.max_batch as u32,
+            max_episodes: self.config.max_episodes as u32,
+            idle_timeout_s: self.config.idle_timeout_s,
+        }
+    }
+
+    pub fn start_episode(
+        &self,
+        request: &v1::StartEpisodeRequest,
+    ) -> Result<v1::StartEpisodeResponse, ServeError> {
+        let rig = request.rig.as_ref().ok_or_else(|| bad("rig is missing"))?;
+        let rig = wire::rig_from_proto(rig).map_err(|e| bad(format!("rig: {e}")))?;
+        let mut control = self.policy.control().clone();
+        if let Some(alpha) = request.overrides.as_ref().and_then(|o| o.fusion_alpha) {
+            if !(0.0..=1.0).contains(&alpha) {
+                return Err(bad(format!(
+                    "overrides.fusion_alpha = {alpha} is not in [0, 1]"
+                )));
+            }
+            control.alpha = alpha as f32;
+        }
+        let id = self
+            .episodes
+            .open(rig, self.policy.new_episode_with(control))?;
+        tracing::info!(
+            episode = %id,
+            client = %request.client,
+            seed = ?request.seed,
+            "episode started"
+        );
+        self.metrics.episode_started(self.episodes.len());
+        Ok(v1::StartEpisodeResponse {
+            episode_id: id,
+            idle_timeout_s: self.config.idle_timeout_s,
+        })
+    }
+
+    pub fn end_episode(&self, episode_id: &str) -> Result<v1::EndEpisodeResponse, ServeError> {
+        let steps = self.episodes.close(episode_id)?;
+        tracing::info!(episode = %episode_id, steps, "episode ended");
+        self.metrics.episodes_closed(0, self.episodes.len());
+        Ok(v1::EndEpisodeResponse { steps })
+    }
+
+    /// Closes idle episodes; returns how many.
+    pub fn expire_idle(&self) -> usize {
+        let expired = self.episodes.expire_idle(Instant::now());
+        for id in &expired {
+            tracing::info!(episode = %id, "episode expired after being idle");
+        }
+        if !expired.is_empty() {
+            self.metrics
+                .episodes_closed(expired.len(), self.episodes.len());
+        }
+        expired.len()
+    }
+
+    /// Runs two steps of a throwaway episode with grey frames of the expected rig through the
+    /// whole path (decode, queue, network, control), so no client pays for first-use setup.
+    pub async fn warm_up(&self) -> Result<Duration, ServeError> {
+        let started = Instant::now();
+        let rig = wire::rig_to_proto(&self.info.expected_rig);
+        let episode = self.start_episode(&v1::StartEpisodeRequest {
+            rig: Some(rig.clone()),
+            client: "warm-up".into(),
+            ..Default::default()
+        })?;
+        for frame_index in 0..2 {
+            let images = rig
+                .cameras
+                .iter()
+                .map(|c| v1::Image {
+                    camera_id: c.id.clone(),
+                    width: c.width,
+                    height: c.height,
+                    encoding: v1::ImageEncoding::Rgb8 as i32,
+                    data: vec![128; c.width as usize * c.height as usize * 3],
+                })
+                .collect();
+            self.step(v1::StepRequest {
+                episode_id: episode.episode_id.clone(),
+                frame_index,
+                images,
+                pose: Some(v1::Pose::default()),
+                command: 4,
+                target_point: Some(v1::EgoPoint { x: 10.0, y: 0.0 }),
+                ..Default::default()
+            })
+            .await?;
+        }
+        self.end_episode(&episode.episode_id)?;
+        Ok(started.elapsed())
+    }
+
+    /// One tick of one episode, batched with whatever else is in flight.
+    pub async fn step(&self, request: v1::StepRequest) -> Result<v1::StepResponse, ServeError> {
+        let received = Instant::now();
+        let (episode_id, frame_index) = (request.episode_id.clone(), request.frame_index);
+        let lease = self
+            .episodes
+            .lease(&request.episode_id, request.frame_index)?;
+        let rig = lease.rig().clone();
+        let (input, decode_time) = tokio::task::spawn_blocking(move || {
+            let started = Instant::now();
+            (decode::step_input(&request, &rig), started.elapsed())
+        })
+        .await
+        .map_err(|e| ServeError::Internal(format!("image decoding failed: {e}")))?;
+        let input = input.map_err(|e| bad(e))?;
+        self.policy.check(&input).map_err(bad)?;
+
+        let (reply, answer) = oneshot::channel();
+        self.batcher.submit(StepJob {
+            lease,
+            input,
+            enqueued: Instant::now(),
+            reply,
+        })?;
+        let BatchedStep {
+            output,
+            queue,
+            model,
+            batch_size,
+        } = answer
+            .await
+            .map_err(|_| ServeError::Internal("the model thread dropped the step".into()))?
+            .map_err(ServeError::Internal)?;
+        let phases = StepPhases {
+            queue,
+            decode: decode_time,
+            model,
+            control: output.control_time,
+            total: received.elapsed(),
+        };
+        self.metrics.observe_step(&phases);
+        Ok(v1::StepResponse {
+            episode_id,
+            frame_index,
+            control: Some(control_to_proto(output.decision.control)),
+            trajectory: output
+                .waypoints
+                .iter()
+                .map(|&[x, y]| v1::EgoPoint {
+                    x: x.into(),
+                    y: y.into(),
+                })
+                .collect(),
+            debug: debug_to_proto(&output),
+            timings: Some(v1::Timings {
+                queue_ms: millis(phases.queue),
+                decode_ms: millis(phases.decode),
+                model_ms: millis(phases.model),
+                control_ms: millis(phases.control),
+                total_ms: millis(phases.total),
+                batch_size: batch_size as u32,
+            }),
+        })
+    }
+}
+
+fn millis(time: Duration) -> f64 {
+    time.as_secs_f64() * 1000.0
+}
+
+fn control_to_proto(control: Control) -> v1::Control {
+    v1::Control {
+        steer: control.steer.into(),
+        throttle: control.throttle.into(),
+        brake: control.brake.into(),
+    }
+}
+
+fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
+    let debug = output.debug.as_ref()?;
+    Some(v1::Debug {
+        token_attention: debug
+            .token_attention
+            .iter()
+            .map(|weights| v1::TokenMap {
+                rows: debug.bev_rows as u32,
+                cols: debug.bev_cols as u32,
+                weights: weights.clone(),
+            })
+            .collect(),
+        trajectory_control: Some(control_to_proto(output.decision.trajectory)),
+        branch_control: Some(control_to_proto(output.decision.branch)),
+        beta_params: vec![debug.alpha[0], debug.beta[0], debug.alpha[1], debug.beta[1]],
+        predicted_speed_mps: debug.predicted_speed.into(),
+    })
+}

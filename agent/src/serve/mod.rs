@@ -1,0 +1,223 @@
+//! The gRPC agent server (`ssr-agent serve`): the `ssrdrive.v1.AgentService` over per-episode
+//! sessions with dynamic batching, plus what operators expect around it.
+//!
+//! - [`config`]: every setting, from a TOML file, the environment and the command line.
+//! - [`episodes`]: open episodes and their temporal state (leased by one step at a time).
+//! - [`decode`]: wire images and numbers to the inference input, checked.
+//! - [`batcher`]: the bounded step queue and the model thread that batches it.
+//! - [`engine`]: the service logic without gRPC; [`service`]: the tonic layer.
+//! - [`metrics`]: Prometheus metrics on their own port.
+//!
+//! Around the service: `grpc.health.v1.Health` (NOT_SERVING until the model is loaded and
+//! warmed up, and again while draining), server reflection (v1 and v1alpha, for grpcurl-style
+//! tools), a request timeout (a shorter client deadline wins), message size limits, idle-episode
+//! expiry and graceful shutdown (NOT_SERVING, optional grace period, stop accepting, drain
+//! in-flight requests within a timeout, exit).
+
+pub mod batcher;
+pub mod config;
+pub mod decode;
+pub mod engine;
+pub mod episodes;
+pub mod metrics;
+pub mod service;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use burn::tensor::Device;
+use ssrdrive_proto::v1;
+use ssrdrive_proto::v1::agent_service_server::AgentServiceServer;
+use tokio::net::TcpListener;
+use tokio_stream::wrappers::TcpListenerStream;
+use tonic_health::ServingStatus;
+
+pub use config::{LogFormat, ServeConfig};
+pub use engine::{Engine, ModelInfo};
+
+use crate::checkpoint;
+use crate::control::ControlConfig;
+use crate::model::SsrModel;
+use crate::model::config::SsrConfig;
+use crate::policy::SsrPolicy;
+use service::AgentServiceImpl;
+
+/// Checkpoint metadata key holding the rig the network was trained with (JSON).
+pub const RIG_METADATA_KEY: &str = "rig";
+
+/// Loads the network the config names: a checkpoint file or random weights of a config.
+pub fn load_policy(
+    config: &ServeConfig,
+    device: &Device,
+) -> anyhow::Result<(SsrPolicy, ModelInfo)> {
+    let (model, model_config, checkpoint, rig) =
+        match (&config.checkpoint, &config.untrained_config) {
+            (Some(path), _) => {
+                let (model, info) = checkpoint::load(path, device)?;
+                let rig = match info.metadata.get(RIG_METADATA_KEY) {
+                    Some(json) => Some(
+                        sim_bridge::camera::Rig::from_json(json)
+                            .with_context(|| format!("checkpoint {}: its rig", path.display()))?,
+                    ),
+                    None => None,
+                };
+                (model, info.config, path.display().to_string(), rig)
+            }
+            (None, Some(spec)) => {
+                let model_config = SsrConfig::from_name_or_file(spec)?;
+                tracing::warn!(
+                    "serving config '{}' with RANDOM weights: a component under test, not a driver",
+                    model_config.name
+                );
+                let model = SsrModel::new(&model_config, device);
+                (
+                    model,
+                    model_config,
+                    "untrained (random weights)".to_string(),
+                    None,
+                )
+            }
+            (None, None) => anyhow::bail!(
+                "no model: pass --checkpoint FILE (a file written by `ssr-agent train`), or \
+             --untrained-config PRESET for random weights (tests and benchmarks); this build \
+             bundles no trained checkpoint yet"
+            ),
+        };
+    let expected_rig = rig.unwrap_or_else(|| ModelInfo::default_rig(&model_config));
+    let info = ModelInfo {
+        config: model_config.clone(),
+        checkpoint,
+        expected_rig,
+    };
+    let policy = SsrPolicy::new(
+        model,
+        model_config,
+        ControlConfig::default(),
+        device.clone(),
+    );
+    Ok((policy, info))
+}
+
+/// Serves until `shutdown` resolves, then drains and returns. Prints `listening on ADDR` (and
+/// `metrics on http://ADDR/metrics`) on stdout once the ports are bound, so a parent process
+/// that asked for port 0 can read the real one.
+pub async fn run(
+    config: ServeConfig,
+    policy: SsrPolicy,
+    info: ModelInfo,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    config.validate()?;
+    let listener = TcpListener::bind(config.listen)
+        .await
+        .with_context(|| format!("binding the gRPC port {}", config.listen))?;
+    let address = listener.local_addr()?;
+    let metrics_listener = match config.metrics_listen {
+        Some(address) => Some(
+            TcpListener::bind(address)
+                .await
+                .with_context(|| format!("binding the metrics port {address}"))?,
+        ),
+        None => None,
+    };
+    println!("listening on {address}");
+    if let Some(listener) = &metrics_listener {
+        println!("metrics on http://{}/metrics", listener.local_addr()?);
+    }
+
+    let engine = Engine::new(policy, info, &config);
+    let (reporter, health) = tonic_health::server::health_reporter();
+    reporter
+        .set_not_serving::<AgentServiceServer<AgentServiceImpl>>()
+        .await;
+    reporter
+        .set_service_status("", ServingStatus::NotServing)
+        .await;
+    let reflection = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(v1::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    let reflection_v1 = reflection().build_v1()?;
+    let reflection_v1alpha = reflection().build_v1alpha()?;
+    let agent = AgentServiceServer::new(AgentServiceImpl::new(Arc::clone(&engine)))
+        .max_decoding_message_size(config.max_message_bytes());
+
+    let (stop_server, server_stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(
+        tonic::transport::Server::builder()
+            .timeout(config.request_timeout())
+            .add_service(health)
+            .add_service(reflection_v1)
+            .add_service(reflection_v1alpha)
+            .add_service(agent)
+            .serve_with_incoming_shutdown(TcpListenerStream::new(listener), async {
+                let _ = server_stopped.await;
+            }),
+    );
+    let (stop_metrics, metrics_stopped) = tokio::sync::oneshot::channel::<()>();
+    if let Some(listener) = metrics_listener {
+        let metrics = Arc::clone(engine.metrics());
+        tokio::spawn(async move {
+            let stopped = async {
+                let _ = metrics_stopped.await;
+            };
+            if let Err(error) = metrics::serve_metrics(listener, metrics, stopped).await {
+                tracing::error!("metrics endpoint failed: {error}");
+            }
+        });
+    }
+    let sweeper = {
+        let engine = Arc::clone(&engine);
+        let period = config
+            .idle_timeout()
+            .div_f64(4.0)
+            .clamp(Duration::from_millis(100), Duration::from_secs(5));
+        tokio::spawn(async move {
+            let mut ticker = tokio::time::interval(period);
+            loop {
+                ticker.tick().await;
+                engine.expire_idle();
+            }
+        })
+    };
+
+    let warm_up = engine.warm_up().await.context("warm-up step failed")?;
+    reporter
+        .set_serving::<AgentServiceServer<AgentServiceImpl>>()
+        .await;
+    reporter
+        .set_service_status("", ServingStatus::Serving)
+        .await;
+    tracing::info!(
+        %address,
+        warm_up_ms = warm_up.as_secs_f64() * 1000.0,
+        "serving"
+    );
+
+    shutdown.await;
+    tracing::info!("shutting down: reporting NOT_SERVING");
+    reporter
+        .set_not_serving::<AgentServiceServer<AgentServiceImpl>>()
+        .await;
+    reporter
+        .set_service_status("", ServingStatus::NotServing)
+        .await;
+    tokio::time::sleep(Duration::from_secs_f64(config.drain_grace_s)).await;
+    tracing::info!("refusing new connections; draining in-flight requests");
+    let _ = stop_server.send(());
+    let drained =
+        tokio::time::timeout(Duration::from_secs_f64(config.drain_timeout_s), server).await;
+    sweeper.abort();
+    let _ = stop_metrics.send(());
+    match drained {
+        Ok(joined) => joined?.context("gRPC server failed")?,
+        Err(_) => tracing::warn!(
+            "requests still in flight after {} s; exiting anyway",
+            config.drain_timeout_s
+        ),
+    }
+    tracing::info!("stopped");
+    Ok(())
+}

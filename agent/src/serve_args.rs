@@ -1,0 +1,119 @@
+//! Command-line and environment settings of `ssr-agent serve`, layered over the config file:
+//! defaults < `--config` file < environment (`SSR_AGENT_*`) < flags.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use clap::Args;
+use ssr_agent::serve::{LogFormat, ServeConfig};
+
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// A TOML file with any of the settings below (snake_case keys, e.g. `max_batch = 8`).
+    #[arg(long, env = "SSR_AGENT_CONFIG")]
+    config: Option<PathBuf>,
+    /// gRPC address [default: 127.0.0.1:50051]; port 0 picks a free one (printed on stdout).
+    #[arg(long, env = "SSR_AGENT_LISTEN")]
+    listen: Option<SocketAddr>,
+    /// Prometheus /metrics address [default: 127.0.0.1:9090], or `off`.
+    #[arg(long, env = "SSR_AGENT_METRICS_LISTEN", value_parser = parse_metrics_listen)]
+    metrics_listen: Option<MetricsListen>,
+    /// Checkpoint written by `ssr-agent train`.
+    #[arg(long, env = "SSR_AGENT_CHECKPOINT")]
+    checkpoint: Option<PathBuf>,
+    /// Serve RANDOM weights of this config preset or file instead of a checkpoint (tests and
+    /// benchmarks: such a network does not drive).
+    #[arg(
+        long,
+        env = "SSR_AGENT_UNTRAINED_CONFIG",
+        conflicts_with = "checkpoint"
+    )]
+    untrained_config: Option<String>,
+    /// Most episodes open at once [default: 64].
+    #[arg(long, env = "SSR_AGENT_MAX_EPISODES")]
+    max_episodes: Option<usize>,
+    /// Seconds without a request before an episode is closed [default: 60].
+    #[arg(long, env = "SSR_AGENT_IDLE_TIMEOUT_S")]
+    idle_timeout_s: Option<f64>,
+    /// Largest batch of concurrent steps in one forward pass; 1 turns batching off [default: 8].
+    #[arg(long, env = "SSR_AGENT_MAX_BATCH")]
+    max_batch: Option<usize>,
+    /// Milliseconds the first step of a batch waits for others [default: 2].
+    #[arg(long, env = "SSR_AGENT_MAX_QUEUE_DELAY_MS")]
+    max_queue_delay_ms: Option<f64>,
+    /// Steps waiting for the network at most; more are refused [default: 256].
+    #[arg(long, env = "SSR_AGENT_MAX_QUEUE")]
+    max_queue: Option<usize>,
+    /// Longest a request may take, seconds; a shorter client deadline wins [default: 30].
+    #[arg(long, env = "SSR_AGENT_REQUEST_TIMEOUT_S")]
+    request_timeout_s: Option<f64>,
+    /// Largest request, MiB [default: 64; six 1600x900 RGB frames are 25 MiB].
+    #[arg(long, env = "SSR_AGENT_MAX_MESSAGE_MIB")]
+    max_message_mib: Option<usize>,
+    /// On shutdown, seconds to report NOT_SERVING before refusing connections [default: 0].
+    #[arg(long, env = "SSR_AGENT_DRAIN_GRACE_S")]
+    drain_grace_s: Option<f64>,
+    /// On shutdown, longest wait for in-flight requests, seconds [default: 30].
+    #[arg(long, env = "SSR_AGENT_DRAIN_TIMEOUT_S")]
+    drain_timeout_s: Option<f64>,
+    /// Log format [default: human].
+    #[arg(long, env = "SSR_AGENT_LOG_FORMAT")]
+    log_format: Option<LogFormat>,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum MetricsListen {
+    Off,
+    At(SocketAddr),
+}
+
+fn parse_metrics_listen(value: &str) -> Result<MetricsListen, String> {
+    if value == "off" {
+        return Ok(MetricsListen::Off);
+    }
+    value
+        .parse()
+        .map(MetricsListen::At)
+        .map_err(|e| format!("{e}: expected HOST:PORT or `off`"))
+}
+
+impl ServeArgs {
+    /// The effective settings, validated.
+    pub fn resolve(&self) -> anyhow::Result<ServeConfig> {
+        let mut config = match &self.config {
+            Some(path) => ServeConfig::from_file(path)?,
+            None => ServeConfig::default(),
+        };
+        fn set<T: Clone>(target: &mut T, value: &Option<T>) {
+            if let Some(value) = value {
+                *target = value.clone();
+            }
+        }
+        set(&mut config.listen, &self.listen);
+        match self.metrics_listen {
+            Some(MetricsListen::Off) => config.metrics_listen = None,
+            Some(MetricsListen::At(address)) => config.metrics_listen = Some(address),
+            None => {}
+        }
+        if self.checkpoint.is_some() {
+            config.checkpoint = self.checkpoint.clone();
+            config.untrained_config = None;
+        }
+        if self.untrained_config.is_some() {
+            config.untrained_config = self.untrained_config.clone();
+            config.checkpoint = None;
+        }
+        set(&mut config.max_episodes, &self.max_episodes);
+        set(&mut config.idle_timeout_s, &self.idle_timeout_s);
+        set(&mut config.max_batch, &self.max_batch);
+        set(&mut config.max_queue_delay_ms, &self.max_queue_delay_ms);
+        set(&mut config.max_queue, &self.max_queue);
+        set(&mut config.request_timeout_s, &self.request_timeout_s);
+        set(&mut config.max_message_mib, &self.max_message_mib);
+        set(&mut config.drain_grace_s, &self.drain_grace_s);
+        set(&mut config.drain_timeout_s, &self.drain_timeout_s);
+        set(&mut config.log_format, &self.log_format);
+        config.validate()?;
+        Ok(config)
+    }
+}

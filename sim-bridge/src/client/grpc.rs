@@ -1,0 +1,218 @@
+//! [`GrpcAgent`]: an [`Agent`] that drives through a remote `ssrdrive.v1.AgentService`. One
+//! episode per route: `StartEpisode` with the rig in `start_route`, one `Step` per tick with the
+//! rendered frames, `EndEpisode` in `end_route`. Any refused or failed call crashes the route
+//! (the leaderboard's "Failed - Agent crashed") with the server's status in the message.
+
+use std::time::Duration;
+
+use ssrdrive_proto::v1;
+use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use tonic::transport::{Channel, Endpoint};
+use tonic_health::pb::health_check_response::ServingStatus;
+use tonic_health::pb::health_client::HealthClient;
+
+use super::wire;
+use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
+use crate::camera::Rig;
+use crate::world::World;
+
+/// Connection settings.
+#[derive(Debug, Clone)]
+pub struct GrpcOptions {
+    /// Rig to render and send; `None` takes the one the server expects.
+    pub rig: Option<Rig>,
+    /// Deadline of each call.
+    pub call_timeout: Duration,
+    /// How long to wait for the server to report SERVING (it warms up first).
+    pub ready_timeout: Duration,
+    /// Free text the server logs with each episode.
+    pub client: String,
+    /// Largest response accepted, bytes.
+    pub max_message_bytes: usize,
+}
+
+impl Default for GrpcOptions {
+    fn default() -> Self {
+        Self {
+            rig: None,
+            call_timeout: Duration::from_secs(30),
+            ready_timeout: Duration::from_secs(120),
+            client: "sim-bridge".into(),
+            max_message_bytes: 64 << 20,
+        }
+    }
+}
+
+/// A remote agent; see the module doc.
+pub struct GrpcAgent {
+    runtime: tokio::runtime::Runtime,
+    client: AgentServiceClient<Channel>,
+    target: String,
+    info: v1::AgentInfo,
+    rig: Rig,
+    options: GrpcOptions,
+    episode: Option<String>,
+}
+
+fn crashed(what: &str, status: &tonic::Status) -> AgentError {
+    AgentError(format!("{what}: {:?}: {}", status.code(), status.message()))
+}
+
+/// `grpc://host:port` or `http://host:port` (or a bare `host:port`) as a tonic URI.
+pub fn endpoint_uri(target: &str) -> String {
+    let address = target
+        .strip_prefix("grpc://")
+        .or_else(|| target.strip_prefix("http://"))
+        .unwrap_or(target);
+    format!("http://{address}")
+}
+
+impl GrpcAgent {
+    /// Connects to `target` (see [`endpoint_uri`]), waits until the server reports SERVING and
+    /// reads what it runs.
+    pub fn connect(target: &str, options: GrpcOptions) -> Result<Self, AgentError> {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| AgentError(format!("starting the client runtime: {e}")))?;
+        let uri = endpoint_uri(target);
+        let channel = runtime.block_on(async {
+            let endpoint = Endpoint::from_shared(uri.clone())
+                .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?
+                .connect_timeout(Duration::from_secs(10));
+            wait_until_serving(&endpoint, options.ready_timeout, target).await
+        })?;
+        let mut client = AgentServiceClient::new(channel)
+            .max_decoding_message_size(options.max_message_bytes)
+            .max_encoding_message_size(options.max_message_bytes);
+        let info = runtime
+            .block_on(client.get_agent_info(v1::GetAgentInfoRequest {}))
+            .map_err(|s| crashed(&format!("GetAgentInfo on {target}"), &s))?
+            .into_inner();
+        let rig = match &options.rig {
+            Some(rig) => rig.clone(),
+            None => wire::rig_from_proto(info.expected_rig.as_ref().unwrap_or(&v1::Rig::default()))
+                .map_err(|e| AgentError(format!("{target} reports an unusable rig: {e}")))?,
+        };
+        Ok(Self {
+            runtime,
+            client,
+            target: target.to_string(),
+            info,
+            rig,
+            options,
+            episode: None,
+        })
+    }
+
+    /// What the server runs.
+    pub fn info(&self) -> &v1::AgentInfo {
+        &self.info
+    }
+
+    fn timed<T>(&self, message: T) -> tonic::Request<T> {
+        let mut request = tonic::Request::new(message);
+        request.set_timeout(self.options.call_timeout);
+        request
+    }
+
+    fn end_episode(&mut self) {
+        if let Some(episode_id) = self.episode.take() {
+            let request = self.timed(v1::EndEpisodeRequest {
+                episode_id: episode_id.clone(),
+            });
+            if let Err(status) = self.runtime.block_on(self.client.end_episode(request)) {
+                tracing::warn!("EndEpisode {episode_id}: {}", status.message());
+            }
+        }
+    }
+}
+
+/// Polls `grpc.health.v1.Health/Check` until the whole server reports SERVING.
+async fn wait_until_serving(
+    endpoint: &Endpoint,
+    timeout: Duration,
+    target: &str,
+) -> Result<Channel, AgentError> {
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        let last = match endpoint.connect().await {
+            Ok(channel) => {
+                let mut health = HealthClient::new(channel.clone());
+                match health
+                    .check(tonic_health::pb::HealthCheckRequest::default())
+                    .await
+                {
+                    Ok(reply) if reply.get_ref().status() == ServingStatus::Serving => {
+                        return Ok(channel);
+                    }
+                    Ok(reply) => format!("health {:?}", reply.get_ref().status()),
+                    Err(status) => format!("health check: {}", status.message()),
+                }
+            }
+            Err(error) => format!("connecting: {error}"),
+        };
+        if tokio::time::Instant::now() >= deadline {
+            return Err(AgentError(format!(
+                "{target} was not SERVING within {:.0} s ({last})",
+                timeout.as_secs_f64()
+            )));
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+impl Agent for GrpcAgent {
+    fn name(&self) -> String {
+        format!(
+            "{} ({}) at {}",
+            self.info.model, self.info.config_name, self.target
+        )
+    }
+
+    fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
+        self.end_episode();
+        let request = self.timed(v1::StartEpisodeRequest {
+            rig: Some(wire::rig_to_proto(&self.rig)),
+            client: self.options.client.clone(),
+            ..Default::default()
+        });
+        let reply = self
+            .runtime
+            .block_on(self.client.start_episode(request))
+            .map_err(|s| crashed("StartEpisode", &s))?;
+        self.episode = Some(reply.into_inner().episode_id);
+        Ok(())
+    }
+
+    fn end_route(&mut self) {
+        self.end_episode();
+    }
+
+    fn sensors(&self) -> Option<Rig> {
+        Some(self.rig.clone())
+    }
+
+    fn run_step(&mut self, obs: &Observation, _world: &World<'_>) -> Result<Control, AgentError> {
+        let episode = self
+            .episode
+            .as_deref()
+            .ok_or_else(|| AgentError("run_step before start_route".into()))?;
+        let request = self.timed(wire::step_request(episode, obs));
+        let reply = self
+            .runtime
+            .block_on(self.client.step(request))
+            .map_err(|s| crashed(&format!("Step {}", obs.frame), &s))?
+            .into_inner();
+        let control = reply
+            .control
+            .ok_or_else(|| AgentError(format!("Step {}: the answer has no control", obs.frame)))?;
+        Ok(wire::control_from_proto(&control))
+    }
+}
+
+impl Drop for GrpcAgent {
+    fn drop(&mut self) {
+        self.end_episode();
+    }
+}

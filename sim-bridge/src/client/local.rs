@@ -1,0 +1,112 @@
+//! [`LocalServer`]: an `ssr-agent serve` child process on a free loopback port, for
+//! `sim-bridge eval --agent local`. The binary is `$SSR_AGENT_BIN`, else the `ssr-agent` beside
+//! this executable (where `cargo build` puts both), else one on `PATH`. The child inherits the
+//! environment, so `SSR_AGENT_CHECKPOINT` or `SSR_AGENT_UNTRAINED_CONFIG` choose its model; it
+//! logs warnings and errors only unless `RUST_LOG` says otherwise, and is killed on drop.
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use crate::agent::AgentError;
+
+/// A running local server.
+pub struct LocalServer {
+    child: Child,
+    address: String,
+}
+
+fn find_binary() -> Result<PathBuf, AgentError> {
+    if let Some(path) = std::env::var_os("SSR_AGENT_BIN") {
+        return Ok(PathBuf::from(path));
+    }
+    let name = format!("ssr-agent{}", std::env::consts::EXE_SUFFIX);
+    let beside = std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().map(|dir| dir.join(&name)));
+    if let Some(path) = beside.filter(|p| p.is_file()) {
+        return Ok(path);
+    }
+    std::env::var_os("PATH")
+        .and_then(|paths| {
+            std::env::split_paths(&paths)
+                .map(|dir| dir.join(&name))
+                .find(|p| p.is_file())
+        })
+        .ok_or_else(|| {
+            AgentError(
+                "no ssr-agent binary beside sim-bridge or on PATH: build it with \
+                 `cargo build --release` (it builds both) or set SSR_AGENT_BIN"
+                    .into(),
+            )
+        })
+}
+
+impl LocalServer {
+    /// Starts `ssr-agent serve` on 127.0.0.1 with a free port and no metrics port, and waits
+    /// until it has bound its port (not until it is warmed up: clients check health).
+    pub fn start() -> Result<Self, AgentError> {
+        let binary = find_binary()?;
+        let mut command = Command::new(&binary);
+        command
+            .args([
+                "serve",
+                "--listen",
+                "127.0.0.1:0",
+                "--metrics-listen",
+                "off",
+            ])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit());
+        if std::env::var_os("RUST_LOG").is_none() {
+            command.env("RUST_LOG", "warn");
+        }
+        let mut child = command
+            .spawn()
+            .map_err(|e| AgentError(format!("starting {}: {e}", binary.display())))?;
+        let stdout = child.stdout.take().expect("stdout is piped");
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut lines = BufReader::new(stdout).lines();
+            let address =
+                lines.find_map(|line| line.ok()?.strip_prefix("listening on ").map(str::to_string));
+            let _ = sender.send(address);
+            // Keep draining so the child never blocks on a full pipe.
+            for _ in lines {}
+        });
+        let mut server = Self {
+            child,
+            address: String::new(),
+        };
+        match receiver.recv_timeout(Duration::from_secs(60)) {
+            Ok(Some(address)) => {
+                server.address = address;
+                Ok(server)
+            }
+            _ => {
+                let status = server.child.try_wait().ok().flatten();
+                Err(AgentError(format!(
+                    "{} serve did not report its port{} (its log is above)",
+                    binary.display(),
+                    status
+                        .map(|s| format!("; it exited with {s}"))
+                        .unwrap_or_default()
+                )))
+            }
+        }
+    }
+
+    /// `grpc://127.0.0.1:PORT`.
+    pub fn target(&self) -> String {
+        format!("grpc://{}", self.address)
+    }
+}
+
+impl Drop for LocalServer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

@@ -1,0 +1,9 @@
+//! Talking to an agent server over gRPC (`ssrdrive.v1`).
+//!
+//! - [`wire`]: conversions between simulator types and wire messages (shared with the server).
+//! - [`grpc`]: [`grpc::GrpcAgent`], an [`crate::agent::Agent`] backed by a remote server.
+//! - [`local`]: [`local::LocalServer`], an `ssr-agent serve` child process on loopback.
+
+pub mod grpc;
+pub mod local;
+pub mod wire;
