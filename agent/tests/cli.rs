@@ -72,3 +72,40 @@ fn bench_runs_a_small_config_and_prints_json() {
     let (ok, _, stderr) = ssr_agent(&["bench", "--config", "/no/such/file.json"]);
     assert!(!ok && stderr.contains("--config"), "{stderr}");
 }
+
+#[test]
+fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
+    let serve = |env: &[(&str, &str)], args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_ssr-agent"))
+            .arg("serve")
+            .args(["--listen", "127.0.0.1:0"])
+            .args(args)
+            .env_remove("SSR_AGENT_CHECKPOINT")
+            .env_remove("SSR_AGENT_UNTRAINED_CONFIG")
+            .envs(env.iter().copied())
+            .output()
+            .expect("runs");
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let file = std::env::temp_dir().join(format!("ssr-cli-serve-{}.toml", std::process::id()));
+    std::fs::write(&file, "max_batch = 0\n").unwrap();
+    let file = file.to_str().unwrap();
+
+    // The file's bad value is caught and named...
+    let stderr = serve(&[], &["--config", file]);
+    assert!(
+        stderr.contains("max_batch = 0: must be in 1..=256"),
+        "{stderr}"
+    );
+    // ...unless the environment overrides it (then the next problem is the missing model)...
+    let stderr = serve(&[("SSR_AGENT_MAX_BATCH", "3")], &["--config", file]);
+    assert!(stderr.contains("no model: pass --checkpoint"), "{stderr}");
+    // ...and a flag beats the environment.
+    let stderr = serve(&[("SSR_AGENT_MAX_BATCH", "3")], &["--max-batch", "0"]);
+    assert!(stderr.contains("max_batch = 0"), "{stderr}");
+    let stderr = serve(&[], &["--config", "/no/such/file.toml"]);
+    assert!(stderr.contains("/no/such/file.toml"), "{stderr}");
+    let stderr = serve(&[("SSR_AGENT_METRICS_LISTEN", "nowhere")], &[]);
+    assert!(stderr.contains("expected HOST:PORT or `off`"), "{stderr}");
+}

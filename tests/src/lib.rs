@@ -1,1 +1,166 @@
-//! End-to-end tests live in tests/tests/.
+//! Helpers for the end-to-end tests in tests/tests/: the workspace's built binaries and a real
+//! `ssr-agent serve` process on an ephemeral loopback port, killed when dropped.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use tonic::transport::Channel;
+use tonic_health::pb::HealthCheckRequest;
+use tonic_health::pb::health_check_response::ServingStatus;
+use tonic_health::pb::health_client::HealthClient;
+
+/// A binary of this workspace, built by `cargo test --workspace` into the same profile folder
+/// as this test (target/<profile>/).
+pub fn binary(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let profile_dir = exe
+        .parent()
+        .and_then(|deps| deps.parent())
+        .expect("tests run from target/<profile>/deps");
+    let path = profile_dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        path.is_file(),
+        "{} is missing: run the tests with `cargo test --workspace` (it builds every binary)",
+        path.display()
+    );
+    path
+}
+
+/// A running `ssr-agent serve` with random cpu-default weights.
+pub struct Server {
+    child: Child,
+    /// gRPC `HOST:PORT`.
+    pub address: String,
+    /// Metrics `HOST:PORT`.
+    pub metrics: String,
+}
+
+impl Server {
+    /// Starts a server with these extra flags and waits until it is SERVING.
+    pub fn start(flags: &[&str]) -> Self {
+        let mut child = Command::new(binary("ssr-agent"))
+            .args([
+                "serve",
+                "--untrained-config",
+                "cpu-default",
+                "--listen",
+                "127.0.0.1:0",
+                "--metrics-listen",
+                "127.0.0.1:0",
+            ])
+            .args(flags)
+            .env("RUST_LOG", "error")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("starting ssr-agent serve");
+        let mut lines = BufReader::new(child.stdout.take().expect("piped")).lines();
+        let mut next = |prefix: &str| {
+            let line = lines
+                .next()
+                .expect("the server printed its addresses")
+                .expect("readable stdout");
+            line.strip_prefix(prefix)
+                .unwrap_or_else(|| panic!("expected '{prefix}...', got '{line}'"))
+                .to_string()
+        };
+        let address = next("listening on ");
+        let metrics = next("metrics on http://")
+            .trim_end_matches("/metrics")
+            .to_string();
+        let server = Self {
+            child,
+            address,
+            metrics,
+        };
+        server.wait_until_serving();
+        server
+    }
+
+    fn wait_until_serving(&self) {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let runtime = runtime();
+        loop {
+            let serving = runtime.block_on(async {
+                let mut health = HealthClient::new(self.channel().await);
+                let reply = health.check(HealthCheckRequest::default()).await.ok()?;
+                Some(reply.into_inner().status() == ServingStatus::Serving)
+            });
+            if serving == Some(true) {
+                return;
+            }
+            assert!(Instant::now() < deadline, "server not SERVING within 60 s");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// `http://HOST:PORT` for tonic.
+    pub fn uri(&self) -> String {
+        format!("http://{}", self.address)
+    }
+
+    /// A connection to the server.
+    pub async fn channel(&self) -> Channel {
+        Channel::from_shared(self.uri())
+            .expect("a valid URI")
+            .connect()
+            .await
+            .expect("connecting to the server")
+    }
+
+    /// A connected agent client.
+    pub async fn client(&self) -> AgentServiceClient<Channel> {
+        AgentServiceClient::new(self.channel().await)
+    }
+
+    /// The metrics page.
+    pub fn metrics_text(&self) -> String {
+        let mut stream = TcpStream::connect(&self.metrics).expect("metrics port");
+        write!(
+            stream,
+            "GET /metrics HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            self.metrics
+        )
+        .expect("sending the request");
+        let mut text = String::new();
+        stream.read_to_string(&mut text).expect("reading metrics");
+        text
+    }
+
+    /// The value of one sample line of the metrics page (`name{labels}` exactly), 0 if absent.
+    pub fn metric(&self, sample: &str) -> f64 {
+        self.metrics_text()
+            .lines()
+            .find_map(|line| line.strip_prefix(sample)?.trim().parse().ok())
+            .unwrap_or(0.0)
+    }
+
+    /// Sends SIGTERM and waits for the exit status.
+    pub fn terminate(mut self) -> std::process::ExitStatus {
+        let status = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status()
+            .expect("running kill");
+        assert!(status.success());
+        self.child.wait().expect("waiting for the server")
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A single-threaded runtime for blocking helpers.
+pub fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("tokio runtime")
+}

@@ -33,6 +33,9 @@ pub struct EvalArgs {
     /// Deadline of each gRPC call, seconds.
     #[arg(long, default_value_t = 30.0)]
     call_timeout: f64,
+    /// How long to wait for a gRPC agent to accept connections and report SERVING, seconds.
+    #[arg(long, default_value_t = 120.0)]
+    ready_timeout: f64,
     #[command(flatten)]
     route: RouteArgs,
     #[command(flatten)]
@@ -40,6 +43,10 @@ pub struct EvalArgs {
     /// Runs of each route; repetition r uses seed S + r.
     #[arg(long, default_value_t = 1)]
     repetitions: usize,
+    /// End every route after this many simulated seconds (a timeout without penalty) instead
+    /// of the leaderboard's length-based timeout: for quick smoke runs.
+    #[arg(long)]
+    timeout: Option<f64>,
     /// Where to write the leaderboard results JSON.
     #[arg(long, default_value = "results.json")]
     out: PathBuf,
@@ -55,6 +62,15 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if args.repetitions == 0 {
         bail!("--repetitions must be at least 1");
     }
+    if let Some(timeout) = args.timeout
+        && !(timeout.is_finite() && timeout > 0.0)
+    {
+        bail!("--timeout must be a positive number of seconds, got {timeout}");
+    }
+    let scoring = ScoringConfig {
+        timeout: args.timeout,
+        ..ScoringConfig::default()
+    };
     let (mut agent, _local_server) = build_agent(&args)?;
     eprintln!("agent: {}", agent.name());
     let (map, planned) = args.route.load()?;
@@ -77,7 +93,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 dense,
                 agent.as_mut(),
                 world,
-                ScoringConfig::default(),
+                scoring.clone(),
                 index,
                 repetition,
                 |rc| bar.set_position(rc.round() as u64),
@@ -140,8 +156,13 @@ fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalS
             bail!("--agent {other}: unknown agent (expected expert, local or grpc://HOST:PORT)")
         }
     };
-    if !(args.call_timeout.is_finite() && args.call_timeout > 0.0) {
-        bail!("--call-timeout must be a positive number of seconds");
+    for (flag, value) in [
+        ("--call-timeout", args.call_timeout),
+        ("--ready-timeout", args.ready_timeout),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            bail!("{flag} must be a positive number of seconds, got {value}");
+        }
     }
     let options = GrpcOptions {
         rig: args
@@ -150,6 +171,7 @@ fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalS
             .map(Rig::from_name_or_file)
             .transpose()?,
         call_timeout: Duration::from_secs_f64(args.call_timeout),
+        ready_timeout: Duration::from_secs_f64(args.ready_timeout),
         client: "sim-bridge eval".into(),
         ..GrpcOptions::default()
     };

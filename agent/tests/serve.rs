@@ -1,0 +1,195 @@
+//! The server's plain-Rust parts through their public API: episode leases, config files and
+//! rules, and image decoding. (The process end to end is in tests/tests/grpc.rs.)
+
+use std::time::{Duration, Instant};
+
+use ssr_agent::camera::{CameraSpec, Rig};
+use ssr_agent::control::ControlConfig;
+use ssr_agent::model::SsrModel;
+use ssr_agent::policy::SsrPolicy;
+use ssr_agent::serve::ServeConfig;
+use ssr_agent::serve::config::ServeConfigError;
+use ssr_agent::serve::decode::decode_image;
+use ssr_agent::serve::episodes::{EpisodeError, EpisodeTable};
+use ssrdrive_proto::v1;
+
+fn policy() -> SsrPolicy {
+    let device = burn::tensor::Device::flex();
+    let config = ssr_agent::model::config::SsrConfig::cpu_default();
+    SsrPolicy::new(
+        SsrModel::new(&config, &device),
+        config,
+        ControlConfig::default(),
+        device,
+    )
+}
+
+#[test]
+fn a_lease_holds_the_state_until_finished_or_dropped() {
+    let policy = policy();
+    let table = EpisodeTable::new(2, Duration::from_secs(60));
+    let id = table.open(Rig::tcp_small(), policy.new_episode()).unwrap();
+    let other = table.open(Rig::tcp_small(), policy.new_episode()).unwrap();
+    assert_ne!(id, other);
+    assert_eq!(
+        table.open(Rig::tcp_small(), policy.new_episode()),
+        Err(EpisodeError::TooMany { open: 2 })
+    );
+
+    let lease = table.lease(&id, 0).unwrap();
+    assert_eq!(lease.rig(), &Rig::tcp_small());
+    assert!(matches!(table.lease(&id, 1), Err(EpisodeError::Busy(_))));
+    // Idle expiry never takes an episode with a step in flight.
+    let far_future = Instant::now() + Duration::from_secs(3600);
+    assert_eq!(table.expire_idle(far_future), vec![other.clone()]);
+    drop(lease);
+    // A dropped lease gives the state back without counting the frame.
+    table.lease(&id, 0).unwrap().finish();
+    assert!(matches!(
+        table.lease(&id, 0),
+        Err(EpisodeError::OutOfOrder {
+            last: 0,
+            got: 0,
+            ..
+        })
+    ));
+    table.lease(&id, 5).unwrap().finish();
+    assert_eq!(table.close(&id), Ok(2));
+    assert_eq!(table.close(&id), Err(EpisodeError::NotFound(id.clone())));
+
+    // Closing an episode mid-step discards the step's result quietly.
+    let id = table.open(Rig::tcp_small(), policy.new_episode()).unwrap();
+    let lease = table.lease(&id, 0).unwrap();
+    assert_eq!(table.close(&id), Ok(0));
+    lease.finish();
+    assert!(table.is_empty());
+}
+
+fn write_temp(name: &str, text: &str) -> std::path::PathBuf {
+    let path = std::env::temp_dir().join(format!("ssr-serve-{}-{name}", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn config_files_override_defaults_and_bad_values_are_named() {
+    let path = write_temp(
+        "ok.toml",
+        "max_batch = 4\nidle_timeout_s = 5.0\nlog_format = \"json\"\n",
+    );
+    let config = ServeConfig::from_file(&path).unwrap();
+    assert_eq!(config.max_batch, 4);
+    assert_eq!(config.idle_timeout_s, 5.0);
+    assert_eq!(config.max_episodes, ServeConfig::default().max_episodes);
+    config.validate().unwrap();
+
+    let path = write_temp("typo.toml", "max_bach = 4\n");
+    let error = ServeConfig::from_file(&path).unwrap_err();
+    assert!(matches!(error, ServeConfigError::Parse { .. }));
+    assert!(error.to_string().contains("max_bach"), "{error}");
+
+    let bad = ServeConfig {
+        max_batch: 0,
+        ..ServeConfig::default()
+    };
+    assert_eq!(
+        bad.validate().unwrap_err().to_string(),
+        "max_batch = 0: must be in 1..=256"
+    );
+    let bad = ServeConfig {
+        idle_timeout_s: f64::NAN,
+        ..ServeConfig::default()
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("idle_timeout_s")
+    );
+    let missing = ServeConfig::from_file(std::path::Path::new("/no/such/serve.toml"));
+    assert!(
+        missing
+            .unwrap_err()
+            .to_string()
+            .contains("/no/such/serve.toml")
+    );
+}
+
+fn camera(width: u32, height: u32) -> CameraSpec {
+    CameraSpec {
+        id: "front".into(),
+        width,
+        height,
+        ..CameraSpec::tcp_front()
+    }
+}
+
+fn image(encoding: v1::ImageEncoding, width: u32, height: u32, data: Vec<u8>) -> v1::Image {
+    v1::Image {
+        camera_id: "front".into(),
+        width,
+        height,
+        encoding: encoding as i32,
+        data,
+    }
+}
+
+#[test]
+fn images_decode_from_every_encoding_to_the_same_rgb() {
+    let (w, h) = (4, 2);
+    let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i * 7 % 256) as u8).collect();
+    let spec = camera(w, h);
+
+    let frame = decode_image(&image(v1::ImageEncoding::Rgb8, w, h, rgb.clone()), &spec).unwrap();
+    assert_eq!(frame.rgb, rgb);
+
+    let bgra: Vec<u8> = rgb
+        .chunks_exact(3)
+        .flat_map(|p| [p[2], p[1], p[0], 255])
+        .collect();
+    let frame = decode_image(&image(v1::ImageEncoding::Bgra8, w, h, bgra), &spec).unwrap();
+    assert_eq!(frame.rgb, rgb);
+
+    let png = sim_bridge::image::encode_png(w, h, &rgb).unwrap();
+    let frame = decode_image(&image(v1::ImageEncoding::Png, w, h, png.clone()), &spec).unwrap();
+    assert_eq!(frame.rgb, rgb);
+
+    // A 4x2 JPEG of one colour (200, 100, 50), quality 100: lossy, so within a few levels.
+    let jpeg = include_bytes!("data/orange_4x2.jpg").to_vec();
+    let frame = decode_image(&image(v1::ImageEncoding::Jpeg, w, h, jpeg.clone()), &spec).unwrap();
+    for pixel in frame.rgb.chunks_exact(3) {
+        for (got, want) in pixel.iter().zip([200u8, 100, 50]) {
+            assert!(got.abs_diff(want) <= 3, "{pixel:?}");
+        }
+    }
+
+    // Sizes are checked against the rig before any pixel memory is allocated.
+    let error = decode_image(&image(v1::ImageEncoding::Png, w, h, png), &camera(8, 2)).unwrap_err();
+    assert!(
+        error
+            .to_string()
+            .contains("image is 4x2 but the rig says 8x2"),
+        "{error}"
+    );
+    let error =
+        decode_image(&image(v1::ImageEncoding::Jpeg, 8, 2, jpeg), &camera(8, 2)).unwrap_err();
+    assert!(error.to_string().contains("JPEG is 4x2"), "{error}");
+    let error =
+        decode_image(&image(v1::ImageEncoding::Bgra8, w, h, vec![0; 12]), &spec).unwrap_err();
+    assert!(
+        error
+            .to_string()
+            .contains("BGRA8 image is 32 bytes, got 12"),
+        "{error}"
+    );
+    let mut wrong_id = image(v1::ImageEncoding::Rgb8, w, h, rgb);
+    wrong_id.camera_id = "rear".into();
+    let error = decode_image(&wrong_id, &spec).unwrap_err();
+    assert!(error.to_string().contains("'rear'"), "{error}");
+    let unknown = v1::Image {
+        encoding: 42,
+        ..image(v1::ImageEncoding::Rgb8, w, h, vec![])
+    };
+    let error = decode_image(&unknown, &spec).unwrap_err();
+    assert!(error.to_string().contains("encoding 42"), "{error}");
+}

@@ -1,0 +1,562 @@
+//! End to end through gRPC: a real `ssr-agent serve` process (random cpu-default weights) on an
+//! ephemeral loopback port, driven by `sim-bridge eval` and by a raw client that provokes every
+//! error status the protocol defines.
+
+use std::process::Command;
+use std::time::Duration;
+
+use ssrdrive_proto::v1;
+use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use ssrdrive_proto::v1::drive_request::Message;
+use ssrdrive_tests::{Server, binary, runtime};
+use tonic::Code;
+use tonic::transport::Channel;
+
+type Client = AgentServiceClient<Channel>;
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("ssrdrive-e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The rig the server expects (tcp-small for cpu-default).
+async fn expected_rig(client: &mut Client) -> v1::Rig {
+    let info = client
+        .get_agent_info(v1::GetAgentInfoRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    info.expected_rig.unwrap()
+}
+
+async fn start(client: &mut Client, rig: &v1::Rig) -> String {
+    client
+        .start_episode(v1::StartEpisodeRequest {
+            rig: Some(rig.clone()),
+            client: "e2e".into(),
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner()
+        .episode_id
+}
+
+/// A valid step with flat grey frames, the ego driving east at 5 m/s.
+fn step(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRequest {
+    v1::StepRequest {
+        episode_id: episode_id.into(),
+        frame_index,
+        timestamp_s: frame_index as f64 * 0.05,
+        images: rig
+            .cameras
+            .iter()
+            .map(|c| v1::Image {
+                camera_id: c.id.clone(),
+                width: c.width,
+                height: c.height,
+                encoding: v1::ImageEncoding::Rgb8 as i32,
+                data: vec![100; (c.width * c.height * 3) as usize],
+            })
+            .collect(),
+        speed_mps: 5.0,
+        pose: Some(v1::Pose {
+            x: frame_index as f64 * 0.25,
+            ..Default::default()
+        }),
+        command: 4,
+        target_point: Some(v1::EgoPoint { x: 20.0, y: 0.0 }),
+        debug: false,
+    }
+}
+
+async fn code_of<T>(call: impl Future<Output = Result<T, tonic::Status>>) -> Code {
+    match call.await {
+        Ok(_) => Code::Ok,
+        Err(status) => status.code(),
+    }
+}
+
+fn read_results(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn eval_scores_a_route_through_the_server() {
+    let server = Server::start(&[]);
+    let dir = temp_dir("eval");
+    let out = dir.join("results.json");
+    let run = Command::new(binary("sim-bridge"))
+        .args(["eval", "--agent", &format!("grpc://{}", server.address)])
+        .args([
+            "--routes",
+            "town05-short-style",
+            "--limit",
+            "1",
+            "--timeout",
+            "2",
+        ])
+        .args(["--vehicles", "0", "--quiet", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stderr.contains("agent: ssr (cpu-default)"), "{stderr}");
+    let results = read_results(&out);
+    let records = results["_checkpoint"]["records"].as_array().unwrap();
+    assert_eq!(records.len(), 1);
+    assert!((records[0]["meta"]["duration_game"].as_f64().unwrap() - 2.0).abs() < 0.1);
+    // One step per 20 Hz tick went through the server, and the episode was ended.
+    let steps = server.metric(r#"ssr_requests_total{method="Step",code="OK"}"#);
+    assert!((40.0..=42.0).contains(&steps), "{steps} steps");
+    assert_eq!(server.metric("ssr_active_episodes"), 0.0);
+}
+
+#[test]
+fn local_agent_starts_its_own_server() {
+    let dir = temp_dir("local");
+    let out = dir.join("results.json");
+    let run = Command::new(binary("sim-bridge"))
+        .args(["eval", "--agent", "local", "--routes", "town05-short-style"])
+        .args([
+            "--limit",
+            "1",
+            "--timeout",
+            "1",
+            "--vehicles",
+            "0",
+            "--quiet",
+            "--out",
+        ])
+        .arg(&out)
+        .env("SSR_AGENT_BIN", binary("ssr-agent"))
+        .env("SSR_AGENT_UNTRAINED_CONFIG", "cpu-default")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("agent: ssr (cpu-default) at grpc://127.0.0.1:"),
+        "{stderr}"
+    );
+    assert_eq!(
+        read_results(&out)["_checkpoint"]["records"]
+            .as_array()
+            .unwrap()
+            .len(),
+        1
+    );
+
+    // Without a model the local server refuses to start, and eval says why.
+    let run = Command::new(binary("sim-bridge"))
+        .args([
+            "eval",
+            "--agent",
+            "local",
+            "--routes",
+            "town05-short-style",
+            "--limit",
+            "1",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .env("SSR_AGENT_BIN", binary("ssr-agent"))
+        .env_remove("SSR_AGENT_UNTRAINED_CONFIG")
+        .env_remove("SSR_AGENT_CHECKPOINT")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("no model: pass --checkpoint"), "{stderr}");
+    assert!(stderr.contains("did not report its port"), "{stderr}");
+}
+
+#[test]
+fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
+    let server = Server::start(&[]);
+    let dir = temp_dir("crash");
+    let out = dir.join("results.json");
+    let eval = Command::new(binary("sim-bridge"))
+        .args(["eval", "--agent", &format!("grpc://{}", server.address)])
+        .args([
+            "--routes",
+            "town05-short-style",
+            "--limit",
+            "2",
+            "--timeout",
+            "600",
+        ])
+        .args([
+            "--vehicles",
+            "0",
+            "--call-timeout",
+            "2",
+            "--ready-timeout",
+            "1",
+        ])
+        .args(["--quiet", "--out"])
+        .arg(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(4));
+    drop(server);
+    let run = eval.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{stderr}");
+    assert!(stderr.contains("the agent crashed"), "{stderr}");
+    let results = read_results(&out);
+    let records = results["_checkpoint"]["records"].as_array().unwrap();
+    assert_eq!(records.len(), 2, "both runs are recorded");
+    for record in records {
+        assert_eq!(record["status"], "Failed - Agent crashed");
+    }
+}
+
+#[test]
+fn every_error_status_is_provoked_and_spares_other_episodes() {
+    let server = Server::start(&["--max-episodes", "4", "--idle-timeout-s", "1.5"]);
+    runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+
+        // NOT_FOUND: an id never issued.
+        assert_eq!(
+            code_of(client.step(step("nope", 0, &rig))).await,
+            Code::NotFound
+        );
+        assert_eq!(
+            code_of(client.end_episode(v1::EndEpisodeRequest {
+                episode_id: "nope".into()
+            }))
+            .await,
+            Code::NotFound
+        );
+
+        // INVALID_ARGUMENT: a rig that cannot be, and steps that do not fit the rig.
+        let mut bad_rig = rig.clone();
+        bad_rig.cameras[0].fov = -5.0;
+        let refused = client
+            .start_episode(v1::StartEpisodeRequest {
+                rig: Some(bad_rig),
+                ..Default::default()
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(refused.code(), Code::InvalidArgument);
+        assert!(refused.message().contains("fov"), "{}", refused.message());
+
+        let good = start(&mut client, &rig).await;
+        let victim = start(&mut client, &rig).await;
+        let reference = start(&mut client, &rig).await;
+        let mut bad_requests: Vec<(v1::StepRequest, &str)> = Vec::new();
+        let mut request = step(&victim, 0, &rig);
+        request.images[0].width += 1;
+        bad_requests.push((request, "but the rig says"));
+        let mut request = step(&victim, 0, &rig);
+        request.images[0].data.truncate(10);
+        bad_requests.push((request, "bytes, got 10"));
+        let mut request = step(&victim, 0, &rig);
+        request.speed_mps = f64::NAN;
+        bad_requests.push((request, "speed_mps = NaN"));
+        let mut request = step(&victim, 0, &rig);
+        request.target_point = Some(v1::EgoPoint {
+            x: f64::INFINITY,
+            y: 0.0,
+        });
+        bad_requests.push((request, "target_point.x"));
+        let mut request = step(&victim, 0, &rig);
+        request.command = 9;
+        bad_requests.push((request, "command 9"));
+        let mut request = step(&victim, 0, &rig);
+        request.images[0].encoding = v1::ImageEncoding::Png as i32;
+        bad_requests.push((request, "not a readable PNG"));
+        let mut request = step(&victim, 0, &rig);
+        request.images[0].encoding = v1::ImageEncoding::Jpeg as i32;
+        bad_requests.push((request, "not a readable JPEG"));
+        let mut request = step(&victim, 0, &rig);
+        request.images.clear();
+        bad_requests.push((request, "carries 0 image(s)"));
+        let mut request = step(&victim, 0, &rig);
+        request.pose = None;
+        bad_requests.push((request, "pose is missing"));
+
+        // The good episode steps between the bad requests and must answer exactly as the
+        // reference episode, which sees no bad requests at all.
+        for (frame, (request, expected)) in bad_requests.into_iter().enumerate() {
+            let answer = client.step(step(&good, frame as u64, &rig)).await.unwrap();
+            let status = client.step(request).await.unwrap_err();
+            assert_eq!(status.code(), Code::InvalidArgument, "{}", status.message());
+            assert!(
+                status.message().contains(expected),
+                "'{}' should mention '{expected}'",
+                status.message()
+            );
+            let same = client
+                .step(step(&reference, frame as u64, &rig))
+                .await
+                .unwrap();
+            assert_eq!(answer.get_ref().control, same.get_ref().control);
+            assert_eq!(answer.get_ref().trajectory, same.get_ref().trajectory);
+        }
+        // The victim's state was never touched: its first good step is frame 0.
+        client.step(step(&victim, 0, &rig)).await.unwrap();
+
+        // FAILED_PRECONDITION: a frame index that does not increase.
+        let status = client.step(step(&victim, 0, &rig)).await.unwrap_err();
+        assert_eq!(status.code(), Code::FailedPrecondition);
+        assert!(
+            status.message().contains("does not follow"),
+            "{}",
+            status.message()
+        );
+
+        // RESOURCE_EXHAUSTED: a fifth episode on a server that allows four.
+        let fourth = start(&mut client, &rig).await;
+        let status = client
+            .start_episode(v1::StartEpisodeRequest {
+                rig: Some(rig.clone()),
+                ..Default::default()
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::ResourceExhausted);
+        client
+            .end_episode(v1::EndEpisodeRequest {
+                episode_id: fourth.clone(),
+            })
+            .await
+            .unwrap();
+
+        // A deadline shorter than a step is honoured, and the episode survives it.
+        let mut request = tonic::Request::new(step(&good, 100, &rig));
+        request.set_timeout(Duration::from_micros(1));
+        let status = client.step(request).await.unwrap_err();
+        assert!(
+            matches!(status.code(), Code::DeadlineExceeded | Code::Cancelled),
+            "{status:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        client.step(step(&good, 101, &rig)).await.unwrap();
+
+        // Idle episodes expire: NOT_FOUND after the idle timeout.
+        tokio::time::sleep(Duration::from_millis(3000)).await;
+        let status = client.step(step(&victim, 1, &rig)).await.unwrap_err();
+        assert_eq!(status.code(), Code::NotFound);
+        assert!(status.message().contains("expired"), "{}", status.message());
+    });
+    assert!(server.metric("ssr_episodes_expired_total") >= 3.0);
+    assert!(server.metric(r#"ssr_requests_total{method="Step",code="INVALID_ARGUMENT"}"#) >= 9.0);
+}
+
+#[test]
+fn a_full_queue_sheds_load_and_batches_form_under_concurrency() {
+    // One step at a time and one waiting: a burst of eight must be partly refused.
+    let server = Server::start(&[
+        "--max-batch",
+        "1",
+        "--max-queue",
+        "1",
+        "--max-queue-delay-ms",
+        "0",
+    ]);
+    runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        let mut episodes = Vec::new();
+        for _ in 0..8 {
+            episodes.push(start(&mut client, &rig).await);
+        }
+        let calls = episodes.iter().map(|id| {
+            let mut client = client.clone();
+            let request = step(id, 0, &rig);
+            async move { code_of(client.step(request)).await }
+        });
+        let codes = futures_join(calls).await;
+        assert!(codes.contains(&Code::ResourceExhausted), "{codes:?}");
+        assert!(codes.contains(&Code::Ok), "{codes:?}");
+        // A refused step leaves its episode as it was: frame 0 is still next.
+        for (id, code) in episodes.iter().zip(&codes) {
+            if *code == Code::ResourceExhausted {
+                client.step(step(id, 0, &rig)).await.unwrap();
+            }
+        }
+    });
+    drop(server);
+
+    let server = Server::start(&["--max-batch", "8", "--max-queue-delay-ms", "50"]);
+    let sizes = runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        let mut episodes = Vec::new();
+        for _ in 0..8 {
+            episodes.push(start(&mut client, &rig).await);
+        }
+        let calls = episodes.iter().map(|id| {
+            let mut client = client.clone();
+            let request = step(id, 0, &rig);
+            async move {
+                let answer = client.step(request).await.unwrap().into_inner();
+                answer.timings.unwrap().batch_size
+            }
+        });
+        futures_join(calls).await
+    });
+    assert!(sizes.iter().any(|&s| s > 1), "no batch formed: {sizes:?}");
+}
+
+/// Runs futures concurrently on the current runtime and collects their outputs in order.
+async fn futures_join<F: Future + Send + 'static>(calls: impl Iterator<Item = F>) -> Vec<F::Output>
+where
+    F::Output: Send,
+{
+    let handles: Vec<_> = calls.map(tokio::spawn).collect();
+    let mut out = Vec::new();
+    for handle in handles {
+        out.push(handle.await.unwrap());
+    }
+    out
+}
+
+#[test]
+fn drive_streams_one_episode_per_stream() {
+    let server = Server::start(&[]);
+    runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        let mut messages = vec![v1::DriveRequest {
+            message: Some(Message::Start(v1::StartEpisodeRequest {
+                rig: Some(rig.clone()),
+                ..Default::default()
+            })),
+        }];
+        for frame in 0..3 {
+            let mut request = step("", frame, &rig);
+            request.debug = frame == 2;
+            messages.push(v1::DriveRequest {
+                message: Some(Message::Step(request)),
+            });
+        }
+        let mut answers = client
+            .drive(tokio_stream::iter(messages))
+            .await
+            .unwrap()
+            .into_inner();
+        let mut frames = Vec::new();
+        while let Some(answer) = answers.message().await.unwrap() {
+            assert_eq!(answer.trajectory.len(), 4);
+            if answer.frame_index == 2 {
+                let debug = answer.debug.expect("debug was asked for");
+                assert_eq!(debug.token_attention.len(), 16);
+                let sum: f32 = debug.token_attention[0].weights.iter().sum();
+                assert!((sum - 1.0).abs() < 1e-3, "attention sums to {sum}");
+            }
+            frames.push(answer.frame_index);
+        }
+        assert_eq!(frames, [0, 1, 2]);
+
+        // A stream must open with `start`.
+        let status = client
+            .drive(tokio_stream::iter([v1::DriveRequest {
+                message: Some(Message::Step(step("", 0, &rig))),
+            }]))
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::InvalidArgument);
+    });
+    // The stream's episode was closed when the stream ended.
+    std::thread::sleep(Duration::from_millis(200));
+    assert_eq!(server.metric("ssr_active_episodes"), 0.0);
+}
+
+#[test]
+fn health_reflection_and_metrics_answer_and_sigterm_drains() {
+    let server = Server::start(&[]);
+    runtime().block_on(async {
+        use tonic_health::pb::health_check_response::ServingStatus;
+        use tonic_health::pb::health_client::HealthClient;
+        let mut health = HealthClient::new(server.channel().await);
+        for service in ["", "ssrdrive.v1.AgentService"] {
+            let reply = health
+                .check(tonic_health::pb::HealthCheckRequest {
+                    service: service.into(),
+                })
+                .await
+                .unwrap();
+            assert_eq!(
+                reply.get_ref().status(),
+                ServingStatus::Serving,
+                "'{service}'"
+            );
+        }
+        let unknown = health
+            .check(tonic_health::pb::HealthCheckRequest {
+                service: "no.such.Service".into(),
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(unknown.code(), Code::NotFound);
+
+        use tonic_reflection::pb::v1::ServerReflectionRequest;
+        use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
+        let mut reflection = ServerReflectionClient::new(server.channel().await);
+        let requests = [
+            MessageRequest::ListServices(String::new()),
+            MessageRequest::FileContainingSymbol("ssrdrive.v1.AgentService".into()),
+        ]
+        .map(|r| ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(r),
+        });
+        let mut answers = reflection
+            .server_reflection_info(tokio_stream::iter(requests))
+            .await
+            .unwrap()
+            .into_inner();
+        let Some(MessageResponse::ListServicesResponse(list)) =
+            answers.message().await.unwrap().unwrap().message_response
+        else {
+            panic!("expected a service list");
+        };
+        let names: Vec<_> = list.service.iter().map(|s| s.name.as_str()).collect();
+        assert!(names.contains(&"ssrdrive.v1.AgentService"), "{names:?}");
+        assert!(names.contains(&"grpc.health.v1.Health"), "{names:?}");
+        let Some(MessageResponse::FileDescriptorResponse(files)) =
+            answers.message().await.unwrap().unwrap().message_response
+        else {
+            panic!("expected a file descriptor");
+        };
+        assert!(!files.file_descriptor_proto.is_empty());
+
+        let info = server
+            .client()
+            .await
+            .get_agent_info(v1::GetAgentInfoRequest {})
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(info.config_name, "cpu-default");
+        assert_eq!(info.checkpoint, "untrained (random weights)");
+        assert_eq!(info.max_batch, 8);
+    });
+    let metrics = server.metrics_text();
+    for name in [
+        "ssr_requests_total",
+        "ssr_step_seconds_bucket",
+        "ssr_batch_size_bucket",
+        "ssr_active_episodes",
+        "ssr_process_resident_bytes",
+    ] {
+        assert!(metrics.contains(name), "{name} missing from:\n{metrics}");
+    }
+    let status = server.terminate();
+    assert!(
+        status.success(),
+        "SIGTERM should drain and exit 0, got {status}"
+    );
+}
