@@ -2,12 +2,18 @@
 //! checkpoints.
 
 mod bench;
+mod bench_serve;
 mod serve_args;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+
+/// Large tensors are allocated and freed every forward pass; glibc would unmap and page-fault
+/// them each time (see the workspace Cargo.toml).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use ssr_agent::checkpoint;
 use ssr_agent::device::Backend;
@@ -36,6 +42,9 @@ enum Command {
     /// STL, head), a full policy step from 900x256 camera frames, and optionally a training step.
     /// Without --config it runs the standard set: cpu-default at batch 1 and 8, paper at batch 1.
     Bench(bench::BenchArgs),
+    /// Time serving: per-step latency in process vs over gRPC on loopback (the overhead), and
+    /// throughput with 1, 4, 8, 16 concurrent episodes with and without dynamic batching.
+    BenchServe(bench_serve::BenchServeArgs),
     /// Print a model config preset as JSON (a starting point for your own).
     Config {
         /// Preset name.
@@ -84,7 +93,15 @@ fn serve(args: &serve_args::ServeArgs) -> anyhow::Result<()> {
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?
-        .block_on(serve::run(config, policy, info, shutdown_signal()))
+        .block_on(async {
+            let listeners = serve::Listeners::bind(&config).await?;
+            // Parents that asked for port 0 read the real ports from these lines.
+            println!("listening on {}", listeners.grpc.local_addr()?);
+            if let Some(metrics) = &listeners.metrics {
+                println!("metrics on http://{}/metrics", metrics.local_addr()?);
+            }
+            serve::run(listeners, config, policy, info, shutdown_signal()).await
+        })
 }
 
 /// Ctrl-C, or SIGTERM on Unix (what container runtimes send).
@@ -113,6 +130,7 @@ fn run_tool(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Serve(_) => unreachable!("served by main"),
         Command::Bench(args) => bench::run(&args),
+        Command::BenchServe(args) => bench_serve::run(&args),
         Command::Config { preset } => {
             let config = SsrConfig::preset(&preset).expect("clap checked the name");
             println!(

@@ -30,7 +30,7 @@ use burn::tensor::Device;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_server::AgentServiceServer;
 use tokio::net::TcpListener;
-use tokio_stream::wrappers::TcpListenerStream;
+use tonic::transport::server::TcpIncoming;
 use tonic_health::ServingStatus;
 
 pub use config::{LogFormat, ServeConfig};
@@ -42,6 +42,9 @@ use crate::model::SsrModel;
 use crate::model::config::SsrConfig;
 use crate::policy::SsrPolicy;
 use service::AgentServiceImpl;
+
+/// HTTP/2 flow-control window per stream, bytes (a whole 900x256 RGB frame and then some).
+pub const STREAM_WINDOW_BYTES: u32 = 4 << 20;
 
 /// Checkpoint metadata key holding the rig the network was trained with (JSON).
 pub const RIG_METADATA_KEY: &str = "rig";
@@ -99,32 +102,43 @@ pub fn load_policy(
     Ok((policy, info))
 }
 
-/// Serves until `shutdown` resolves, then drains and returns. Prints `listening on ADDR` (and
-/// `metrics on http://ADDR/metrics`) on stdout once the ports are bound, so a parent process
-/// that asked for port 0 can read the real one.
+/// The server's bound ports (bind first to learn the real port when asking for port 0).
+pub struct Listeners {
+    pub grpc: TcpListener,
+    pub metrics: Option<TcpListener>,
+}
+
+impl Listeners {
+    pub async fn bind(config: &ServeConfig) -> anyhow::Result<Self> {
+        let grpc = TcpListener::bind(config.listen)
+            .await
+            .with_context(|| format!("binding the gRPC port {}", config.listen))?;
+        let metrics = match config.metrics_listen {
+            Some(address) => Some(
+                TcpListener::bind(address)
+                    .await
+                    .with_context(|| format!("binding the metrics port {address}"))?,
+            ),
+            None => None,
+        };
+        Ok(Self { grpc, metrics })
+    }
+}
+
+/// Serves on `listeners` until `shutdown` resolves, then drains and returns.
 pub async fn run(
+    listeners: Listeners,
     config: ServeConfig,
     policy: SsrPolicy,
     info: ModelInfo,
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<()> {
     config.validate()?;
-    let listener = TcpListener::bind(config.listen)
-        .await
-        .with_context(|| format!("binding the gRPC port {}", config.listen))?;
+    let Listeners {
+        grpc: listener,
+        metrics: metrics_listener,
+    } = listeners;
     let address = listener.local_addr()?;
-    let metrics_listener = match config.metrics_listen {
-        Some(address) => Some(
-            TcpListener::bind(address)
-                .await
-                .with_context(|| format!("binding the metrics port {address}"))?,
-        ),
-        None => None,
-    };
-    println!("listening on {address}");
-    if let Some(listener) = &metrics_listener {
-        println!("metrics on http://{}/metrics", listener.local_addr()?);
-    }
 
     let engine = Engine::new(policy, info, &config);
     let (reporter, health) = tonic_health::server::health_reporter();
@@ -144,15 +158,21 @@ pub async fn run(
     let agent = AgentServiceServer::new(AgentServiceImpl::new(Arc::clone(&engine)))
         .max_decoding_message_size(config.max_message_bytes());
 
+    // Small answers must not wait for Nagle's algorithm.
+    let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
     let (stop_server, server_stopped) = tokio::sync::oneshot::channel::<()>();
     let server = tokio::spawn(
         tonic::transport::Server::builder()
             .timeout(config.request_timeout())
+            // Frames are 0.1-5 MB: HTTP/2's default 64 KiB windows would stall every request
+            // on flow-control round trips.
+            .initial_stream_window_size(STREAM_WINDOW_BYTES)
+            .initial_connection_window_size(4 * STREAM_WINDOW_BYTES)
             .add_service(health)
             .add_service(reflection_v1)
             .add_service(reflection_v1alpha)
             .add_service(agent)
-            .serve_with_incoming_shutdown(TcpListenerStream::new(listener), async {
+            .serve_with_incoming_shutdown(incoming, async {
                 let _ = server_stopped.await;
             }),
     );
