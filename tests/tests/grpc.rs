@@ -560,3 +560,48 @@ fn health_reflection_and_metrics_answer_and_sigterm_drains() {
         "SIGTERM should drain and exit 0, got {status}"
     );
 }
+
+#[test]
+fn load_reports_every_step_and_the_server_memory() {
+    let server = Server::start(&[]);
+    let dir = temp_dir("load");
+    let out = dir.join("load.json");
+    let run = Command::new(binary("sim-bridge"))
+        .args(["load", "--agent", &format!("grpc://{}", server.address)])
+        .args(["--metrics", &format!("http://{}/metrics", server.metrics)])
+        .args([
+            "--episodes",
+            "2",
+            "--rate",
+            "5",
+            "--duration",
+            "2",
+            "--frames",
+            "4",
+        ])
+        .args([
+            "--routes",
+            "town05-short-style",
+            "--vehicles",
+            "0",
+            "--quiet",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("status codes: Ok 20"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(report["report"]["count"], 20);
+    assert!(report["report"]["latency_ms"]["p99"].as_f64().unwrap() > 0.0);
+    assert!(report["server_rss_bytes_end"].as_u64().unwrap() > 10 << 20);
+    let steps = server.metric(r#"ssr_requests_total{method="Step",code="OK"}"#);
+    assert_eq!(steps, 20.0);
+}

@@ -178,7 +178,7 @@ fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalS
     let (target, server) = match target {
         Some(target) => (target, None),
         None => {
-            let server = LocalServer::start()?;
+            let server = LocalServer::start(false)?;
             (server.target(), Some(server))
         }
     };

@@ -4,6 +4,7 @@ mod args;
 mod bench;
 mod collect;
 mod eval;
+mod load;
 mod render;
 mod routes;
 mod towns;
@@ -48,6 +49,9 @@ enum Command {
     /// List or regenerate the bundled towns.
     #[command(subcommand)]
     Towns(towns::TownsCommand),
+    /// Load-test an agent server: N episodes ticking at a fixed rate with real frames; prints
+    /// RPS, latency percentiles (from intended send times), status codes and server memory.
+    Load(load::LoadArgs),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -72,6 +76,7 @@ pub fn init_logging(verbose: u8) {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Eval(args) => eval::run(args),
+        Command::Load(args) => load::run(args),
         Command::Render(args) => render::run(args),
         Command::Collect(args) => collect::run(args),
         Command::Routes(cmd) => routes::run(cmd),

@@ -129,7 +129,7 @@ impl GrpcAgent {
 }
 
 /// Polls `grpc.health.v1.Health/Check` until the whole server reports SERVING.
-async fn wait_until_serving(
+pub async fn wait_until_serving(
     endpoint: &Endpoint,
     timeout: Duration,
     target: &str,

@@ -15,6 +15,7 @@ use crate::agent::AgentError;
 pub struct LocalServer {
     child: Child,
     address: String,
+    metrics: Option<String>,
 }
 
 fn find_binary() -> Result<PathBuf, AgentError> {
@@ -43,20 +44,31 @@ fn find_binary() -> Result<PathBuf, AgentError> {
         })
 }
 
+/// The addresses a server prints: `listening on ADDR`, then `metrics on URL` when asked.
+fn read_addresses(
+    lines: &mut impl Iterator<Item = String>,
+    metrics: bool,
+) -> Option<(String, Option<String>)> {
+    let address = lines.find_map(|line| line.strip_prefix("listening on ").map(str::to_string))?;
+    let metrics_url = if metrics {
+        lines.find_map(|line| line.strip_prefix("metrics on ").map(str::to_string))
+    } else {
+        None
+    };
+    Some((address, metrics_url))
+}
+
 impl LocalServer {
-    /// Starts `ssr-agent serve` on 127.0.0.1 with a free port and no metrics port, and waits
-    /// until it has bound its port (not until it is warmed up: clients check health).
-    pub fn start() -> Result<Self, AgentError> {
+    /// Starts `ssr-agent serve` on 127.0.0.1 with a free port (and a free metrics port when
+    /// `metrics` is set), and waits until it has bound its ports (not until it is warmed up:
+    /// clients check health).
+    pub fn start(metrics: bool) -> Result<Self, AgentError> {
         let binary = find_binary()?;
         let mut command = Command::new(&binary);
+        let metrics_listen = if metrics { "127.0.0.1:0" } else { "off" };
         command
-            .args([
-                "serve",
-                "--listen",
-                "127.0.0.1:0",
-                "--metrics-listen",
-                "off",
-            ])
+            .args(["serve", "--listen", "127.0.0.1:0"])
+            .args(["--metrics-listen", metrics_listen])
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
@@ -69,20 +81,20 @@ impl LocalServer {
         let stdout = child.stdout.take().expect("stdout is piped");
         let (sender, receiver) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
-            let mut lines = BufReader::new(stdout).lines();
-            let address =
-                lines.find_map(|line| line.ok()?.strip_prefix("listening on ").map(str::to_string));
-            let _ = sender.send(address);
+            let mut lines = BufReader::new(stdout).lines().map_while(Result::ok);
+            let _ = sender.send(read_addresses(&mut lines, metrics));
             // Keep draining so the child never blocks on a full pipe.
             for _ in lines {}
         });
         let mut server = Self {
             child,
             address: String::new(),
+            metrics: None,
         };
         match receiver.recv_timeout(Duration::from_secs(60)) {
-            Ok(Some(address)) => {
+            Ok(Some((address, metrics))) => {
                 server.address = address;
+                server.metrics = metrics;
                 Ok(server)
             }
             _ => {
@@ -97,10 +109,14 @@ impl LocalServer {
             }
         }
     }
-
     /// `grpc://127.0.0.1:PORT`.
     pub fn target(&self) -> String {
         format!("grpc://{}", self.address)
+    }
+
+    /// `http://127.0.0.1:PORT/metrics`, when started with metrics.
+    pub fn metrics_url(&self) -> Option<&str> {
+        self.metrics.as_deref()
     }
 }
 

@@ -2,8 +2,10 @@
 //!
 //! - [`wire`]: conversions between simulator types and wire messages (shared with the server).
 //! - [`grpc`]: [`grpc::GrpcAgent`], an [`crate::agent::Agent`] backed by a remote server.
+//! - [`load`]: a fixed-rate load generator (no coordinated omission).
 //! - [`local`]: [`local::LocalServer`], an `ssr-agent serve` child process on loopback.
 
 pub mod grpc;
+pub mod load;
 pub mod local;
 pub mod wire;

@@ -1,0 +1,344 @@
+//! `sim-bridge load`: N concurrent episodes at a fixed tick rate against an agent server, with
+//! real frames (rendered from a bundled route while the expert drives, or read from a
+//! dataset); reports count, RPS, latency percentiles, status codes and the server's memory.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
+use sim_bridge::camera::Rig;
+use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
+use sim_bridge::client::load::{LoadConfig, LoadProgress, LoadReport, run_load};
+use sim_bridge::client::local::LocalServer;
+use sim_bridge::client::wire;
+use sim_bridge::dataset::Dataset;
+use sim_bridge::eval::run_route;
+use sim_bridge::expert::Expert;
+use sim_bridge::scoring::ScoringConfig;
+use sim_bridge::world::World;
+use ssrdrive_proto::v1;
+
+use super::args::{RouteArgs, WorldArgs};
+
+#[derive(Debug, Args)]
+pub struct LoadArgs {
+    /// The server: `grpc://HOST:PORT`, or `local` (starts `ssr-agent serve` for the run;
+    /// SSR_AGENT_* variables configure it).
+    #[arg(long, default_value = "local")]
+    agent: String,
+    /// Concurrent episodes, each on its own connection.
+    #[arg(long, default_value_t = 8)]
+    episodes: usize,
+    /// Steps per second of each episode.
+    #[arg(long, default_value_t = 10.0)]
+    rate: f64,
+    /// Seconds of load.
+    #[arg(long, default_value_t = 60.0)]
+    duration: f64,
+    /// Distinct frames to cycle through.
+    #[arg(long, default_value_t = 40)]
+    frames: usize,
+    /// Send frames of this dataset (its rig) instead of rendering some.
+    #[arg(long)]
+    dataset: Option<PathBuf>,
+    /// Camera rig to render and send: a preset or a JSON file [default: the rig the server
+    /// expects].
+    #[arg(long)]
+    rig: Option<String>,
+    /// The server's Prometheus URL (http://HOST:PORT/metrics), to report its memory before and
+    /// after; `local` finds its own.
+    #[arg(long)]
+    metrics: Option<String>,
+    /// Deadline of each step, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    call_timeout: f64,
+    /// Also write the report as JSON here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+    #[command(flatten)]
+    route: RouteArgs,
+    #[command(flatten)]
+    world: WorldArgs,
+}
+
+pub fn run(args: LoadArgs) -> anyhow::Result<()> {
+    if args.episodes == 0 || args.frames == 0 {
+        bail!("--episodes and --frames must be at least 1");
+    }
+    for (flag, value) in [
+        ("--rate", args.rate),
+        ("--duration", args.duration),
+        ("--call-timeout", args.call_timeout),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            bail!("{flag} must be a positive number, got {value}");
+        }
+    }
+    let local = match args.agent.as_str() {
+        "local" => Some(LocalServer::start(true)?),
+        _ => None,
+    };
+    let target = local
+        .as_ref()
+        .map_or_else(|| args.agent.clone(), LocalServer::target);
+    let metrics_url = args.metrics.clone().or_else(|| {
+        local
+            .as_ref()
+            .and_then(|l| l.metrics_url().map(str::to_string))
+    });
+
+    let dataset = args.dataset.as_deref().map(Dataset::open).transpose()?;
+    let rig = match (&dataset, &args.rig) {
+        (Some(dataset), _) => Some(dataset.manifest.rig.clone()),
+        (None, Some(spec)) => Some(Rig::from_name_or_file(spec)?),
+        (None, None) => None,
+    };
+    // Connecting once waits for SERVING and resolves the rig the server expects.
+    let probe = GrpcAgent::connect(
+        &target,
+        GrpcOptions {
+            rig,
+            ..GrpcOptions::default()
+        },
+    )?;
+    let rig = probe.sensors().expect("a gRPC agent has a rig");
+    eprintln!("server: {}", probe.name());
+    drop(probe);
+
+    let templates = match &dataset {
+        Some(dataset) => dataset_templates(dataset, args.frames)?,
+        None => rendered_templates(&args, &rig)?,
+    };
+    eprintln!(
+        "{} frame(s) of {} camera(s) ready; {} episodes at {} Hz for {} s",
+        templates.len(),
+        rig.cameras.len(),
+        args.episodes,
+        args.rate,
+        args.duration
+    );
+    let rss_start = metrics_url.as_deref().map(resident_bytes).transpose()?;
+    let config = LoadConfig {
+        target,
+        episodes: args.episodes,
+        rate_hz: args.rate,
+        duration: Duration::from_secs_f64(args.duration),
+        call_timeout: Duration::from_secs_f64(args.call_timeout),
+        rig: wire::rig_to_proto(&rig),
+    };
+    let progress = Arc::new(LoadProgress::default());
+    let bar = progress_bar(args.quiet, args.duration);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    let report = runtime.block_on(async {
+        let ticker = {
+            let (bar, progress) = (bar.clone(), Arc::clone(&progress));
+            tokio::spawn(async move {
+                loop {
+                    tokio::time::sleep(Duration::from_millis(500)).await;
+                    bar.set_position(bar.elapsed().as_secs());
+                    bar.set_message(format!(
+                        "{} steps, {} errors",
+                        progress.steps.load(Ordering::Relaxed),
+                        progress.errors.load(Ordering::Relaxed)
+                    ));
+                }
+            })
+        };
+        let report = run_load(&config, Arc::new(templates), Arc::clone(&progress)).await;
+        ticker.abort();
+        report
+    })?;
+    bar.finish_and_clear();
+    let rss_end = metrics_url.as_deref().map(resident_bytes).transpose()?;
+    print_report(&report, rss_start, rss_end);
+    if let Some(path) = &args.out {
+        let json = serde_json::json!({
+            "report": report,
+            "server_rss_bytes_start": rss_start,
+            "server_rss_bytes_end": rss_end,
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn print_report(report: &LoadReport, rss_start: Option<u64>, rss_end: Option<u64>) {
+    let l = &report.latency_ms;
+    println!(
+        "load: {} episodes at {} Hz for {:.1} s: {} steps, {:.1} steps/s",
+        report.episodes, report.rate_hz, report.duration_s, report.count, report.rps
+    );
+    println!(
+        "latency from intended send (ms): p50 {:.1}  p90 {:.1}  p99 {:.1}  max {:.1}",
+        l.p50, l.p90, l.p99, l.max
+    );
+    let codes: Vec<String> = report
+        .codes
+        .iter()
+        .map(|(code, n)| format!("{code} {n}"))
+        .collect();
+    println!("status codes: {}", codes.join(", "));
+    if let (Some(start), Some(end)) = (rss_start, rss_end) {
+        println!(
+            "server resident memory: {:.1} MiB at start, {:.1} MiB at end",
+            start as f64 / (1 << 20) as f64,
+            end as f64 / (1 << 20) as f64
+        );
+    }
+}
+
+fn progress_bar(quiet: bool, seconds: f64) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(seconds.ceil() as u64);
+    let style = ProgressStyle::with_template("load [{bar:40}] {pos}/{len} s  {msg}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style.progress_chars("=> "));
+    bar
+}
+
+/// `ssr_process_resident_bytes` from a Prometheus endpoint (plain HTTP/1.1 GET).
+fn resident_bytes(url: &str) -> anyhow::Result<u64> {
+    let rest = url
+        .strip_prefix("http://")
+        .with_context(|| format!("--metrics {url}: expected http://HOST:PORT/metrics"))?;
+    let (host, path) = rest.split_once('/').unwrap_or((rest, "metrics"));
+    let mut stream = TcpStream::connect(host).with_context(|| format!("connecting to {url}"))?;
+    stream.set_read_timeout(Some(Duration::from_secs(10)))?;
+    write!(
+        stream,
+        "GET /{path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )?;
+    let mut text = String::new();
+    stream.read_to_string(&mut text)?;
+    text.lines()
+        .find_map(|line| {
+            line.strip_prefix("ssr_process_resident_bytes ")?
+                .trim()
+                .parse()
+                .ok()
+        })
+        .with_context(|| format!("{url} has no ssr_process_resident_bytes"))
+}
+
+/// Step templates from the first frames of a dataset, in episode order.
+fn dataset_templates(dataset: &Dataset, wanted: usize) -> anyhow::Result<Vec<v1::StepRequest>> {
+    let mut templates = Vec::new();
+    for entry in &dataset.manifest.episode_list {
+        for record in dataset.frames(&entry.name)? {
+            let images = dataset.images(&entry.name, &record)?;
+            let frames = images
+                .into_iter()
+                .zip(&dataset.manifest.rig.cameras)
+                .map(|(image, camera)| sim_bridge::agent::CameraFrame {
+                    camera: camera.id.clone(),
+                    width: image.width,
+                    height: image.height,
+                    rgb: image.rgb,
+                })
+                .collect();
+            let observation = Observation {
+                time: record.time,
+                frame: record.tick,
+                speed: record.speed,
+                position: record.position.into(),
+                yaw: record.yaw,
+                compass: Observation::compass_of(record.yaw),
+                command: sim_bridge::route::RoadOption::from_value(record.command)
+                    .unwrap_or(sim_bridge::route::RoadOption::LaneFollow),
+                target_point: record.target_point.into(),
+                frames,
+            };
+            templates.push(wire::step_request("", &observation));
+            if templates.len() == wanted {
+                return Ok(templates);
+            }
+        }
+    }
+    if templates.is_empty() {
+        bail!("the dataset holds no frames");
+    }
+    Ok(templates)
+}
+
+/// Step templates rendered while the expert drives the first selected route.
+fn rendered_templates(args: &LoadArgs, rig: &Rig) -> anyhow::Result<Vec<v1::StepRequest>> {
+    let (map, planned) = args.route.load()?;
+    let first = &planned[0];
+    let every = 5;
+    let mut capture = Capture {
+        expert: Expert::new(),
+        rig: rig.clone(),
+        every,
+        wanted: args.frames,
+        templates: Vec::new(),
+    };
+    let scoring = ScoringConfig {
+        timeout: Some((args.frames as u64 * every) as f64 * sim_bridge::world::DT + 1.0),
+        ..ScoringConfig::default()
+    };
+    let world = args.world.config(&map, args.world.seed);
+    run_route(
+        &map,
+        &first.spec,
+        &first.dense,
+        &mut capture,
+        world,
+        scoring,
+        0,
+        0,
+        |_| {},
+    );
+    if capture.templates.is_empty() {
+        bail!("no frames were rendered from route {}", first.spec.id);
+    }
+    Ok(capture.templates)
+}
+
+/// The expert driving with the load rig, keeping a step template every `every` ticks.
+struct Capture {
+    expert: Expert,
+    rig: Rig,
+    every: u64,
+    wanted: usize,
+    templates: Vec<v1::StepRequest>,
+}
+
+impl Agent for Capture {
+    fn name(&self) -> String {
+        "expert (capturing frames)".into()
+    }
+
+    fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
+        self.expert.start_route(ctx)
+    }
+
+    fn sensors(&self) -> Option<Rig> {
+        Some(self.rig.clone())
+    }
+
+    fn wants_frames(&self, frame: u64) -> bool {
+        frame % self.every == 0 && self.templates.len() < self.wanted
+    }
+
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
+        if !obs.frames.is_empty() {
+            self.templates.push(wire::step_request("", obs));
+        }
+        self.expert.run_step(obs, world)
+    }
+}

@@ -1,0 +1,189 @@
+//! A load generator for agent servers: N episodes, each on its own connection, ticking at a
+//! fixed rate like N simulators in lockstep, for a fixed time.
+//!
+//! No coordinated omission: every step has an *intended* send time on the episode's fixed
+//! schedule, and its latency is measured from that time, so a slow answer also counts against
+//! the steps it delays (an episode never has two steps in flight, as a lockstep simulator
+//! would not). Steps cycle through prepared request templates (real rendered or recorded
+//! frames) with strictly increasing frame indices.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use ssrdrive_proto::v1;
+use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use tonic::transport::Endpoint;
+
+use super::grpc::{endpoint_uri, wait_until_serving};
+use crate::agent::AgentError;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct LoadConfig {
+    /// `grpc://HOST:PORT`.
+    pub target: String,
+    pub episodes: usize,
+    /// Steps per second per episode.
+    pub rate_hz: f64,
+    pub duration: Duration,
+    /// Deadline of each step.
+    pub call_timeout: Duration,
+    pub rig: v1::Rig,
+}
+
+/// Counters shared with a progress display while the run goes.
+#[derive(Debug, Default)]
+pub struct LoadProgress {
+    pub steps: AtomicU64,
+    pub errors: AtomicU64,
+}
+
+/// What a run measured.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LoadReport {
+    pub episodes: usize,
+    pub rate_hz: f64,
+    /// Wall time from the first intended step to the last answer, seconds (longer than the
+    /// configured duration when the server falls behind).
+    pub duration_s: f64,
+    /// Steps answered (any status): every step the schedule held.
+    pub count: usize,
+    /// Answered steps per second of wall time.
+    pub rps: f64,
+    /// Latency from each step's intended send time, milliseconds.
+    pub latency_ms: Percentiles,
+    /// Answers by gRPC status code name ("Ok" for successes).
+    pub codes: BTreeMap<String, usize>,
+}
+
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Percentiles {
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// Of unsorted samples (NaN when empty).
+    pub fn of(mut samples: Vec<f64>) -> Self {
+        samples.sort_by(f64::total_cmp);
+        let at = |p: f64| {
+            if samples.is_empty() {
+                f64::NAN
+            } else {
+                samples[((p * (samples.len() - 1) as f64).round() as usize).min(samples.len() - 1)]
+            }
+        };
+        Self {
+            p50: at(0.5),
+            p90: at(0.9),
+            p99: at(0.99),
+            max: at(1.0),
+        }
+    }
+}
+
+/// One episode's results.
+struct EpisodeResult {
+    latencies: Vec<f64>,
+    codes: BTreeMap<String, usize>,
+}
+
+/// Runs the load; `templates` are cycled (episode `e` starts at template `e`).
+pub async fn run_load(
+    config: &LoadConfig,
+    templates: Arc<Vec<v1::StepRequest>>,
+    progress: Arc<LoadProgress>,
+) -> Result<LoadReport, AgentError> {
+    if templates.is_empty() {
+        return Err(AgentError("no step templates to send".into()));
+    }
+    let endpoint = Endpoint::from_shared(endpoint_uri(&config.target))
+        .map_err(|e| AgentError(format!("'{}' is not a server address: {e}", config.target)))?;
+    wait_until_serving(&endpoint, Duration::from_secs(60), &config.target).await?;
+    let period = Duration::from_secs_f64(1.0 / config.rate_hz);
+    // Episodes start spread over one period, as independent simulators would.
+    let start = tokio::time::Instant::now() + Duration::from_millis(200);
+    let end = start + config.duration;
+    let mut tasks = Vec::with_capacity(config.episodes);
+    for episode in 0..config.episodes {
+        let channel = endpoint
+            .connect()
+            .await
+            .map_err(|e| AgentError(format!("connecting to {}: {e}", config.target)))?;
+        let mut client = AgentServiceClient::new(channel);
+        let id = client
+            .start_episode(v1::StartEpisodeRequest {
+                rig: Some(config.rig.clone()),
+                client: format!("sim-bridge load episode {episode}"),
+                ..Default::default()
+            })
+            .await
+            .map_err(|s| AgentError(format!("StartEpisode: {:?}: {}", s.code(), s.message())))?
+            .into_inner()
+            .episode_id;
+        let offset = period.mul_f64(episode as f64 / config.episodes as f64);
+        let (templates, progress) = (Arc::clone(&templates), Arc::clone(&progress));
+        let call_timeout = config.call_timeout;
+        tasks.push(tokio::spawn(async move {
+            let mut result = EpisodeResult {
+                latencies: Vec::new(),
+                codes: BTreeMap::new(),
+            };
+            let mut k: u64 = 0;
+            loop {
+                let intended = start + offset + period.mul_f64(k as f64);
+                if intended >= end {
+                    break;
+                }
+                tokio::time::sleep_until(intended).await;
+                let mut request = templates[(episode + k as usize) % templates.len()].clone();
+                request.episode_id = id.clone();
+                request.frame_index = k;
+                let mut request = tonic::Request::new(request);
+                request.set_timeout(call_timeout);
+                let code = match client.step(request).await {
+                    Ok(_) => "Ok".to_string(),
+                    Err(status) => {
+                        progress.errors.fetch_add(1, Ordering::Relaxed);
+                        format!("{:?}", status.code())
+                    }
+                };
+                result
+                    .latencies
+                    .push(intended.elapsed().as_secs_f64() * 1e3);
+                *result.codes.entry(code).or_default() += 1;
+                progress.steps.fetch_add(1, Ordering::Relaxed);
+                k += 1;
+            }
+            let _ = client
+                .end_episode(v1::EndEpisodeRequest { episode_id: id })
+                .await;
+            result
+        }));
+    }
+    let mut latencies = Vec::new();
+    let mut codes = BTreeMap::new();
+    for task in tasks {
+        let result = task
+            .await
+            .map_err(|e| AgentError(format!("a load episode failed: {e}")))?;
+        latencies.extend(result.latencies);
+        for (code, n) in result.codes {
+            *codes.entry(code).or_default() += n;
+        }
+    }
+    let duration_s = start.elapsed().as_secs_f64();
+    Ok(LoadReport {
+        episodes: config.episodes,
+        rate_hz: config.rate_hz,
+        duration_s,
+        count: latencies.len(),
+        rps: latencies.len() as f64 / duration_s,
+        latency_ms: Percentiles::of(latencies),
+        codes,
+    })
+}
