@@ -1,4 +1,4 @@
-//! Compiles `ssrdrive/v1/agent.proto` with protox (a protobuf compiler in pure Rust, so no
+//! Compiles `ssrdrive/v1/{agent,log}.proto` with protox (a protobuf compiler in pure Rust, so no
 //! `protoc` is needed), generates the prost messages and tonic client/server from the result, and
 //! writes the encoded file descriptor set that server reflection serves.
 
@@ -6,11 +6,13 @@ use std::path::PathBuf;
 
 use prost::Message as _;
 
-const PROTO: &str = "ssrdrive/v1/agent.proto";
+const PROTOS: [&str; 2] = ["ssrdrive/v1/agent.proto", "ssrdrive/v1/log.proto"];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    println!("cargo:rerun-if-changed={PROTO}");
-    let descriptors = protox::compile([PROTO], ["."])?;
+    for proto in PROTOS {
+        println!("cargo:rerun-if-changed={proto}");
+    }
+    let descriptors = protox::compile(PROTOS, ["."])?;
     let out_dir = PathBuf::from(std::env::var("OUT_DIR")?);
     std::fs::write(
         out_dir.join("ssrdrive_descriptor.bin"),

@@ -68,6 +68,12 @@ pub struct RouteContext<'a> {
     pub route: &'a DenseRoute,
     /// The downsampled global plan, as the leaderboard hands it to agents.
     pub plan: &'a [PlanNode],
+    /// The route's id in its set, the repetition and the world seed (for logs).
+    pub route_id: &'a str,
+    pub repetition: usize,
+    pub seed: u64,
+    /// The ego's half length and half width, metres.
+    pub ego_half_extent: DVec2,
 }
 
 /// An agent that cannot go on (a lost server connection, a refused request). The route ends
@@ -93,6 +99,11 @@ pub trait Agent {
     fn wants_frames(&self, frame: u64) -> bool {
         let _ = frame;
         true
+    }
+    /// The trajectory planned on the last tick, ego frame (x forward, y left), metres, every
+    /// 0.5 s; empty for agents that plan none.
+    fn planned_trajectory(&self) -> Vec<DVec2> {
+        Vec::new()
     }
     /// Decide this tick's control. `world` is privileged ground truth: only in-process agents
     /// such as the expert may read it; sensor-based agents use `obs` alone.

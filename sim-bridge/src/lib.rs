@@ -15,6 +15,7 @@ pub mod expert;
 pub mod image;
 pub mod map;
 pub mod render;
+pub mod replay;
 pub mod route;
 pub mod scoring;
 pub mod towngen;

@@ -605,3 +605,65 @@ fn load_reports_every_step_and_the_server_memory() {
     let steps = server.metric(r#"ssr_requests_total{method="Step",code="OK"}"#);
     assert_eq!(steps, 20.0);
 }
+
+#[test]
+fn a_recorded_run_replays_without_drift() {
+    let server = Server::start(&[]);
+    let dir = temp_dir("replay");
+    let logs = dir.join("logs");
+    let run = Command::new(binary("sim-bridge"))
+        .args(["eval", "--agent", &format!("grpc://{}", server.address)])
+        .args([
+            "--routes",
+            "town05-short-style",
+            "--limit",
+            "1",
+            "--timeout",
+            "1.5",
+        ])
+        .args(["--vehicles", "0", "--quiet", "--record"])
+        .arg(&logs)
+        .arg("--out")
+        .arg(dir.join("results.json"))
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let out = dir.join("replay.json");
+    let run = Command::new(binary("sim-bridge"))
+        .args([
+            "replay",
+            "--agent",
+            &format!("grpc://{}", server.address),
+            "--out",
+        ])
+        .arg(&out)
+        .arg(&logs)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("open loop at 1 s: L2"), "{stdout}");
+    let reports: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let report = &reports[0];
+    assert_eq!(report["ticks"], 31);
+    assert_eq!(report["codes"]["Ok"], 31);
+    // The same server and weights answer the same frames the same way.
+    for field in [
+        "steer_diff",
+        "throttle_diff",
+        "brake_diff",
+        "trajectory_drift_m",
+    ] {
+        assert_eq!(report[field]["max"], 0.0, "{field}: {report}");
+    }
+    assert!(report["open_loop"][0]["samples"].as_u64().unwrap() > 0);
+}

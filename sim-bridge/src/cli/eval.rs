@@ -15,6 +15,7 @@ use sim_bridge::client::local::LocalServer;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::render::topdown::write_run_png;
+use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, ScoringConfig, summary_table};
 
 use super::args::{PlannedRoute, RouteArgs, WorldArgs};
@@ -50,6 +51,13 @@ pub struct EvalArgs {
     /// Where to write the leaderboard results JSON.
     #[arg(long, default_value = "results.json")]
     out: PathBuf,
+    /// Write a step log of each run into this folder (requests with PNG frames, the agent's
+    /// controls and plans, ground truth), for `sim-bridge replay`.
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// Rig rendered into step logs of an agent without cameras (the expert).
+    #[arg(long, default_value = "tcp-small")]
+    record_rig: String,
     /// Write a top-down PNG of each run into this folder.
     #[arg(long)]
     pictures: Option<PathBuf>,
@@ -72,6 +80,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         ..ScoringConfig::default()
     };
     let (mut agent, _local_server) = build_agent(&args)?;
+    if let Some(dir) = &args.record {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let rig = Rig::from_name_or_file(&args.record_rig)?;
+        agent = Box::new(LoggingAgent::new(agent, rig, dir.clone()));
+    }
     eprintln!("agent: {}", agent.name());
     let (map, planned) = args.route.load()?;
     if let Some(dir) = &args.pictures {

@@ -6,6 +6,7 @@ mod collect;
 mod eval;
 mod load;
 mod render;
+mod replay;
 mod routes;
 mod towns;
 
@@ -52,6 +53,9 @@ enum Command {
     /// Load-test an agent server: N episodes ticking at a fixed rate with real frames; prints
     /// RPS, latency percentiles (from intended send times), status codes and server memory.
     Load(load::LoadArgs),
+    /// Re-feed step logs (from `eval --record`) to an agent server: latency, drift from the
+    /// recorded answers, open-loop L2 and collision rate at 1, 2, 3 s.
+    Replay(replay::ReplayArgs),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -77,6 +81,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Eval(args) => eval::run(args),
         Command::Load(args) => load::run(args),
+        Command::Replay(args) => replay::run(args),
         Command::Render(args) => render::run(args),
         Command::Collect(args) => collect::run(args),
         Command::Routes(cmd) => routes::run(cmd),

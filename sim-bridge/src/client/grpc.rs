@@ -5,6 +5,8 @@
 
 use std::time::Duration;
 
+use glam::DVec2;
+
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use tonic::transport::{Channel, Endpoint};
@@ -52,6 +54,7 @@ pub struct GrpcAgent {
     rig: Rig,
     options: GrpcOptions,
     episode: Option<String>,
+    trajectory: Vec<DVec2>,
 }
 
 fn crashed(what: &str, status: &tonic::Status) -> AgentError {
@@ -102,6 +105,7 @@ impl GrpcAgent {
             rig,
             options,
             episode: None,
+            trajectory: Vec::new(),
         })
     }
 
@@ -189,6 +193,10 @@ impl Agent for GrpcAgent {
         self.end_episode();
     }
 
+    fn planned_trajectory(&self) -> Vec<DVec2> {
+        self.trajectory.clone()
+    }
+
     fn sensors(&self) -> Option<Rig> {
         Some(self.rig.clone())
     }
@@ -204,6 +212,11 @@ impl Agent for GrpcAgent {
             .block_on(self.client.step(request))
             .map_err(|s| crashed(&format!("Step {}", obs.frame), &s))?
             .into_inner();
+        self.trajectory = reply
+            .trajectory
+            .iter()
+            .map(|p| DVec2::new(p.x, p.y))
+            .collect();
         let control = reply
             .control
             .ok_or_else(|| AgentError(format!("Step {}: the answer has no control", obs.frame)))?;

@@ -57,14 +57,18 @@ pub fn run_route(
     let started = Instant::now();
     let plan = global_plan(dense);
     let mut follower = RouteFollower::new(plan.clone());
+    let mut world = World::new(map, dense, world_config);
     let mut agent_error = agent
         .start_route(&RouteContext {
             map,
             route: dense,
             plan: &plan,
+            route_id: &spec.id,
+            repetition,
+            seed: world_config.seed,
+            ego_half_extent: world.ego_state().half_extent,
         })
         .err();
-    let mut world = World::new(map, dense, world_config);
     let mut cameras = None;
     if agent_error.is_none()
         && let Some(rig) = agent.sensors()

@@ -1,0 +1,119 @@
+//! `sim-bridge replay`: re-feed step logs (from `eval --record`) to an agent server and report
+//! latency, drift from the recorded answers and open-loop metrics.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use sim_bridge::client::local::LocalServer;
+use sim_bridge::replay::{ReplayReport, Spread, log::read_log, replay};
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// Step log files (`*.ssrlog`), or folders of them.
+    #[arg(required = true)]
+    logs: Vec<PathBuf>,
+    /// The server: `grpc://HOST:PORT`, or `local` (starts `ssr-agent serve` for the run).
+    #[arg(long, default_value = "local")]
+    agent: String,
+    /// Deadline of each step, seconds.
+    #[arg(long, default_value_t = 30.0)]
+    call_timeout: f64,
+    /// Also write the reports as a JSON list here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+/// The log files named, folders expanded (sorted).
+fn log_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(path)
+                .with_context(|| format!("reading {}", path.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|e| e == "ssrlog"))
+                .collect();
+            found.sort();
+            files.extend(found);
+        } else {
+            files.push(path.clone());
+        }
+    }
+    if files.is_empty() {
+        bail!("no .ssrlog files in {paths:?}");
+    }
+    Ok(files)
+}
+
+fn spread(s: Option<Spread>) -> String {
+    s.map_or("-".into(), |s| format!("{:.3}/{:.3}", s.mean, s.max))
+}
+
+fn print(report: &ReplayReport, path: &std::path::Path) {
+    println!(
+        "{}: route {} ({} ticks{}, recorded with {})",
+        path.display(),
+        report.route_id,
+        report.ticks,
+        if report.truncated { ", cut short" } else { "" },
+        report.recorded_agent
+    );
+    let l = &report.latency_ms;
+    println!(
+        "  latency ms: p50 {:.1} p90 {:.1} p99 {:.1} max {:.1}; codes {:?}",
+        l.p50, l.p90, l.p99, l.max, report.codes
+    );
+    println!(
+        "  |replayed - recorded| mean/max: steer {} throttle {} brake {} trajectory {} m",
+        spread(report.steer_diff),
+        spread(report.throttle_diff),
+        spread(report.brake_diff),
+        spread(report.trajectory_drift_m)
+    );
+    for h in &report.open_loop {
+        let value =
+            |v: Option<f64>, scale: f64| v.map_or("-".into(), |v| format!("{:.3}", v * scale));
+        println!(
+            "  open loop at {:.0} s: L2 {} m, collisions {} % ({} samples)",
+            h.horizon_s,
+            value(h.l2_m, 1.0),
+            value(h.collision_rate, 100.0),
+            h.samples
+        );
+    }
+}
+
+pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    if !(args.call_timeout.is_finite() && args.call_timeout > 0.0) {
+        bail!("--call-timeout must be a positive number of seconds");
+    }
+    let files = log_files(&args.logs)?;
+    let local = match args.agent.as_str() {
+        "local" => Some(LocalServer::start(false)?),
+        _ => None,
+    };
+    let target = local
+        .as_ref()
+        .map_or_else(|| args.agent.clone(), LocalServer::target);
+    let mut reports = Vec::new();
+    for path in &files {
+        let log = read_log(path)?;
+        if log.truncated {
+            eprintln!(
+                "warning: {} was cut short; replaying its {} whole ticks",
+                path.display(),
+                log.ticks.len()
+            );
+        }
+        let report = replay(&log, &target, Duration::from_secs_f64(args.call_timeout))?;
+        print(&report, path);
+        reports.push(report);
+    }
+    if let Some(out) = &args.out {
+        std::fs::write(out, serde_json::to_string_pretty(&reports)?)
+            .with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok(())
+}

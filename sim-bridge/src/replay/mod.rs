@@ -1,0 +1,168 @@
+//! Recording and replaying agent steps.
+//!
+//! - [`log`]: the step log file format (`proto/ssrdrive/v1/log.proto`), writer and reader.
+//! - [`recorder`]: [`recorder::LoggingAgent`], which logs any agent's route runs.
+//! - [`metrics`]: open-loop L2 and collision rate at 1, 2 and 3 s.
+//!
+//! [`replay`] re-feeds a log's requests, in order, as one episode to an agent server and
+//! reports the latency of each step, how far the answers drift from the recorded controls and
+//! trajectories (zero drift from a log of the same server and checkpoint means the server is
+//! deterministic; from a log of the expert it is the control error against the expert), and
+//! the open-loop metrics of the server's trajectories against what the recorded ego did.
+
+pub mod log;
+pub mod metrics;
+pub mod recorder;
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use glam::DVec2;
+use ssrdrive_proto::v1;
+use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use tonic::transport::Endpoint;
+
+use crate::agent::AgentError;
+use crate::client::grpc::{endpoint_uri, wait_until_serving};
+use crate::client::load::Percentiles;
+use log::StepLog;
+use metrics::{HorizonMetrics, open_loop};
+
+/// Mean and max of absolute differences.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct Spread {
+    pub mean: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    fn of(values: &[f64]) -> Option<Self> {
+        (!values.is_empty()).then(|| Self {
+            mean: values.iter().sum::<f64>() / values.len() as f64,
+            max: values.iter().copied().fold(0.0, f64::max),
+        })
+    }
+}
+
+/// What a replay measured.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ReplayReport {
+    /// Who drove when the log was recorded.
+    pub recorded_agent: String,
+    pub route_id: String,
+    pub ticks: usize,
+    /// The log was cut short (its whole ticks were replayed).
+    pub truncated: bool,
+    /// Round-trip latency per step, milliseconds.
+    pub latency_ms: Percentiles,
+    /// Answers by gRPC status code name.
+    pub codes: BTreeMap<String, usize>,
+    /// |replayed - recorded| of steer, throttle and brake.
+    pub steer_diff: Option<Spread>,
+    pub throttle_diff: Option<Spread>,
+    pub brake_diff: Option<Spread>,
+    /// Mean distance between replayed and recorded waypoints, metres (logs of agents that
+    /// planned).
+    pub trajectory_drift_m: Option<Spread>,
+    pub open_loop: Vec<HorizonMetrics>,
+}
+
+/// Replays `log` to the server at `target` (see the module doc).
+pub fn replay(
+    log: &StepLog,
+    target: &str,
+    call_timeout: Duration,
+) -> Result<ReplayReport, AgentError> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| AgentError(format!("starting the client runtime: {e}")))?;
+    runtime.block_on(replay_async(log, target, call_timeout))
+}
+
+fn status_error(what: &str, status: &tonic::Status) -> AgentError {
+    AgentError(format!("{what}: {:?}: {}", status.code(), status.message()))
+}
+
+async fn replay_async(
+    log: &StepLog,
+    target: &str,
+    call_timeout: Duration,
+) -> Result<ReplayReport, AgentError> {
+    let endpoint = Endpoint::from_shared(endpoint_uri(target))
+        .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?;
+    let channel = wait_until_serving(&endpoint, Duration::from_secs(120), target).await?;
+    let mut client = AgentServiceClient::new(channel);
+    let episode_id = client
+        .start_episode(v1::StartEpisodeRequest {
+            rig: log.header.rig.clone(),
+            client: format!("sim-bridge replay of route {}", log.header.route_id),
+            ..Default::default()
+        })
+        .await
+        .map_err(|s| status_error("StartEpisode", &s))?
+        .into_inner()
+        .episode_id;
+    let mut latencies = Vec::with_capacity(log.ticks.len());
+    let mut codes = BTreeMap::new();
+    let mut predictions = Vec::with_capacity(log.ticks.len());
+    let (mut steer, mut throttle, mut brake, mut drift) = (vec![], vec![], vec![], vec![]);
+    for tick in &log.ticks {
+        let Some(mut request) = tick.request.clone() else {
+            predictions.push(Vec::new());
+            continue;
+        };
+        request.episode_id = episode_id.clone();
+        let mut call = tonic::Request::new(request);
+        call.set_timeout(call_timeout);
+        let started = Instant::now();
+        let answer = client.step(call).await;
+        latencies.push(started.elapsed().as_secs_f64() * 1e3);
+        let answer = match answer {
+            Ok(answer) => answer.into_inner(),
+            Err(status) => {
+                *codes.entry(format!("{:?}", status.code())).or_default() += 1;
+                predictions.push(Vec::new());
+                continue;
+            }
+        };
+        *codes.entry("Ok".to_string()).or_default() += 1;
+        if let (Some(now), Some(then)) = (&answer.control, &tick.control) {
+            steer.push((now.steer - then.steer).abs());
+            throttle.push((now.throttle - then.throttle).abs());
+            brake.push((now.brake - then.brake).abs());
+        }
+        let plan: Vec<DVec2> = answer
+            .trajectory
+            .iter()
+            .map(|p| DVec2::new(p.x, p.y))
+            .collect();
+        if !tick.trajectory.is_empty() {
+            let distances: Vec<f64> = plan
+                .iter()
+                .zip(&tick.trajectory)
+                .map(|(a, b)| a.distance(DVec2::new(b.x, b.y)))
+                .collect();
+            if let Some(spread) = Spread::of(&distances) {
+                drift.push(spread.mean);
+            }
+        }
+        predictions.push(plan);
+    }
+    let _ = client
+        .end_episode(v1::EndEpisodeRequest { episode_id })
+        .await;
+    Ok(ReplayReport {
+        recorded_agent: log.header.agent.clone(),
+        route_id: log.header.route_id.clone(),
+        ticks: log.ticks.len(),
+        truncated: log.truncated,
+        latency_ms: Percentiles::of(latencies),
+        codes,
+        steer_diff: Spread::of(&steer),
+        throttle_diff: Spread::of(&throttle),
+        brake_diff: Spread::of(&brake),
+        trajectory_drift_m: Spread::of(&drift),
+        open_loop: open_loop(log, &predictions),
+    })
+}
