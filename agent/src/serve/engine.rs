@@ -235,7 +235,7 @@ impl Engine {
         })
         .await
         .map_err(|e| ServeError::Internal(format!("image decoding failed: {e}")))?;
-        let input = input.map_err(|e| bad(e))?;
+        let input = input.map_err(bad)?;
         self.policy.check(&input).map_err(bad)?;
 
         let (reply, answer) = oneshot::channel();

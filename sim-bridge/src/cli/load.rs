@@ -332,7 +332,7 @@ impl Agent for Capture {
     }
 
     fn wants_frames(&self, frame: u64) -> bool {
-        frame % self.every == 0 && self.templates.len() < self.wanted
+        frame.is_multiple_of(self.every) && self.templates.len() < self.wanted
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
