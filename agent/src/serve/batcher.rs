@@ -2,7 +2,8 @@
 //!
 //! Requests enter a bounded queue ([`Batcher::submit`] refuses when it is full, so the server
 //! sheds load instead of growing latency without bound). One model thread takes the oldest step,
-//! waits at most `max_queue_delay` for up to `max_batch - 1` more, drops steps whose caller has
+//! waits at most `max_queue_delay` for up to `max_batch - 1` more (not at all once every open
+//! episode is in the batch: a lone episode never waits for company), drops steps whose caller has
 //! gone (deadline passed or cancelled; their episode state goes back untouched), runs
 //! [`SsrPolicy::step_batch`] and answers each caller. `max_batch = 1` serves steps one by one.
 
@@ -53,6 +54,9 @@ pub enum SubmitError {
     Stopped,
 }
 
+/// How many episodes are open, i.e. could send a step to join a batch.
+pub type OpenEpisodes = Arc<dyn Fn() -> usize + Send + Sync>;
+
 /// The queue in front of the model thread.
 pub struct Batcher {
     queue: SyncSender<StepJob>,
@@ -61,11 +65,16 @@ pub struct Batcher {
 
 impl Batcher {
     /// Starts the model thread.
-    pub fn start(policy: Arc<SsrPolicy>, settings: BatchSettings, metrics: Arc<Metrics>) -> Self {
+    pub fn start(
+        policy: Arc<SsrPolicy>,
+        settings: BatchSettings,
+        metrics: Arc<Metrics>,
+        open_episodes: OpenEpisodes,
+    ) -> Self {
         let (queue, jobs) = std::sync::mpsc::sync_channel(settings.max_queue);
         std::thread::Builder::new()
             .name("ssr-model".into())
-            .spawn(move || model_loop(&policy, settings, &metrics, &jobs))
+            .spawn(move || model_loop(&policy, settings, &metrics, &jobs, &*open_episodes))
             .expect("spawning the model thread");
         Self {
             queue,
@@ -87,12 +96,17 @@ fn model_loop(
     settings: BatchSettings,
     metrics: &Metrics,
     jobs: &Receiver<StepJob>,
+    open_episodes: &(dyn Fn() -> usize + Send + Sync),
 ) {
     while let Ok(first) = jobs.recv() {
         let window_end = Instant::now() + settings.max_queue_delay;
         let mut batch = vec![first];
         while batch.len() < settings.max_batch {
-            let wait = window_end.saturating_duration_since(Instant::now());
+            let wait = if batch.len() >= open_episodes() {
+                Duration::ZERO
+            } else {
+                window_end.saturating_duration_since(Instant::now())
+            };
             match jobs.recv_timeout(wait) {
                 Ok(job) => batch.push(job),
                 Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => break,

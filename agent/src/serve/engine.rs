@@ -96,6 +96,8 @@ impl Engine {
     pub fn new(policy: SsrPolicy, info: ModelInfo, config: &ServeConfig) -> Arc<Self> {
         let policy = Arc::new(policy);
         let metrics = Metrics::new();
+        let episodes = EpisodeTable::new(config.max_episodes, config.idle_timeout());
+        let open = Arc::clone(&episodes);
         let batcher = Batcher::start(
             Arc::clone(&policy),
             BatchSettings {
@@ -104,11 +106,12 @@ impl Engine {
                 max_queue: config.max_queue,
             },
             Arc::clone(&metrics),
+            Arc::new(move || open.len()),
         );
         Arc::new(Self {
             policy,
             info,
-            episodes: EpisodeTable::new(config.max_episodes, config.idle_timeout()),
+            episodes,
             batcher,
             metrics,
             config: config.clone(),
