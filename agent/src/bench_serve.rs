@@ -5,14 +5,16 @@
 //!    identical inputs, in alternating blocks so machine noise hits both alike: median and p99
 //!    of each and the overhead of the median.
 //! 2. Throughput: N episodes, each on its own connection, stepping back to back for a fixed
-//!    time, with dynamic batching and without (max batch 1): steps per second, median and p99
-//!    latency, mean batch size.
+//!    time, in four server set-ups: one model thread without batching (max batch 1, the
+//!    baseline), with dynamic batching, several model threads without batching, and both:
+//!    steps per second, the gain over the baseline, median and p99 latency, mean batch size.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
+use sim_bridge::client::wire;
 use ssr_agent::device::Backend;
 use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::{self, ModelInfo, ServeConfig, decode};
@@ -40,6 +42,9 @@ pub struct BenchServeArgs {
     /// Queue delay with batching on, milliseconds.
     #[arg(long, default_value_t = 2.0)]
     max_queue_delay_ms: f64,
+    /// Model threads of the multi-threaded set-ups.
+    #[arg(long, default_value_t = 2)]
+    model_threads: usize,
     /// Skip the overhead comparison.
     #[arg(long)]
     no_overhead: bool,
@@ -66,24 +71,16 @@ fn step_request(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRe
         episode_id: episode_id.into(),
         frame_index,
         timestamp_s: frame_index as f64 * 0.05,
-        images: rig
-            .cameras
-            .iter()
-            .map(|c| v1::Image {
-                camera_id: c.id.clone(),
-                width: c.width,
-                height: c.height,
-                encoding: v1::ImageEncoding::Rgb8 as i32,
-                data: (0..c.width * c.height * 3)
-                    .map(|_| {
-                        state ^= state << 13;
-                        state ^= state >> 17;
-                        state ^= state << 5;
-                        (state >> 24) as u8
-                    })
-                    .collect(),
-            })
-            .collect(),
+        images: wire::rgb_images(rig, |c| {
+            (0..c.width * c.height * 3)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 17;
+                    state ^= state << 5;
+                    (state >> 24) as u8
+                })
+                .collect()
+        }),
         speed_mps: 6.0,
         pose: Some(v1::Pose {
             x: frame_index as f64 * 0.3,
@@ -164,12 +161,13 @@ async fn start_episode(
         .episode_id)
 }
 
-fn server_config(max_batch: usize, max_queue_delay_ms: f64) -> ServeConfig {
+fn server_config(max_batch: usize, max_queue_delay_ms: f64, model_threads: usize) -> ServeConfig {
     ServeConfig {
         listen: "127.0.0.1:0".parse().expect("an address"),
         metrics_listen: None,
         max_batch,
         max_queue_delay_ms,
+        model_threads,
         ..ServeConfig::default()
     }
 }
@@ -186,7 +184,7 @@ pub fn run(args: &BenchServeArgs) -> anyhow::Result<()> {
         ..ServeConfig::default()
     };
     let (policy, info) = serve::load_policy(&model_config, &device)?;
-    let rig = ssr_agent_rig(&info);
+    let rig = wire::rig_to_proto(&info.expected_rig);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
@@ -204,17 +202,14 @@ pub fn run(args: &BenchServeArgs) -> anyhow::Result<()> {
     runtime.block_on(throughput(args, &policy, &info, &rig))
 }
 
-fn ssr_agent_rig(info: &ModelInfo) -> v1::Rig {
-    sim_bridge::client::wire::rig_to_proto(&info.expected_rig)
-}
-
 async fn overhead(
     args: &BenchServeArgs,
     policy: &SsrPolicy,
     info: &ModelInfo,
     rig: &v1::Rig,
 ) -> anyhow::Result<()> {
-    let server = LoopbackServer::start(server_config(1, 0.0), policy.clone(), info.clone()).await?;
+    let server =
+        LoopbackServer::start(server_config(1, 0.0, 1), policy.clone(), info.clone()).await?;
     let mut client = AgentServiceClient::new(connect(&server.uri).await?);
     let remote_id = start_episode(&mut client, rig).await?;
     let rust_rig = info.expected_rig.clone();
@@ -286,51 +281,48 @@ async fn throughput(
     info: &ModelInfo,
     rig: &v1::Rig,
 ) -> anyhow::Result<()> {
+    let threads = args.model_threads;
+    let setups = [
+        ("1 thread, no batching", server_config(1, 0.0, 1)),
+        (
+            "1 thread, batching",
+            server_config(args.max_batch, args.max_queue_delay_ms, 1),
+        ),
+        ("N threads, no batching", server_config(1, 0.0, threads)),
+        (
+            "N threads, batching",
+            server_config(args.max_batch, args.max_queue_delay_ms, threads),
+        ),
+    ];
     println!(
         "\nthroughput, episodes stepping back to back for {:.0} s each (batching: max batch {}, \
-         queue delay {} ms):",
+         queue delay {} ms; N = {threads} model threads):",
         args.seconds, args.max_batch, args.max_queue_delay_ms
     );
     println!(
-        "  {:>8} {:>12} {:>12} {:>8} {:>14} {:>14} {:>10}",
-        "episodes",
-        "off steps/s",
-        "on steps/s",
-        "gain",
-        "off p50/p99 ms",
-        "on p50/p99 ms",
-        "on batch"
+        "  {:>8}  {:<24} {:>9} {:>7} {:>16} {:>10}",
+        "episodes", "server", "steps/s", "gain", "p50/p99 ms", "mean batch"
     );
     for &episodes in &args.episodes {
         anyhow::ensure!(episodes > 0, "--episodes values must be at least 1");
-        let off = throughput_run(args, policy, info, rig, episodes, 1, 0.0).await?;
-        let on = throughput_run(
-            args,
-            policy,
-            info,
-            rig,
-            episodes,
-            args.max_batch,
-            args.max_queue_delay_ms,
-        )
-        .await?;
-        let p = |r: &RunResult| {
-            format!(
-                "{:.1}/{:.1}",
-                percentile(&r.latencies, 50.0),
-                percentile(&r.latencies, 99.0)
-            )
-        };
-        println!(
-            "  {:>8} {:>12.1} {:>12.1} {:>7.2}x {:>14} {:>14} {:>10.2}",
-            episodes,
-            off.steps_per_second,
-            on.steps_per_second,
-            on.steps_per_second / off.steps_per_second,
-            p(&off),
-            p(&on),
-            on.mean_batch
-        );
+        let mut baseline = None;
+        for (name, config) in &setups {
+            let run = throughput_run(args, policy, info, rig, episodes, config.clone()).await?;
+            let base = *baseline.get_or_insert(run.steps_per_second);
+            println!(
+                "  {:>8}  {:<24} {:>9.1} {:>6.2}x {:>16} {:>10.2}",
+                episodes,
+                name,
+                run.steps_per_second,
+                run.steps_per_second / base,
+                format!(
+                    "{:.1}/{:.1}",
+                    percentile(&run.latencies, 50.0),
+                    percentile(&run.latencies, 99.0)
+                ),
+                run.mean_batch
+            );
+        }
     }
     Ok(())
 }
@@ -341,15 +333,9 @@ async fn throughput_run(
     info: &ModelInfo,
     rig: &v1::Rig,
     episodes: usize,
-    max_batch: usize,
-    max_queue_delay_ms: f64,
+    config: ServeConfig,
 ) -> anyhow::Result<RunResult> {
-    let server = LoopbackServer::start(
-        server_config(max_batch, max_queue_delay_ms),
-        policy.clone(),
-        info.clone(),
-    )
-    .await?;
+    let server = LoopbackServer::start(config, policy.clone(), info.clone()).await?;
     let measuring = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
     let mut tasks = Vec::new();

@@ -44,6 +44,9 @@ pub struct ServeArgs {
     /// Steps waiting for the network at most; more are refused [default: 256].
     #[arg(long, env = "SSR_AGENT_MAX_QUEUE")]
     max_queue: Option<usize>,
+    /// Model threads, each forming and running its own batches [default: 2].
+    #[arg(long, env = "SSR_AGENT_MODEL_THREADS")]
+    model_threads: Option<usize>,
     /// Longest a request may take, seconds; a shorter client deadline wins [default: 30].
     #[arg(long, env = "SSR_AGENT_REQUEST_TIMEOUT_S")]
     request_timeout_s: Option<f64>,
@@ -108,6 +111,7 @@ impl ServeArgs {
         set(&mut config.max_batch, &self.max_batch);
         set(&mut config.max_queue_delay_ms, &self.max_queue_delay_ms);
         set(&mut config.max_queue, &self.max_queue);
+        set(&mut config.model_threads, &self.model_threads);
         set(&mut config.request_timeout_s, &self.request_timeout_s);
         set(&mut config.max_message_mib, &self.max_message_mib);
         set(&mut config.drain_grace_s, &self.drain_grace_s);

@@ -3,22 +3,11 @@
 
 mod common;
 
-use burn::tensor::Device;
-
-use common::{rig, step_input, tiny_config};
-use ssr_agent::control::ControlConfig;
-use ssr_agent::model::SsrModel;
+use common::{policy_of, rig, step_input, tiny_config};
 use ssr_agent::policy::{InputError, SsrPolicy, StepError};
 
 fn policy() -> SsrPolicy {
-    let device = Device::flex();
-    let config = tiny_config();
-    SsrPolicy::new(
-        SsrModel::new(&config, &device),
-        config,
-        ControlConfig::default(),
-        device,
-    )
+    policy_of(tiny_config())
 }
 
 #[test]

@@ -1,11 +1,11 @@
 //! The server's plain-Rust parts through their public API: episode leases, config files and
 //! rules, and image decoding. (The process end to end is in tests/tests/grpc.rs.)
 
+mod common;
+
 use std::time::{Duration, Instant};
 
 use ssr_agent::camera::{CameraSpec, Rig};
-use ssr_agent::control::ControlConfig;
-use ssr_agent::model::SsrModel;
 use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::ServeConfig;
 use ssr_agent::serve::config::ServeConfigError;
@@ -14,14 +14,7 @@ use ssr_agent::serve::episodes::{EpisodeError, EpisodeTable};
 use ssrdrive_proto::v1;
 
 fn policy() -> SsrPolicy {
-    let device = burn::tensor::Device::flex();
-    let config = ssr_agent::model::config::SsrConfig::cpu_default();
-    SsrPolicy::new(
-        SsrModel::new(&config, &device),
-        config,
-        ControlConfig::default(),
-        device,
-    )
+    common::policy_of(common::tiny_config())
 }
 
 #[test]

@@ -5,6 +5,7 @@
 use std::process::Command;
 use std::time::Duration;
 
+use sim_bridge::client::wire;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use ssrdrive_proto::v1::drive_request::Message;
@@ -50,17 +51,7 @@ fn step(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRequest {
         episode_id: episode_id.into(),
         frame_index,
         timestamp_s: frame_index as f64 * 0.05,
-        images: rig
-            .cameras
-            .iter()
-            .map(|c| v1::Image {
-                camera_id: c.id.clone(),
-                width: c.width,
-                height: c.height,
-                encoding: v1::ImageEncoding::Rgb8 as i32,
-                data: vec![100; (c.width * c.height * 3) as usize],
-            })
-            .collect(),
+        images: wire::rgb_images(rig, |c| vec![100; (c.width * c.height * 3) as usize]),
         speed_mps: 5.0,
         pose: Some(v1::Pose {
             x: frame_index as f64 * 0.25,
@@ -83,23 +74,26 @@ fn read_results(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// `sim-bridge eval` of the bundled short routes without traffic, quiet, results to `out`;
+/// `flags` add to or narrow it (`--limit`, `--timeout`, ...).
+fn eval_command(agent: &str, flags: &[&str], out: &std::path::Path) -> Command {
+    let mut command = Command::new(binary("sim-bridge"));
+    command
+        .args(["eval", "--agent", agent, "--routes", "town05-short-style"])
+        .args(["--vehicles", "0", "--quiet"])
+        .args(flags)
+        .arg("--out")
+        .arg(out);
+    command
+}
+
 #[test]
 fn eval_scores_a_route_through_the_server() {
     let server = Server::start(&[]);
     let dir = temp_dir("eval");
     let out = dir.join("results.json");
-    let run = Command::new(binary("sim-bridge"))
-        .args(["eval", "--agent", &format!("grpc://{}", server.address)])
-        .args([
-            "--routes",
-            "town05-short-style",
-            "--limit",
-            "1",
-            "--timeout",
-            "2",
-        ])
-        .args(["--vehicles", "0", "--quiet", "--out"])
-        .arg(&out)
+    let agent = format!("grpc://{}", server.address);
+    let run = eval_command(&agent, &["--limit", "1", "--timeout", "2"], &out)
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&run.stderr);
@@ -119,19 +113,7 @@ fn eval_scores_a_route_through_the_server() {
 fn local_agent_starts_its_own_server() {
     let dir = temp_dir("local");
     let out = dir.join("results.json");
-    let run = Command::new(binary("sim-bridge"))
-        .args(["eval", "--agent", "local", "--routes", "town05-short-style"])
-        .args([
-            "--limit",
-            "1",
-            "--timeout",
-            "1",
-            "--vehicles",
-            "0",
-            "--quiet",
-            "--out",
-        ])
-        .arg(&out)
+    let run = eval_command("local", &["--limit", "1", "--timeout", "1"], &out)
         .env("SSR_AGENT_BIN", binary("ssr-agent"))
         .env("SSR_AGENT_UNTRAINED_CONFIG", "cpu-default")
         .output()
@@ -151,18 +133,7 @@ fn local_agent_starts_its_own_server() {
     );
 
     // Without a model the local server refuses to start, and eval says why.
-    let run = Command::new(binary("sim-bridge"))
-        .args([
-            "eval",
-            "--agent",
-            "local",
-            "--routes",
-            "town05-short-style",
-            "--limit",
-            "1",
-        ])
-        .arg("--out")
-        .arg(&out)
+    let run = eval_command("local", &["--limit", "1"], &out)
         .env("SSR_AGENT_BIN", binary("ssr-agent"))
         .env_remove("SSR_AGENT_UNTRAINED_CONFIG")
         .env_remove("SSR_AGENT_CHECKPOINT")
@@ -179,26 +150,10 @@ fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
     let server = Server::start(&[]);
     let dir = temp_dir("crash");
     let out = dir.join("results.json");
-    let eval = Command::new(binary("sim-bridge"))
-        .args(["eval", "--agent", &format!("grpc://{}", server.address)])
-        .args([
-            "--routes",
-            "town05-short-style",
-            "--limit",
-            "2",
-            "--timeout",
-            "600",
-        ])
-        .args([
-            "--vehicles",
-            "0",
-            "--call-timeout",
-            "2",
-            "--ready-timeout",
-            "1",
-        ])
-        .args(["--quiet", "--out"])
-        .arg(&out)
+    let agent = format!("grpc://{}", server.address);
+    let flags = ["--limit", "2", "--timeout", "600", "--call-timeout", "2"];
+    let eval = eval_command(&agent, &flags, &out)
+        .args(["--ready-timeout", "1"])
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
@@ -218,7 +173,14 @@ fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
 
 #[test]
 fn every_error_status_is_provoked_and_spares_other_episodes() {
-    let server = Server::start(&["--max-episodes", "4", "--idle-timeout-s", "1.5"]);
+    let server = Server::start(&[
+        "--max-episodes",
+        "4",
+        "--idle-timeout-s",
+        "1.5",
+        "--max-message-mib",
+        "1",
+    ]);
     runtime().block_on(async {
         let mut client = server.client().await;
         let rig = expected_rig(&mut client).await;
@@ -341,6 +303,15 @@ fn every_error_status_is_provoked_and_spares_other_episodes() {
         );
         tokio::time::sleep(Duration::from_millis(200)).await;
         client.step(step(&good, 101, &rig)).await.unwrap();
+
+        // A message over the size limit (1 MiB here) is refused before it is decoded (tonic
+        // answers OUT_OF_RANGE where gRPC's C core says RESOURCE_EXHAUSTED).
+        let mut request = step(&good, 102, &rig);
+        request.images[0].data = vec![0; 2 << 20];
+        let status = client.step(request).await.unwrap_err();
+        assert_eq!(status.code(), Code::OutOfRange, "{status:?}");
+        assert!(status.message().contains("too large"), "{status:?}");
+        client.step(step(&good, 103, &rig)).await.unwrap();
 
         // Idle episodes expire: NOT_FOUND after the idle timeout.
         tokio::time::sleep(Duration::from_millis(3000)).await;
@@ -601,7 +572,9 @@ fn load_reports_every_step_and_the_server_memory() {
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(report["report"]["count"], 20);
     assert!(report["report"]["latency_ms"]["p99"].as_f64().unwrap() > 0.0);
-    assert!(report["server_rss_bytes_end"].as_u64().unwrap() > 10 << 20);
+    let memory = report["server_rss_bytes"].as_array().unwrap();
+    assert!(memory.len() >= 2, "{memory:?}");
+    assert!(memory.last().unwrap()["bytes"].as_u64().unwrap() > 10 << 20);
     let steps = server.metric(r#"ssr_requests_total{method="Step",code="OK"}"#);
     assert_eq!(steps, 20.0);
 }
@@ -611,20 +584,16 @@ fn a_recorded_run_replays_without_drift() {
     let server = Server::start(&[]);
     let dir = temp_dir("replay");
     let logs = dir.join("logs");
-    let run = Command::new(binary("sim-bridge"))
-        .args(["eval", "--agent", &format!("grpc://{}", server.address)])
-        .args([
-            "--routes",
-            "town05-short-style",
-            "--limit",
-            "1",
-            "--timeout",
-            "1.5",
-        ])
-        .args(["--vehicles", "0", "--quiet", "--record"])
-        .arg(&logs)
-        .arg("--out")
-        .arg(dir.join("results.json"))
+    let agent = format!("grpc://{}", server.address);
+    let flags = [
+        "--limit",
+        "1",
+        "--timeout",
+        "1.5",
+        "--record",
+        logs.to_str().unwrap(),
+    ];
+    let run = eval_command(&agent, &flags, &dir.join("results.json"))
         .output()
         .unwrap();
     assert!(

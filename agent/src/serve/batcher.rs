@@ -8,8 +8,8 @@
 //! [`SsrPolicy::step_batch`] and answers each caller. `max_batch = 1` serves steps one by one.
 
 use std::panic::AssertUnwindSafe;
-use std::sync::Arc;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use tokio::sync::oneshot;
@@ -24,6 +24,10 @@ pub struct BatchSettings {
     pub max_batch: usize,
     pub max_queue_delay: Duration,
     pub max_queue: usize,
+    /// Model threads taking batches from the queue, each running its own forward passes
+    /// (Triton's instance count): parts of the network that do not spread over all cores then
+    /// run side by side.
+    pub model_threads: usize,
 }
 
 /// One step waiting for the network.
@@ -64,7 +68,7 @@ pub struct Batcher {
 }
 
 impl Batcher {
-    /// Starts the model thread.
+    /// Starts the model threads.
     pub fn start(
         policy: Arc<SsrPolicy>,
         settings: BatchSettings,
@@ -72,10 +76,19 @@ impl Batcher {
         open_episodes: OpenEpisodes,
     ) -> Self {
         let (queue, jobs) = std::sync::mpsc::sync_channel(settings.max_queue);
-        std::thread::Builder::new()
-            .name("ssr-model".into())
-            .spawn(move || model_loop(&policy, settings, &metrics, &jobs, &*open_episodes))
-            .expect("spawning the model thread");
+        let jobs = Arc::new(Mutex::new(jobs));
+        for index in 0..settings.model_threads.max(1) {
+            let (policy, metrics, jobs, open) = (
+                Arc::clone(&policy),
+                Arc::clone(&metrics),
+                Arc::clone(&jobs),
+                Arc::clone(&open_episodes),
+            );
+            std::thread::Builder::new()
+                .name(format!("ssr-model-{index}"))
+                .spawn(move || model_loop(&policy, settings, &metrics, &jobs, &*open))
+                .expect("spawning a model thread");
+        }
         Self {
             queue,
             capacity: settings.max_queue,
@@ -95,29 +108,47 @@ fn model_loop(
     policy: &SsrPolicy,
     settings: BatchSettings,
     metrics: &Metrics,
-    jobs: &Receiver<StepJob>,
+    jobs: &Mutex<Receiver<StepJob>>,
     open_episodes: &(dyn Fn() -> usize + Send + Sync),
 ) {
-    while let Ok(first) = jobs.recv() {
-        let window_end = Instant::now() + settings.max_queue_delay;
-        let mut batch = vec![first];
-        while batch.len() < settings.max_batch {
-            let wait = if batch.len() >= open_episodes() {
-                Duration::ZERO
-            } else {
-                window_end.saturating_duration_since(Instant::now())
-            };
-            match jobs.recv_timeout(wait) {
-                Ok(job) => batch.push(job),
-                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => break,
-            }
-        }
+    loop {
+        // One thread forms a batch at a time; the others run theirs meanwhile.
+        let batch = {
+            let jobs = jobs.lock().unwrap_or_else(|e| e.into_inner());
+            collect_batch(&jobs, settings, open_episodes)
+        };
+        let Some(mut batch) = batch else { return };
         // A caller that gave up gets nothing; dropping its job returns its state unchanged.
         batch.retain(|job| !job.reply.is_closed());
         if !batch.is_empty() {
             run_batch(policy, metrics, batch);
         }
     }
+}
+
+/// The next batch, or `None` once the queue is closed.
+fn collect_batch(
+    jobs: &Receiver<StepJob>,
+    settings: BatchSettings,
+    open_episodes: &(dyn Fn() -> usize + Send + Sync),
+) -> Option<Vec<StepJob>> {
+    let first = jobs.recv().ok()?;
+    let window_end = Instant::now() + settings.max_queue_delay;
+    let mut batch = vec![first];
+    while batch.len() < settings.max_batch {
+        // This thread's share of the open episodes is all it can expect.
+        let share = open_episodes().div_ceil(settings.model_threads.max(1));
+        let wait = if batch.len() >= share {
+            Duration::ZERO
+        } else {
+            window_end.saturating_duration_since(Instant::now())
+        };
+        match jobs.recv_timeout(wait) {
+            Ok(job) => batch.push(job),
+            Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    Some(batch)
 }
 
 fn run_batch(policy: &SsrPolicy, metrics: &Metrics, batch: Vec<StepJob>) {

@@ -104,6 +104,7 @@ impl Engine {
                 max_batch: config.max_batch,
                 max_queue_delay: config.max_queue_delay(),
                 max_queue: config.max_queue,
+                model_threads: config.model_threads,
             },
             Arc::clone(&metrics),
             Arc::new(move || open.len()),
@@ -198,17 +199,9 @@ impl Engine {
             ..Default::default()
         })?;
         for frame_index in 0..2 {
-            let images = rig
-                .cameras
-                .iter()
-                .map(|c| v1::Image {
-                    camera_id: c.id.clone(),
-                    width: c.width,
-                    height: c.height,
-                    encoding: v1::ImageEncoding::Rgb8 as i32,
-                    data: vec![128; c.width as usize * c.height as usize * 3],
-                })
-                .collect();
+            let images = wire::rgb_images(&rig, |c| {
+                vec![128; c.width as usize * c.height as usize * 3]
+            });
             self.step(v1::StepRequest {
                 episode_id: episode.episode_id.clone(),
                 frame_index,

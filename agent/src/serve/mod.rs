@@ -125,6 +125,17 @@ impl Listeners {
     }
 }
 
+/// Reports `status` for the whole server ("") and for the agent service.
+async fn set_health(reporter: &tonic_health::server::HealthReporter, status: ServingStatus) {
+    reporter.set_service_status("", status).await;
+    reporter
+        .set_service_status(
+            <AgentServiceServer<AgentServiceImpl> as tonic::server::NamedService>::NAME,
+            status,
+        )
+        .await;
+}
+
 /// Serves on `listeners` until `shutdown` resolves, then drains and returns.
 pub async fn run(
     listeners: Listeners,
@@ -142,12 +153,7 @@ pub async fn run(
 
     let engine = Engine::new(policy, info, &config);
     let (reporter, health) = tonic_health::server::health_reporter();
-    reporter
-        .set_not_serving::<AgentServiceServer<AgentServiceImpl>>()
-        .await;
-    reporter
-        .set_service_status("", ServingStatus::NotServing)
-        .await;
+    set_health(&reporter, ServingStatus::NotServing).await;
     let reflection = || {
         tonic_reflection::server::Builder::configure()
             .register_encoded_file_descriptor_set(v1::FILE_DESCRIPTOR_SET)
@@ -204,12 +210,7 @@ pub async fn run(
     };
 
     let warm_up = engine.warm_up().await.context("warm-up step failed")?;
-    reporter
-        .set_serving::<AgentServiceServer<AgentServiceImpl>>()
-        .await;
-    reporter
-        .set_service_status("", ServingStatus::Serving)
-        .await;
+    set_health(&reporter, ServingStatus::Serving).await;
     tracing::info!(
         %address,
         warm_up_ms = warm_up.as_secs_f64() * 1000.0,
@@ -218,12 +219,7 @@ pub async fn run(
 
     shutdown.await;
     tracing::info!("shutting down: reporting NOT_SERVING");
-    reporter
-        .set_not_serving::<AgentServiceServer<AgentServiceImpl>>()
-        .await;
-    reporter
-        .set_service_status("", ServingStatus::NotServing)
-        .await;
+    set_health(&reporter, ServingStatus::NotServing).await;
     tokio::time::sleep(Duration::from_secs_f64(config.drain_grace_s)).await;
     tracing::info!("refusing new connections; draining in-flight requests");
     let _ = stop_server.send(());

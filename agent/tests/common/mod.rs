@@ -40,6 +40,17 @@ pub fn tiny_config() -> SsrConfig {
     config
 }
 
+/// A policy over a random network of `config` on the CPU.
+pub fn policy_of(config: SsrConfig) -> ssr_agent::policy::SsrPolicy {
+    let device = Device::flex();
+    ssr_agent::policy::SsrPolicy::new(
+        ssr_agent::model::SsrModel::new(&config, &device),
+        config,
+        ssr_agent::control::ControlConfig::default(),
+        device,
+    )
+}
+
 /// A rig of `n` cameras looking forward, left, right, ... at the config's image size.
 pub fn rig(n: usize, width: u32, height: u32) -> Rig {
     let yaws = [0.0, -60.0, 60.0, 180.0, -120.0, 120.0];

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
+use sim_bridge::client::local::LocalServer;
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::route::planner::plan_route;
@@ -121,5 +122,20 @@ pub fn default_vehicles(map: &Map) -> usize {
         "town06" => 150,
         "ssr_train_small" => 60,
         _ => 120,
+    }
+}
+
+/// The server an `--agent` value names: `grpc://HOST:PORT` (or `http://`), or `local`: a child
+/// `ssr-agent serve` (with a metrics port if `metrics`), alive as long as the returned handle.
+pub fn server_target(agent: &str, metrics: bool) -> anyhow::Result<(String, Option<LocalServer>)> {
+    match agent {
+        "local" => {
+            let server = LocalServer::start(metrics)?;
+            Ok((server.target(), Some(server)))
+        }
+        remote if remote.starts_with("grpc://") || remote.starts_with("http://") => {
+            Ok((remote.to_string(), None))
+        }
+        other => bail!("--agent {other}: unknown agent (expected local or grpc://HOST:PORT)"),
     }
 }

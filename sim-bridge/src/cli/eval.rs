@@ -18,7 +18,7 @@ use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, ScoringConfig, summary_table};
 
-use super::args::{PlannedRoute, RouteArgs, WorldArgs};
+use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
@@ -159,16 +159,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
 /// The agent `--agent` names, and the local server process behind it, if any.
 fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalServer>)> {
-    let target = match args.agent.as_str() {
-        "expert" => return Ok((Box::new(Expert::new()), None)),
-        "local" => None,
-        remote if remote.starts_with("grpc://") || remote.starts_with("http://") => {
-            Some(remote.to_string())
-        }
-        other => {
-            bail!("--agent {other}: unknown agent (expected expert, local or grpc://HOST:PORT)")
-        }
-    };
+    // `expert` runs in process; everything else names a server.
+    if args.agent == "expert" {
+        return Ok((Box::new(Expert::new()), None));
+    }
     for (flag, value) in [
         ("--call-timeout", args.call_timeout),
         ("--ready-timeout", args.ready_timeout),
@@ -188,13 +182,7 @@ fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalS
         client: "sim-bridge eval".into(),
         ..GrpcOptions::default()
     };
-    let (target, server) = match target {
-        Some(target) => (target, None),
-        None => {
-            let server = LocalServer::start(false)?;
-            (server.target(), Some(server))
-        }
-    };
+    let (target, server) = server_target(&args.agent, false)?;
     let agent = GrpcAgent::connect(&target, options)?;
     Ok((Box::new(agent), server))
 }

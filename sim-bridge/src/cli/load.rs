@@ -16,7 +16,6 @@ use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
 use sim_bridge::camera::Rig;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::load::{LoadConfig, LoadProgress, LoadReport, run_load};
-use sim_bridge::client::local::LocalServer;
 use sim_bridge::client::wire;
 use sim_bridge::dataset::Dataset;
 use sim_bridge::eval::run_route;
@@ -25,7 +24,7 @@ use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::World;
 use ssrdrive_proto::v1;
 
-use super::args::{RouteArgs, WorldArgs};
+use super::args::{RouteArgs, WorldArgs, server_target};
 
 #[derive(Debug, Args)]
 pub struct LoadArgs {
@@ -84,13 +83,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
             bail!("{flag} must be a positive number, got {value}");
         }
     }
-    let local = match args.agent.as_str() {
-        "local" => Some(LocalServer::start(true)?),
-        _ => None,
-    };
-    let target = local
-        .as_ref()
-        .map_or_else(|| args.agent.clone(), LocalServer::target);
+    let (target, local) = server_target(&args.agent, true)?;
     let metrics_url = args.metrics.clone().or_else(|| {
         local
             .as_ref()
@@ -127,7 +120,10 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         args.rate,
         args.duration
     );
-    let rss_start = metrics_url.as_deref().map(resident_bytes).transpose()?;
+    let mut memory = Vec::new();
+    if let Some(url) = &metrics_url {
+        memory.push((0.0, resident_bytes(url)?));
+    }
     let config = LoadConfig {
         target,
         episodes: args.episodes,
@@ -141,7 +137,24 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
+    let samples = Arc::new(std::sync::Mutex::new(memory));
     let report = runtime.block_on(async {
+        let sampler = metrics_url.clone().map(|url| {
+            let samples = Arc::clone(&samples);
+            tokio::spawn(async move {
+                let started = tokio::time::Instant::now();
+                loop {
+                    tokio::time::sleep(MEMORY_SAMPLE_PERIOD).await;
+                    let url = url.clone();
+                    if let Ok(Ok(bytes)) =
+                        tokio::task::spawn_blocking(move || resident_bytes(&url)).await
+                    {
+                        let at = started.elapsed().as_secs_f64();
+                        samples.lock().expect("not poisoned").push((at, bytes));
+                    }
+                }
+            })
+        });
         let ticker = {
             let (bar, progress) = (bar.clone(), Arc::clone(&progress));
             tokio::spawn(async move {
@@ -158,16 +171,24 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         };
         let report = run_load(&config, Arc::new(templates), Arc::clone(&progress)).await;
         ticker.abort();
+        if let Some(sampler) = sampler {
+            sampler.abort();
+        }
         report
     })?;
     bar.finish_and_clear();
-    let rss_end = metrics_url.as_deref().map(resident_bytes).transpose()?;
-    print_report(&report, rss_start, rss_end);
+    let mut memory = std::mem::take(&mut *samples.lock().expect("not poisoned"));
+    if let Some(url) = &metrics_url {
+        memory.push((report.duration_s, resident_bytes(url)?));
+    }
+    print_report(&report, &memory);
     if let Some(path) = &args.out {
         let json = serde_json::json!({
             "report": report,
-            "server_rss_bytes_start": rss_start,
-            "server_rss_bytes_end": rss_end,
+            "server_rss_bytes": memory
+                .iter()
+                .map(|(at, bytes)| serde_json::json!({"at_s": at, "bytes": bytes}))
+                .collect::<Vec<_>>(),
         });
         std::fs::write(path, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -175,7 +196,11 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_report(report: &LoadReport, rss_start: Option<u64>, rss_end: Option<u64>) {
+/// How often the server's memory is read during a run.
+const MEMORY_SAMPLE_PERIOD: Duration = Duration::from_secs(10);
+
+/// `memory`: (seconds into the run, resident bytes) of the server, before, during and after.
+fn print_report(report: &LoadReport, memory: &[(f64, u64)]) {
     let l = &report.latency_ms;
     println!(
         "load: {} episodes at {} Hz for {:.1} s: {} steps, {:.1} steps/s",
@@ -191,11 +216,30 @@ fn print_report(report: &LoadReport, rss_start: Option<u64>, rss_end: Option<u64
         .map(|(code, n)| format!("{code} {n}"))
         .collect();
     println!("status codes: {}", codes.join(", "));
-    if let (Some(start), Some(end)) = (rss_start, rss_end) {
+    if report.behind_schedule > 0 {
         println!(
-            "server resident memory: {:.1} MiB at start, {:.1} MiB at end",
-            start as f64 / (1 << 20) as f64,
-            end as f64 / (1 << 20) as f64
+            "behind schedule: {} steps were due before the end but never sent (the server \
+             answered slower than the episodes tick)",
+            report.behind_schedule
+        );
+    }
+    let mib = |bytes: u64| bytes as f64 / (1 << 20) as f64;
+    if let (Some(&(_, start)), Some(&(_, end))) = (memory.first(), memory.last()) {
+        // After a tenth of the run every batch size has been seen: growth from there on is
+        // what a leak would show.
+        let warm = memory
+            .iter()
+            .find(|(at, _)| *at >= report.duration_s / 10.0)
+            .map_or(end, |&(_, bytes)| bytes);
+        let peak = memory.iter().map(|&(_, bytes)| bytes).max().unwrap_or(end);
+        println!(
+            "server resident memory (MiB): {:.1} before, {:.1} after a tenth of the run, \
+             {:.1} peak, {:.1} at the end ({} samples)",
+            mib(start),
+            mib(warm),
+            mib(peak),
+            mib(end),
+            memory.len()
         );
     }
 }

@@ -6,8 +6,9 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use sim_bridge::client::local::LocalServer;
 use sim_bridge::replay::{ReplayReport, Spread, log::read_log, replay};
+
+use super::args::server_target;
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
@@ -90,13 +91,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         bail!("--call-timeout must be a positive number of seconds");
     }
     let files = log_files(&args.logs)?;
-    let local = match args.agent.as_str() {
-        "local" => Some(LocalServer::start(false)?),
-        _ => None,
-    };
-    let target = local
-        .as_ref()
-        .map_or_else(|| args.agent.clone(), LocalServer::target);
+    let (target, _local) = server_target(&args.agent, false)?;
     let mut reports = Vec::new();
     for path in &files {
         let log = read_log(path)?;

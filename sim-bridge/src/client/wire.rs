@@ -49,6 +49,24 @@ pub fn rig_from_proto(rig: &v1::Rig) -> Result<Rig, RigError> {
     )
 }
 
+/// One RGB8 image per rig camera, its pixels from `pixels(camera)` (width * height * 3 bytes):
+/// synthetic steps for warm-ups, benchmarks and tests.
+pub fn rgb_images(
+    rig: &v1::Rig,
+    mut pixels: impl FnMut(&v1::CameraSpec) -> Vec<u8>,
+) -> Vec<v1::Image> {
+    rig.cameras
+        .iter()
+        .map(|c| v1::Image {
+            camera_id: c.id.clone(),
+            width: c.width,
+            height: c.height,
+            encoding: v1::ImageEncoding::Rgb8 as i32,
+            data: pixels(c),
+        })
+        .collect()
+}
+
 /// A rendered frame as an uncompressed RGB8 image.
 pub fn frame_to_proto(frame: &CameraFrame) -> v1::Image {
     v1::Image {
