@@ -92,7 +92,7 @@ fn step_request(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRe
     }
 }
 
-/// A server on a free loopback port, running until dropped.
+/// A server on a free loopback port, running until [`LoopbackServer::stop`].
 struct LoopbackServer {
     uri: String,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
@@ -123,6 +123,12 @@ impl LoopbackServer {
                 {
                     break;
                 }
+            }
+            if task.is_finished() {
+                return match task.await? {
+                    Ok(()) => Err(anyhow::anyhow!("the bench server stopped before serving")),
+                    Err(error) => Err(error),
+                };
             }
             anyhow::ensure!(Instant::now() < deadline, "the bench server did not start");
             tokio::time::sleep(Duration::from_millis(50)).await;

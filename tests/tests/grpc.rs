@@ -514,6 +514,11 @@ fn health_reflection_and_metrics_answer_and_sigterm_drains() {
         assert_eq!(info.config_name, "cpu-default");
         assert_eq!(info.checkpoint, "untrained (random weights)");
         assert_eq!(info.max_batch, 8);
+        // One step, so the step metrics have samples (the warm-up's are not counted).
+        let mut client = server.client().await;
+        let rig = info.expected_rig.unwrap();
+        let id = start(&mut client, &rig).await;
+        client.step(step(&id, 0, &rig)).await.unwrap();
     });
     let metrics = server.metrics_text();
     for name in [
@@ -635,4 +640,53 @@ fn a_recorded_run_replays_without_drift() {
         assert_eq!(report[field]["max"], 0.0, "{field}: {report}");
     }
     assert!(report["open_loop"][0]["samples"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn sigterm_ends_open_drive_streams_and_the_server_exits_promptly() {
+    let server = Server::start(&["--drain-timeout-s", "30"]);
+    let (sender, mut answers) = runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        let (sender, requests) = tokio::sync::mpsc::channel(4);
+        sender
+            .send(v1::DriveRequest {
+                message: Some(Message::Start(v1::StartEpisodeRequest {
+                    rig: Some(rig.clone()),
+                    ..Default::default()
+                })),
+            })
+            .await
+            .unwrap();
+        sender
+            .send(v1::DriveRequest {
+                message: Some(Message::Step(step("", 0, &rig))),
+            })
+            .await
+            .unwrap();
+        let mut answers = client
+            .drive(tokio_stream::wrappers::ReceiverStream::new(requests))
+            .await
+            .unwrap()
+            .into_inner();
+        answers
+            .message()
+            .await
+            .unwrap()
+            .expect("the first step's answer");
+        (sender, answers)
+    });
+    // The stream stays open (the sender is alive) while the server is told to stop.
+    let started = std::time::Instant::now();
+    let status = server.terminate();
+    assert!(status.success(), "{status}");
+    assert!(
+        started.elapsed() < Duration::from_secs(10),
+        "the drain waited on the open stream: {:?}",
+        started.elapsed()
+    );
+    // The stream has ended (UNAVAILABLE, or the connection closing under it), not hung.
+    let end = runtime().block_on(answers.message());
+    assert!(!matches!(end, Ok(Some(_))), "{end:?}");
+    drop(sender);
 }

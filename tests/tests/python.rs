@@ -35,5 +35,5 @@ fn python_client_and_carla_adapter_pass_their_suites() {
         .expect("running python3 -m unittest");
     let log = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "Python suites failed:\n{log}");
-    assert!(log.contains("Ran 6 tests"), "{log}");
+    assert!(log.contains("Ran 7 tests"), "{log}");
 }

@@ -4,7 +4,8 @@
 //! sheds load instead of growing latency without bound). One model thread takes the oldest step,
 //! waits at most `max_queue_delay` for up to `max_batch - 1` more (not at all once every open
 //! episode is in the batch: a lone episode never waits for company), drops steps whose caller has
-//! gone (deadline passed or cancelled; their episode state goes back untouched), runs
+//! gone (deadline passed or cancelled before the batch started; their episode state goes back
+//! untouched: a step whose batch already started completes), runs
 //! [`SsrPolicy::step_batch`] and answers each caller. `max_batch = 1` serves steps one by one.
 
 use std::panic::AssertUnwindSafe;
@@ -169,8 +170,19 @@ fn run_batch(policy: &SsrPolicy, metrics: &Metrics, batch: Vec<StepJob>) {
     let elapsed = started.elapsed();
     let outputs = match result {
         Ok(Ok(outputs)) => outputs,
+        // Inputs are checked before anything runs: the states are untouched.
         Ok(Err(error)) => return fail(waiting, &error.to_string()),
-        Err(_) => return fail(waiting, "the forward pass panicked; see the server log"),
+        Err(_) => {
+            // The states may be half-stepped: their episodes are closed.
+            tracing::error!("a forward pass of {} episodes panicked", waiting.len());
+            for (lease, _, reply) in waiting {
+                lease.abandon();
+                let _ = reply.send(Err(
+                    "the forward pass failed; the episode was closed (see the server log)".into(),
+                ));
+            }
+            return;
+        }
     };
     let control: Duration = outputs.iter().map(|o| o.control_time).sum();
     let model = elapsed.saturating_sub(control);
@@ -192,7 +204,7 @@ type Waiting = (
     oneshot::Sender<Result<BatchedStep, String>>,
 );
 
-/// Answers every step of a failed batch; dropping the leases returns the states unchanged.
+/// Answers every step of a refused batch; dropping the leases returns the states unchanged.
 fn fail(waiting: Vec<Waiting>, message: &str) {
     tracing::error!("batch of {} failed: {message}", waiting.len());
     for (_, _, reply) in waiting {

@@ -30,7 +30,7 @@ pub struct ServeConfig {
     pub listen: SocketAddr,
     /// Prometheus `/metrics` address; `None` serves no metrics.
     pub metrics_listen: Option<SocketAddr>,
-    /// A checkpoint file; `None` loads the embedded one.
+    /// A checkpoint file written by `ssr-agent train`.
     pub checkpoint: Option<PathBuf>,
     /// Serve a network with random weights of this config preset instead of a checkpoint
     /// (for tests and benchmarks; it does not drive).

@@ -2,6 +2,7 @@
 //! layer in `service.rs` only converts [`ServeError`]s into status codes and counts requests.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use sim_bridge::camera::{CameraSpec, Rig};
@@ -22,7 +23,7 @@ use crate::policy::{SsrPolicy, StepOutput};
 #[derive(Debug, Clone)]
 pub struct ModelInfo {
     pub config: SsrConfig,
-    /// Checkpoint file name, "embedded", or "untrained (random weights)".
+    /// Checkpoint file name, or "untrained (random weights)".
     pub checkpoint: String,
     /// The rig the network was trained with.
     pub expected_rig: Rig,
@@ -45,15 +46,18 @@ impl ModelInfo {
 /// Why a request was refused; each maps to one gRPC status code.
 #[derive(Debug, thiserror::Error)]
 pub enum ServeError {
-    /// NOT_FOUND, RESOURCE_EXHAUSTED or FAILED_PRECONDITION.
+    /// NOT_FOUND, RESOURCE_EXHAUSTED, FAILED_PRECONDITION or ABORTED.
     #[error(transparent)]
     Episode(#[from] EpisodeError),
     /// INVALID_ARGUMENT.
     #[error("{0}")]
     BadRequest(String),
-    /// RESOURCE_EXHAUSTED (queue full) or UNAVAILABLE (shutting down).
+    /// RESOURCE_EXHAUSTED (queue full) or UNAVAILABLE (the model threads have stopped).
     #[error(transparent)]
     Submit(#[from] SubmitError),
+    /// DEADLINE_EXCEEDED: a Drive step took longer than the request timeout.
+    #[error("the step took longer than the server's request timeout of {0:?}")]
+    DeadlineExceeded(Duration),
     /// INTERNAL.
     #[error("{0}")]
     Internal(String),
@@ -65,12 +69,12 @@ impl From<ServeError> for tonic::Status {
         let code = match &error {
             ServeError::Episode(EpisodeError::NotFound(_)) => Code::NotFound,
             ServeError::Episode(EpisodeError::TooMany { .. }) => Code::ResourceExhausted,
-            ServeError::Episode(EpisodeError::OutOfOrder { .. } | EpisodeError::Busy(_)) => {
-                Code::FailedPrecondition
-            }
+            ServeError::Episode(EpisodeError::OutOfOrder { .. }) => Code::FailedPrecondition,
+            ServeError::Episode(EpisodeError::Busy(_)) => Code::Aborted,
             ServeError::BadRequest(_) => Code::InvalidArgument,
             ServeError::Submit(SubmitError::QueueFull(_)) => Code::ResourceExhausted,
             ServeError::Submit(SubmitError::Stopped) => Code::Unavailable,
+            ServeError::DeadlineExceeded(_) => Code::DeadlineExceeded,
             ServeError::Internal(_) => Code::Internal,
         };
         tonic::Status::new(code, error.to_string())
@@ -89,6 +93,8 @@ pub struct Engine {
     batcher: Batcher,
     metrics: Arc<Metrics>,
     config: ServeConfig,
+    /// True until the warm-up is done: its episode and steps stay out of the metrics.
+    warming: AtomicBool,
 }
 
 impl Engine {
@@ -116,11 +122,20 @@ impl Engine {
             batcher,
             metrics,
             config: config.clone(),
+            warming: AtomicBool::new(true),
         })
     }
 
     pub fn metrics(&self) -> &Arc<Metrics> {
         &self.metrics
+    }
+
+    pub fn request_timeout(&self) -> Duration {
+        self.config.request_timeout()
+    }
+
+    fn counting(&self) -> bool {
+        !self.warming.load(Ordering::Relaxed)
     }
 
     pub fn agent_info(&self) -> v1::AgentInfo {
@@ -161,7 +176,9 @@ impl Engine {
             seed = ?request.seed,
             "episode started"
         );
-        self.metrics.episode_started(self.episodes.len());
+        if self.counting() {
+            self.metrics.episode_started(self.episodes.len());
+        }
         Ok(v1::StartEpisodeResponse {
             episode_id: id,
             idle_timeout_s: self.config.idle_timeout_s,
@@ -171,7 +188,9 @@ impl Engine {
     pub fn end_episode(&self, episode_id: &str) -> Result<v1::EndEpisodeResponse, ServeError> {
         let steps = self.episodes.close(episode_id)?;
         tracing::info!(episode = %episode_id, steps, "episode ended");
-        self.metrics.episodes_closed(0, self.episodes.len());
+        if self.counting() {
+            self.metrics.episode_ended(self.episodes.len());
+        }
         Ok(v1::EndEpisodeResponse { steps })
     }
 
@@ -183,7 +202,7 @@ impl Engine {
         }
         if !expired.is_empty() {
             self.metrics
-                .episodes_closed(expired.len(), self.episodes.len());
+                .episodes_expired(expired.len(), self.episodes.len());
         }
         expired.len()
     }
@@ -214,6 +233,7 @@ impl Engine {
             .await?;
         }
         self.end_episode(&episode.episode_id)?;
+        self.warming.store(false, Ordering::Relaxed);
         Ok(started.elapsed())
     }
 
@@ -257,7 +277,9 @@ impl Engine {
             control: output.control_time,
             total: received.elapsed(),
         };
-        self.metrics.observe_step(&phases);
+        if self.counting() {
+            self.metrics.observe_step(&phases);
+        }
         Ok(v1::StepResponse {
             episode_id,
             frame_index,

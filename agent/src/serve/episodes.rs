@@ -63,8 +63,7 @@ impl EpisodeTable {
     }
 
     fn lock(&self) -> MutexGuard<'_, HashMap<String, Episode>> {
-        // A panic elsewhere never leaves the map half-updated: every critical section is a
-        // single map operation.
+        // Poisoning is harmless: nothing that can panic runs while the lock is held.
         self.episodes.lock().unwrap_or_else(|e| e.into_inner())
     }
 
@@ -106,7 +105,6 @@ impl EpisodeTable {
         let episode = episodes
             .get_mut(id)
             .ok_or_else(|| EpisodeError::NotFound(id.to_string()))?;
-        episode.last_seen = Instant::now();
         if let Some(last) = episode.last_frame
             && frame_index <= last
         {
@@ -120,6 +118,7 @@ impl EpisodeTable {
             .state
             .take()
             .ok_or_else(|| EpisodeError::Busy(id.to_string()))?;
+        episode.last_seen = Instant::now();
         Ok(StepLease {
             table: Arc::clone(self),
             id: id.to_string(),
@@ -195,6 +194,13 @@ impl StepLease {
         self.state
             .as_mut()
             .expect("a lease holds its state until it ends")
+    }
+
+    /// Closes the episode: its state may be half-stepped (a forward pass that panicked), so
+    /// its client must start over (NOT_FOUND from now on).
+    pub fn abandon(mut self) {
+        self.state = None;
+        let _ = self.table.close(&self.id);
     }
 
     /// Returns the stepped state and records the frame as done.

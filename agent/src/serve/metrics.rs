@@ -1,7 +1,8 @@
 //! Prometheus metrics of the server and the HTTP endpoint that serves them (`GET /metrics`, on
 //! its own port, OpenMetrics text).
 //!
-//! - `ssr_requests_total{method, code}`: every RPC by gRPC status code name.
+//! - `ssr_requests_total{method, code}`: answered RPCs by gRPC status code name (each Drive
+//!   message counts once; calls abandoned by their client are not answered, so not counted).
 //! - `ssr_step_seconds{phase}`: step latency split into `queue` (waiting for a batch), `decode`
 //!   (images), `model` (the shared forward pass), `control` (PID and fusion) and `total`.
 //! - `ssr_batch_size`: episodes per forward pass.
@@ -146,7 +147,11 @@ impl Metrics {
         self.active_episodes.set(open as i64);
     }
 
-    pub fn episodes_closed(&self, expired: usize, open: usize) {
+    pub fn episode_ended(&self, open: usize) {
+        self.active_episodes.set(open as i64);
+    }
+
+    pub fn episodes_expired(&self, expired: usize, open: usize) {
         self.episodes_expired.inc_by(expired as u64);
         self.active_episodes.set(open as i64);
     }

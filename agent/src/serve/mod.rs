@@ -125,6 +125,24 @@ impl Listeners {
     }
 }
 
+/// A spawned task that is aborted when this handle is dropped (every exit path of [`run`]).
+struct AbortOnDrop<T>(tokio::task::JoinHandle<T>);
+
+impl<T> Drop for AbortOnDrop<T> {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
+/// The gRPC server task's end as this function's result.
+fn server_ended(
+    ended: Result<Result<(), tonic::transport::Error>, tokio::task::JoinError>,
+) -> anyhow::Result<()> {
+    ended
+        .context("the gRPC server task failed")?
+        .context("the gRPC server failed")
+}
+
 /// Reports `status` for the whole server ("") and for the agent service.
 async fn set_health(reporter: &tonic_health::server::HealthReporter, status: ServingStatus) {
     reporter.set_service_status("", status).await;
@@ -161,13 +179,15 @@ pub async fn run(
     };
     let reflection_v1 = reflection().build_v1()?;
     let reflection_v1alpha = reflection().build_v1alpha()?;
-    let agent = AgentServiceServer::new(AgentServiceImpl::new(Arc::clone(&engine)))
+    // Drive streams end (UNAVAILABLE) when this flips, so a drain does not wait on them.
+    let (draining, drain_signal) = tokio::sync::watch::channel(false);
+    let agent = AgentServiceServer::new(AgentServiceImpl::new(Arc::clone(&engine), drain_signal))
         .max_decoding_message_size(config.max_message_bytes());
 
     // Small answers must not wait for Nagle's algorithm.
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
     let (stop_server, server_stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(
+    let mut server = AbortOnDrop(tokio::spawn(
         tonic::transport::Server::builder()
             .timeout(config.request_timeout())
             // Frames are 0.1-5 MB: HTTP/2's default 64 KiB windows would stall every request
@@ -181,54 +201,64 @@ pub async fn run(
             .serve_with_incoming_shutdown(incoming, async {
                 let _ = server_stopped.await;
             }),
-    );
+    ));
     let (stop_metrics, metrics_stopped) = tokio::sync::oneshot::channel::<()>();
-    if let Some(listener) = metrics_listener {
+    let _metrics_task = metrics_listener.map(|listener| {
         let metrics = Arc::clone(engine.metrics());
-        tokio::spawn(async move {
+        AbortOnDrop(tokio::spawn(async move {
             let stopped = async {
                 let _ = metrics_stopped.await;
             };
             if let Err(error) = metrics::serve_metrics(listener, metrics, stopped).await {
                 tracing::error!("metrics endpoint failed: {error}");
             }
-        });
-    }
-    let sweeper = {
+        }))
+    });
+    let _sweeper = {
         let engine = Arc::clone(&engine);
         let period = config
             .idle_timeout()
             .div_f64(4.0)
             .clamp(Duration::from_millis(100), Duration::from_secs(5));
-        tokio::spawn(async move {
+        AbortOnDrop(tokio::spawn(async move {
             let mut ticker = tokio::time::interval(period);
             loop {
                 ticker.tick().await;
                 engine.expire_idle();
             }
-        })
+        }))
     };
 
-    let warm_up = engine.warm_up().await.context("warm-up step failed")?;
+    // Warm up, then serve until the shutdown signal, unless the server fails first.
+    let warm_up = tokio::select! {
+        warm_up = engine.warm_up() => warm_up.context("warm-up step failed")?,
+        ended = &mut server.0 => return server_ended(ended),
+    };
     set_health(&reporter, ServingStatus::Serving).await;
     tracing::info!(
         %address,
         warm_up_ms = warm_up.as_secs_f64() * 1000.0,
         "serving"
     );
+    tokio::select! {
+        () = shutdown => {}
+        ended = &mut server.0 => return server_ended(ended),
+    }
 
-    shutdown.await;
     tracing::info!("shutting down: reporting NOT_SERVING");
     set_health(&reporter, ServingStatus::NotServing).await;
     tokio::time::sleep(Duration::from_secs_f64(config.drain_grace_s)).await;
     tracing::info!("refusing new connections; draining in-flight requests");
+    let _ = draining.send(true);
     let _ = stop_server.send(());
-    let drained =
-        tokio::time::timeout(Duration::from_secs_f64(config.drain_timeout_s), server).await;
-    sweeper.abort();
+    let drained = tokio::time::timeout(
+        Duration::from_secs_f64(config.drain_timeout_s),
+        &mut server.0,
+    )
+    .await;
     let _ = stop_metrics.send(());
     match drained {
-        Ok(joined) => joined?.context("gRPC server failed")?,
+        Ok(ended) => server_ended(ended)?,
         Err(_) => tracing::warn!(
             "requests still in flight after {} s; exiting anyway",
             config.drain_timeout_s

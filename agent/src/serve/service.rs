@@ -11,6 +11,7 @@ use std::sync::Arc;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_server::AgentService;
 use ssrdrive_proto::v1::drive_request::Message;
+use tokio::sync::watch;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
@@ -20,25 +21,32 @@ use super::engine::{Engine, ServeError};
 /// The gRPC face of an [`Engine`].
 pub struct AgentServiceImpl {
     engine: Arc<Engine>,
+    /// Flips to `true` when the server starts draining; open Drive streams then end.
+    draining: watch::Receiver<bool>,
 }
 
 impl AgentServiceImpl {
-    pub fn new(engine: Arc<Engine>) -> Self {
-        Self { engine }
+    pub fn new(engine: Arc<Engine>, draining: watch::Receiver<bool>) -> Self {
+        Self { engine, draining }
     }
+}
 
-    fn answer<T>(&self, method: &'static str, result: Result<T, ServeError>) -> Result<T, Status> {
-        let result = result.map_err(Status::from);
-        let code = match &result {
-            Ok(_) => tonic::Code::Ok,
-            Err(status) => {
-                tracing::debug!(method, code = ?status.code(), "{}", status.message());
-                status.code()
-            }
-        };
-        self.engine.metrics().request(method, code);
-        result
-    }
+/// Counts an answer by method and code, logs refusals at debug level, and converts the error.
+fn answer<T>(
+    engine: &Engine,
+    method: &'static str,
+    result: Result<T, ServeError>,
+) -> Result<T, Status> {
+    let result = result.map_err(Status::from);
+    let code = match &result {
+        Ok(_) => tonic::Code::Ok,
+        Err(status) => {
+            tracing::debug!(method, code = ?status.code(), "{}", status.message());
+            status.code()
+        }
+    };
+    engine.metrics().request(method, code);
+    result
 }
 
 type StepStream = Pin<Box<dyn Stream<Item = Result<v1::StepResponse, Status>> + Send>>;
@@ -49,8 +57,7 @@ impl AgentService for AgentServiceImpl {
         &self,
         _request: Request<v1::GetAgentInfoRequest>,
     ) -> Result<Response<v1::AgentInfo>, Status> {
-        self.answer("GetAgentInfo", Ok(self.engine.agent_info()))
-            .map(Response::new)
+        answer(&self.engine, "GetAgentInfo", Ok(self.engine.agent_info())).map(Response::new)
     }
 
     async fn start_episode(
@@ -58,7 +65,7 @@ impl AgentService for AgentServiceImpl {
         request: Request<v1::StartEpisodeRequest>,
     ) -> Result<Response<v1::StartEpisodeResponse>, Status> {
         let result = self.engine.start_episode(request.get_ref());
-        self.answer("StartEpisode", result).map(Response::new)
+        answer(&self.engine, "StartEpisode", result).map(Response::new)
     }
 
     async fn step(
@@ -66,7 +73,7 @@ impl AgentService for AgentServiceImpl {
         request: Request<v1::StepRequest>,
     ) -> Result<Response<v1::StepResponse>, Status> {
         let result = self.engine.step(request.into_inner()).await;
-        self.answer("Step", result).map(Response::new)
+        answer(&self.engine, "Step", result).map(Response::new)
     }
 
     type DriveStream = StepStream;
@@ -76,40 +83,48 @@ impl AgentService for AgentServiceImpl {
         request: Request<Streaming<v1::DriveRequest>>,
     ) -> Result<Response<Self::DriveStream>, Status> {
         let mut inbound = request.into_inner();
-        let first = inbound.message().await?;
-        let start = match first.and_then(|m| m.message) {
-            Some(Message::Start(start)) => start,
-            _ => {
-                let status =
-                    Status::invalid_argument("the first message of a Drive stream must be `start`");
-                self.engine.metrics().request("Drive", status.code());
-                return Err(status);
-            }
+        let start = match inbound.message().await {
+            Ok(Some(v1::DriveRequest {
+                message: Some(Message::Start(start)),
+            })) => Ok(start),
+            Ok(_) => Err(ServeError::BadRequest(
+                "the first message of a Drive stream must be `start`".into(),
+            )),
+            Err(status) => return Err(status),
         };
-        let id = self
-            .answer("Drive", self.engine.start_episode(&start))?
-            .episode_id;
+        let id = answer(
+            &self.engine,
+            "Drive",
+            start.and_then(|start| self.engine.start_episode(&start)),
+        )?
+        .episode_id;
         let (sender, receiver) = tokio::sync::mpsc::channel(4);
         let engine = Arc::clone(&self.engine);
-        let service = Self::new(Arc::clone(&engine));
+        let mut draining = self.draining.clone();
         tokio::spawn(async move {
-            while let Ok(Some(message)) = inbound.message().await {
-                let result = match message.message {
-                    Some(Message::Step(mut step))
-                        if step.episode_id.is_empty() || step.episode_id == id =>
-                    {
-                        step.episode_id = id.clone();
-                        engine.step(step).await
+            loop {
+                let message = tokio::select! {
+                    message = inbound.message() => message,
+                    () = async {
+                        let _ = draining.wait_for(|draining| *draining).await;
+                    } => {
+                        let _ = sender
+                            .send(Err(Status::unavailable("the server is shutting down")))
+                            .await;
+                        break;
                     }
-                    Some(Message::Step(step)) => Err(ServeError::BadRequest(format!(
-                        "this Drive stream carries episode '{id}', not '{}'",
-                        step.episode_id
-                    ))),
-                    _ => Err(ServeError::BadRequest(
-                        "after `start`, a Drive stream carries only `step` messages".into(),
-                    )),
+                    () = sender.closed() => break,
                 };
-                let result = service.answer("Drive", result);
+                let result = match message {
+                    Ok(Some(message)) => drive_step(&engine, &id, message).await,
+                    Ok(None) => break,
+                    // A broken or oversized message ends the stream with its status.
+                    Err(status) => {
+                        let _ = sender.send(Err(status)).await;
+                        break;
+                    }
+                };
+                let result = answer(&engine, "Drive", result);
                 let failed = result.is_err();
                 if sender.send(result).await.is_err() || failed {
                     break;
@@ -125,6 +140,33 @@ impl AgentService for AgentServiceImpl {
         request: Request<v1::EndEpisodeRequest>,
     ) -> Result<Response<v1::EndEpisodeResponse>, Status> {
         let result = self.engine.end_episode(&request.get_ref().episode_id);
-        self.answer("EndEpisode", result).map(Response::new)
+        answer(&self.engine, "EndEpisode", result).map(Response::new)
     }
+}
+
+/// One message of a Drive stream after `start`: a step of the stream's episode, bounded by the
+/// server's request timeout (tonic's timeout covers only the call that opens the stream).
+async fn drive_step(
+    engine: &Engine,
+    id: &str,
+    message: v1::DriveRequest,
+) -> Result<v1::StepResponse, ServeError> {
+    let mut step = match message.message {
+        Some(Message::Step(step)) if step.episode_id.is_empty() || step.episode_id == id => step,
+        Some(Message::Step(step)) => {
+            return Err(ServeError::BadRequest(format!(
+                "this Drive stream carries episode '{id}', not '{}'",
+                step.episode_id
+            )));
+        }
+        _ => {
+            return Err(ServeError::BadRequest(
+                "after `start`, a Drive stream carries only `step` messages".into(),
+            ));
+        }
+    };
+    step.episode_id = id.to_string();
+    tokio::time::timeout(engine.request_timeout(), engine.step(step))
+        .await
+        .map_err(|_| ServeError::DeadlineExceeded(engine.request_timeout()))?
 }

@@ -1,9 +1,9 @@
 """A CARLA leaderboard (1.0) agent that drives through an ssrdrive server.
 
-Run it like any leaderboard agent::
+Run it like any leaderboard agent, with this package on the Python path::
 
-    SSRDRIVE_SERVER=localhost:50051 python leaderboard_evaluator.py \\
-        --agent=proto/python/ssrdrive/carla_agent.py --agent-config=server.txt ...
+    PYTHONPATH=proto/python:$PYTHONPATH SSRDRIVE_SERVER=localhost:50051 \\
+        python leaderboard_evaluator.py --agent=proto/python/ssrdrive/carla_agent.py ...
 
 The agent config file holds the server address (``host:port``); ``SSRDRIVE_SERVER`` overrides
 it. Each tick the agent forwards the rig's camera images (CARLA's BGRA), the speedometer, the
@@ -24,7 +24,7 @@ import os
 from collections import deque
 from types import SimpleNamespace
 
-from ssrdrive.client import AgentClient
+from ssrdrive.client import AgentClient, AgentError
 
 try:  # pragma: no cover - only inside a CARLA leaderboard installation
     import carla
@@ -88,6 +88,8 @@ class RouteFollower:
     ``max_distance`` along the plan, and return the next one (position, command value)."""
 
     def __init__(self, plan, min_distance: float = 4.0, max_distance: float = 50.0):
+        if not plan:
+            raise ValueError("the global plan is empty")
         self.route = deque(plan)
         self.min_distance = min_distance
         self.max_distance = max_distance
@@ -130,7 +132,8 @@ class SsrAgent(AutonomousAgent):
         self.rig = self.client.expected_rig()
         self.episode = None
         self.follower = None
-        self.frame = 0
+        # Facing north until the compass says otherwise (TCP reads a NaN compass as north).
+        self.yaw = math.pi / 2
 
     def sensors(self):
         cameras = [
@@ -165,7 +168,9 @@ class SsrAgent(AutonomousAgent):
         lat, lon = input_data["gps"][1][:2]
         position = gnss_to_world(lat, lon)
         compass = float(input_data["imu"][1][-1])
-        yaw = 0.0 if math.isnan(compass) else compass_to_yaw(compass)
+        if not math.isnan(compass):
+            self.yaw = compass_to_yaw(compass)
+        yaw = self.yaw
         speed = float(input_data["speed"][1]["speed"])
         node, command = self.follower.step(position)
         target_point = to_ego(node, position, yaw)
@@ -176,18 +181,20 @@ class SsrAgent(AutonomousAgent):
             pose=(position[0], position[1], 0.0, yaw),
             command=command,
             target_point=target_point,
-            frame_index=self.frame,
             timestamp=timestamp,
             encoding="bgra8",
         )
-        self.frame += 1
         c = result.control
         if carla is not None:  # pragma: no cover
             return carla.VehicleControl(steer=c.steer, throttle=c.throttle, brake=c.brake)
         return SimpleNamespace(steer=c.steer, throttle=c.throttle, brake=c.brake)
 
     def destroy(self):
+        """Ends the episode; never raises while the leaderboard cleans up."""
         if self.episode is not None:
-            self.episode.end()
+            try:
+                self.episode.end()
+            except AgentError:
+                pass
             self.episode = None
         self.client.close()

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import grpc
+from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from ssrdrive.stubs import load
 
@@ -203,16 +204,21 @@ class AgentClient:
         self.target = address
 
     def wait_until_serving(self, timeout: float = 120.0) -> None:
-        """Waits until the server accepts calls (it reports NOT_SERVING while warming up)."""
+        """Waits until ``grpc.health.v1.Health/Check`` reports the server SERVING (it reports
+        NOT_SERVING while it loads and warms up the model)."""
+        health = health_pb2_grpc.HealthStub(self.channel)
         deadline = time.monotonic() + timeout
-        while True:
+        last = "no answer yet"
+        while time.monotonic() < deadline:
             try:
-                self.stub.GetAgentInfo(pb.GetAgentInfoRequest(), timeout=2.0, wait_for_ready=True)
-                return
+                reply = health.Check(health_pb2.HealthCheckRequest(), timeout=2.0)
+                if reply.status == health_pb2.HealthCheckResponse.SERVING:
+                    return
+                last = health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
             except grpc.RpcError as error:
-                if time.monotonic() > deadline:
-                    raise AgentError(error.code().name, f"{self.target} is not serving") from error
-                time.sleep(0.2)
+                last = error.code().name
+            time.sleep(0.2)
+        raise AgentError("UNAVAILABLE", f"{self.target} was not SERVING within {timeout} s ({last})")
 
     def info(self):
         """The server's AgentInfo message (model, config, expected rig, limits)."""

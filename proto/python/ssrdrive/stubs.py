@@ -8,11 +8,16 @@ from pathlib import Path
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROTO_ROOT = PACKAGE_DIR.parents[1]
 PROTO_FILE = PROTO_ROOT / "ssrdrive" / "v1" / "agent.proto"
-GENERATED = PACKAGE_DIR / "v1" / "agent_pb2.py"
+GENERATED = [PACKAGE_DIR / "v1" / "agent_pb2.py", PACKAGE_DIR / "v1" / "agent_pb2_grpc.py"]
 
 
 def _stale() -> bool:
-    return not GENERATED.exists() or GENERATED.stat().st_mtime < PROTO_FILE.stat().st_mtime
+    """Missing stubs, or stubs older than a proto file that is there to regenerate from."""
+    if not all(path.exists() for path in GENERATED):
+        return True
+    if not PROTO_FILE.exists():
+        return False
+    return min(path.stat().st_mtime for path in GENERATED) < PROTO_FILE.stat().st_mtime
 
 
 def generate() -> None:
@@ -53,4 +58,4 @@ def load():
 
 if __name__ == "__main__":
     generate()
-    sys.stdout.write(f"generated {GENERATED.parent}\n")
+    sys.stdout.write(f"generated {GENERATED[0].parent}\n")

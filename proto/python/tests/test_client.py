@@ -46,6 +46,14 @@ class ClientTest(unittest.TestCase):
                          target_point=(15.0, 0.0), encoding="bgra8")
             self.assertEqual(episode.end(), 4)
 
+    def test_waiting_for_a_missing_server_gives_up_with_the_reason(self):
+        lost = AgentClient("127.0.0.1:1")
+        with self.assertRaises(AgentError) as caught:
+            lost.wait_until_serving(timeout=0.5)
+        self.assertEqual(caught.exception.code, "UNAVAILABLE")
+        self.assertIn("was not SERVING", caught.exception.message)
+        lost.close()
+
     def test_errors_carry_the_status_and_the_reason(self):
         episode = self.client.start_episode()
         camera = episode.rig[0]

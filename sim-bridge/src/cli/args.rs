@@ -2,6 +2,7 @@
 //! routes on which map, and what populates the world.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::bail;
 use clap::Args;
@@ -138,4 +139,20 @@ pub fn server_target(agent: &str, metrics: bool) -> anyhow::Result<(String, Opti
         }
         other => bail!("--agent {other}: unknown agent (expected local or grpc://HOST:PORT)"),
     }
+}
+
+/// A positive, finite number (a clap value parser).
+pub fn parse_positive(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if value.is_finite() && value > 0.0 => Ok(value),
+        _ => Err(format!("expected a positive number, got '{text}'")),
+    }
+}
+
+/// A positive number of seconds that fits a duration (a clap value parser).
+pub fn parse_seconds(text: &str) -> Result<Duration, String> {
+    parse_positive(text).and_then(|seconds| {
+        Duration::try_from_secs_f64(seconds)
+            .map_err(|_| format!("{seconds} s is longer than any run can take"))
+    })
 }

@@ -18,7 +18,9 @@ use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, ScoringConfig, summary_table};
 
-use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
+use super::args::{
+    PlannedRoute, RouteArgs, WorldArgs, parse_positive, parse_seconds, server_target,
+};
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
@@ -32,11 +34,11 @@ pub struct EvalArgs {
     #[arg(long)]
     rig: Option<String>,
     /// Deadline of each gRPC call, seconds.
-    #[arg(long, default_value_t = 30.0)]
-    call_timeout: f64,
+    #[arg(long, default_value = "30", value_parser = parse_seconds)]
+    call_timeout: Duration,
     /// How long to wait for a gRPC agent to accept connections and report SERVING, seconds.
-    #[arg(long, default_value_t = 120.0)]
-    ready_timeout: f64,
+    #[arg(long, default_value = "120", value_parser = parse_seconds)]
+    ready_timeout: Duration,
     #[command(flatten)]
     route: RouteArgs,
     #[command(flatten)]
@@ -46,7 +48,7 @@ pub struct EvalArgs {
     repetitions: usize,
     /// End every route after this many simulated seconds (a timeout without penalty) instead
     /// of the leaderboard's length-based timeout: for quick smoke runs.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_positive)]
     timeout: Option<f64>,
     /// Where to write the leaderboard results JSON.
     #[arg(long, default_value = "results.json")]
@@ -69,11 +71,6 @@ pub struct EvalArgs {
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if args.repetitions == 0 {
         bail!("--repetitions must be at least 1");
-    }
-    if let Some(timeout) = args.timeout
-        && !(timeout.is_finite() && timeout > 0.0)
-    {
-        bail!("--timeout must be a positive number of seconds, got {timeout}");
     }
     let scoring = ScoringConfig {
         timeout: args.timeout,
@@ -163,22 +160,14 @@ fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalS
     if args.agent == "expert" {
         return Ok((Box::new(Expert::new()), None));
     }
-    for (flag, value) in [
-        ("--call-timeout", args.call_timeout),
-        ("--ready-timeout", args.ready_timeout),
-    ] {
-        if !(value.is_finite() && value > 0.0) {
-            bail!("{flag} must be a positive number of seconds, got {value}");
-        }
-    }
     let options = GrpcOptions {
         rig: args
             .rig
             .as_deref()
             .map(Rig::from_name_or_file)
             .transpose()?,
-        call_timeout: Duration::from_secs_f64(args.call_timeout),
-        ready_timeout: Duration::from_secs_f64(args.ready_timeout),
+        call_timeout: args.call_timeout,
+        ready_timeout: args.ready_timeout,
         client: "sim-bridge eval".into(),
         ..GrpcOptions::default()
     };

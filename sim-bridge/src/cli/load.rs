@@ -24,7 +24,7 @@ use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::World;
 use ssrdrive_proto::v1;
 
-use super::args::{RouteArgs, WorldArgs, server_target};
+use super::args::{RouteArgs, WorldArgs, parse_positive, parse_seconds, server_target};
 
 #[derive(Debug, Args)]
 pub struct LoadArgs {
@@ -36,11 +36,11 @@ pub struct LoadArgs {
     #[arg(long, default_value_t = 8)]
     episodes: usize,
     /// Steps per second of each episode.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value = "10", value_parser = parse_positive)]
     rate: f64,
     /// Seconds of load.
-    #[arg(long, default_value_t = 60.0)]
-    duration: f64,
+    #[arg(long, default_value = "60", value_parser = parse_seconds)]
+    duration: Duration,
     /// Distinct frames to cycle through.
     #[arg(long, default_value_t = 40)]
     frames: usize,
@@ -49,15 +49,15 @@ pub struct LoadArgs {
     dataset: Option<PathBuf>,
     /// Camera rig to render and send: a preset or a JSON file [default: the rig the server
     /// expects].
-    #[arg(long)]
+    #[arg(long, conflicts_with = "dataset")]
     rig: Option<String>,
     /// The server's Prometheus URL (http://HOST:PORT/metrics), to report its memory before and
     /// after; `local` finds its own.
     #[arg(long)]
     metrics: Option<String>,
     /// Deadline of each step, seconds.
-    #[arg(long, default_value_t = 10.0)]
-    call_timeout: f64,
+    #[arg(long, default_value = "10", value_parser = parse_seconds)]
+    call_timeout: Duration,
     /// Also write the report as JSON here.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -73,15 +73,6 @@ pub struct LoadArgs {
 pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     if args.episodes == 0 || args.frames == 0 {
         bail!("--episodes and --frames must be at least 1");
-    }
-    for (flag, value) in [
-        ("--rate", args.rate),
-        ("--duration", args.duration),
-        ("--call-timeout", args.call_timeout),
-    ] {
-        if !(value.is_finite() && value > 0.0) {
-            bail!("{flag} must be a positive number, got {value}");
-        }
     }
     let (target, local) = server_target(&args.agent, true)?;
     let metrics_url = args.metrics.clone().or_else(|| {
@@ -113,12 +104,12 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         None => rendered_templates(&args, &rig)?,
     };
     eprintln!(
-        "{} frame(s) of {} camera(s) ready; {} episodes at {} Hz for {} s",
+        "{} frame(s) of {} camera(s) ready; {} episodes at {} Hz for {:.0} s",
         templates.len(),
         rig.cameras.len(),
         args.episodes,
         args.rate,
-        args.duration
+        args.duration.as_secs_f64()
     );
     let mut memory = Vec::new();
     if let Some(url) = &metrics_url {
@@ -128,12 +119,12 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         target,
         episodes: args.episodes,
         rate_hz: args.rate,
-        duration: Duration::from_secs_f64(args.duration),
-        call_timeout: Duration::from_secs_f64(args.call_timeout),
+        duration: args.duration,
+        call_timeout: args.call_timeout,
         rig: wire::rig_to_proto(&rig),
     };
     let progress = Arc::new(LoadProgress::default());
-    let bar = progress_bar(args.quiet, args.duration);
+    let bar = progress_bar(args.quiet, args.duration.as_secs_f64());
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
@@ -285,6 +276,15 @@ fn dataset_templates(dataset: &Dataset, wanted: usize) -> anyhow::Result<Vec<v1:
     for entry in &dataset.manifest.episode_list {
         for record in dataset.frames(&entry.name)? {
             let images = dataset.images(&entry.name, &record)?;
+            if images.len() != dataset.manifest.rig.cameras.len() {
+                bail!(
+                    "episode {} frame {}: {} image(s) for a {}-camera rig",
+                    entry.name,
+                    record.index,
+                    images.len(),
+                    dataset.manifest.rig.cameras.len()
+                );
+            }
             let frames = images
                 .into_iter()
                 .zip(&dataset.manifest.rig.cameras)

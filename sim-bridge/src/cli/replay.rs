@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use sim_bridge::replay::{ReplayReport, Spread, log::read_log, replay};
 
-use super::args::server_target;
+use super::args::{parse_seconds, server_target};
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
@@ -19,8 +19,8 @@ pub struct ReplayArgs {
     #[arg(long, default_value = "local")]
     agent: String,
     /// Deadline of each step, seconds.
-    #[arg(long, default_value_t = 30.0)]
-    call_timeout: f64,
+    #[arg(long, default_value = "30", value_parser = parse_seconds)]
+    call_timeout: Duration,
     /// Also write the reports as a JSON list here.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -87,9 +87,6 @@ fn print(report: &ReplayReport, path: &std::path::Path) {
 }
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
-    if !(args.call_timeout.is_finite() && args.call_timeout > 0.0) {
-        bail!("--call-timeout must be a positive number of seconds");
-    }
     let files = log_files(&args.logs)?;
     let (target, _local) = server_target(&args.agent, false)?;
     let mut reports = Vec::new();
@@ -102,7 +99,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
                 log.ticks.len()
             );
         }
-        let report = replay(&log, &target, Duration::from_secs_f64(args.call_timeout))?;
+        let report = replay(&log, &target, args.call_timeout)?;
         print(&report, path);
         reports.push(report);
     }

@@ -57,12 +57,13 @@ pub struct GrpcAgent {
     trajectory: Vec<DVec2>,
 }
 
-fn crashed(what: &str, status: &tonic::Status) -> AgentError {
+/// A failed call as an agent error: `what: CODE: message`.
+pub fn status_error(what: &str, status: &tonic::Status) -> AgentError {
     AgentError(format!("{what}: {:?}: {}", status.code(), status.message()))
 }
 
 /// `grpc://host:port` or `http://host:port` (or a bare `host:port`) as a tonic URI.
-pub fn endpoint_uri(target: &str) -> String {
+fn endpoint_uri(target: &str) -> String {
     let address = target
         .strip_prefix("grpc://")
         .or_else(|| target.strip_prefix("http://"))
@@ -78,19 +79,15 @@ impl GrpcAgent {
             .enable_all()
             .build()
             .map_err(|e| AgentError(format!("starting the client runtime: {e}")))?;
-        let uri = endpoint_uri(target);
-        let channel = runtime.block_on(async {
-            let endpoint = Endpoint::from_shared(uri.clone())
-                .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?
-                .connect_timeout(Duration::from_secs(10));
-            wait_until_serving(&endpoint, options.ready_timeout, target).await
-        })?;
+        let channel = runtime.block_on(connect_when_serving(target, options.ready_timeout))?;
         let mut client = AgentServiceClient::new(channel)
             .max_decoding_message_size(options.max_message_bytes)
             .max_encoding_message_size(options.max_message_bytes);
+        let mut request = tonic::Request::new(v1::GetAgentInfoRequest {});
+        request.set_timeout(options.call_timeout);
         let info = runtime
-            .block_on(client.get_agent_info(v1::GetAgentInfoRequest {}))
-            .map_err(|s| crashed(&format!("GetAgentInfo on {target}"), &s))?
+            .block_on(client.get_agent_info(request))
+            .map_err(|s| status_error(&format!("GetAgentInfo on {target}"), &s))?
             .into_inner();
         let rig = match &options.rig {
             Some(rig) => rig.clone(),
@@ -107,11 +104,6 @@ impl GrpcAgent {
             episode: None,
             trajectory: Vec::new(),
         })
-    }
-
-    /// What the server runs.
-    pub fn info(&self) -> &v1::AgentInfo {
-        &self.info
     }
 
     fn timed<T>(&self, message: T) -> tonic::Request<T> {
@@ -132,29 +124,34 @@ impl GrpcAgent {
     }
 }
 
-/// Polls `grpc.health.v1.Health/Check` until the whole server reports SERVING.
-pub async fn wait_until_serving(
-    endpoint: &Endpoint,
-    timeout: Duration,
-    target: &str,
-) -> Result<Channel, AgentError> {
+/// Connects to `target` and polls `grpc.health.v1.Health/Check` until the whole server reports
+/// SERVING, all within `timeout` (each attempt is bounded too, so a stalled server cannot hold
+/// it up).
+pub async fn connect_when_serving(target: &str, timeout: Duration) -> Result<Channel, AgentError> {
+    let endpoint = Endpoint::from_shared(endpoint_uri(target))
+        .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?
+        .connect_timeout(Duration::from_secs(5));
     let deadline = tokio::time::Instant::now() + timeout;
     loop {
-        let last = match endpoint.connect().await {
-            Ok(channel) => {
-                let mut health = HealthClient::new(channel.clone());
-                match health
-                    .check(tonic_health::pb::HealthCheckRequest::default())
-                    .await
-                {
-                    Ok(reply) if reply.get_ref().status() == ServingStatus::Serving => {
-                        return Ok(channel);
-                    }
-                    Ok(reply) => format!("health {:?}", reply.get_ref().status()),
-                    Err(status) => format!("health check: {}", status.message()),
-                }
+        let attempt = async {
+            let channel = endpoint
+                .connect()
+                .await
+                .map_err(|e| format!("connecting: {e}"))?;
+            let reply = HealthClient::new(channel.clone())
+                .check(tonic_health::pb::HealthCheckRequest::default())
+                .await
+                .map_err(|status| format!("health check: {}", status.message()))?;
+            match reply.get_ref().status() {
+                ServingStatus::Serving => Ok(channel),
+                other => Err(format!("health {other:?}")),
             }
-            Err(error) => format!("connecting: {error}"),
+        };
+        let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+        let last = match tokio::time::timeout(left.min(Duration::from_secs(10)), attempt).await {
+            Ok(Ok(channel)) => return Ok(channel),
+            Ok(Err(problem)) => problem,
+            Err(_) => "no answer in time".to_string(),
         };
         if tokio::time::Instant::now() >= deadline {
             return Err(AgentError(format!(
@@ -176,6 +173,7 @@ impl Agent for GrpcAgent {
 
     fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.end_episode();
+        self.trajectory.clear();
         let request = self.timed(v1::StartEpisodeRequest {
             rig: Some(wire::rig_to_proto(&self.rig)),
             client: self.options.client.clone(),
@@ -184,7 +182,7 @@ impl Agent for GrpcAgent {
         let reply = self
             .runtime
             .block_on(self.client.start_episode(request))
-            .map_err(|s| crashed("StartEpisode", &s))?;
+            .map_err(|s| status_error("StartEpisode", &s))?;
         self.episode = Some(reply.into_inner().episode_id);
         Ok(())
     }
@@ -210,7 +208,7 @@ impl Agent for GrpcAgent {
         let reply = self
             .runtime
             .block_on(self.client.step(request))
-            .map_err(|s| crashed(&format!("Step {}", obs.frame), &s))?
+            .map_err(|s| status_error(&format!("Step {}", obs.frame), &s))?
             .into_inner();
         self.trajectory = reply
             .trajectory

@@ -16,9 +16,8 @@ use std::time::Duration;
 
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
-use tonic::transport::Endpoint;
 
-use super::grpc::{endpoint_uri, wait_until_serving};
+use super::grpc::{connect_when_serving, status_error};
 use crate::agent::AgentError;
 
 /// What to run.
@@ -53,7 +52,8 @@ pub struct LoadReport {
     pub count: usize,
     /// Answered steps per second of wall time.
     pub rps: f64,
-    /// Latency from each step's intended send time, milliseconds.
+    /// Latency from each step's intended send time, milliseconds; a step never sent counts
+    /// with its wait until the end (a lower bound).
     pub latency_ms: Percentiles,
     /// Answers by gRPC status code name ("Ok" for successes).
     pub codes: BTreeMap<String, usize>,
@@ -94,6 +94,8 @@ struct EpisodeResult {
     latencies: Vec<f64>,
     codes: BTreeMap<String, usize>,
     behind: u64,
+    /// When its last answer came.
+    finished: tokio::time::Instant,
 }
 
 /// Runs the load; `templates` are cycled (episode `e` starts at template `e`).
@@ -105,19 +107,16 @@ pub async fn run_load(
     if templates.is_empty() {
         return Err(AgentError("no step templates to send".into()));
     }
-    let endpoint = Endpoint::from_shared(endpoint_uri(&config.target))
-        .map_err(|e| AgentError(format!("'{}' is not a server address: {e}", config.target)))?;
-    wait_until_serving(&endpoint, Duration::from_secs(60), &config.target).await?;
-    let period = Duration::from_secs_f64(1.0 / config.rate_hz);
-    // Episodes start spread over one period, as independent simulators would.
-    let start = tokio::time::Instant::now() + Duration::from_millis(200);
-    let end = start + config.duration;
-    let mut tasks = Vec::with_capacity(config.episodes);
+    let period = Duration::try_from_secs_f64(1.0 / config.rate_hz).map_err(|_| {
+        AgentError(format!(
+            "a rate of {} Hz has no usable period",
+            config.rate_hz
+        ))
+    })?;
+    // Open every episode first, so set-up time never counts against the schedule.
+    let mut clients = Vec::with_capacity(config.episodes);
     for episode in 0..config.episodes {
-        let channel = endpoint
-            .connect()
-            .await
-            .map_err(|e| AgentError(format!("connecting to {}: {e}", config.target)))?;
+        let channel = connect_when_serving(&config.target, Duration::from_secs(60)).await?;
         let mut client = AgentServiceClient::new(channel);
         let id = client
             .start_episode(v1::StartEpisodeRequest {
@@ -126,9 +125,16 @@ pub async fn run_load(
                 ..Default::default()
             })
             .await
-            .map_err(|s| AgentError(format!("StartEpisode: {:?}: {}", s.code(), s.message())))?
+            .map_err(|s| status_error("StartEpisode", &s))?
             .into_inner()
             .episode_id;
+        clients.push((client, id));
+    }
+    let start = tokio::time::Instant::now() + Duration::from_millis(100);
+    let end = start + config.duration;
+    let mut tasks = Vec::with_capacity(config.episodes);
+    for (episode, (mut client, id)) in clients.into_iter().enumerate() {
+        // Episodes tick spread over one period, as independent simulators would.
         let offset = period.mul_f64(episode as f64 / config.episodes as f64);
         let (templates, progress) = (Arc::clone(&templates), Arc::clone(&progress));
         let call_timeout = config.call_timeout;
@@ -137,6 +143,7 @@ pub async fn run_load(
                 latencies: Vec::new(),
                 codes: BTreeMap::new(),
                 behind: 0,
+                finished: start,
             };
             let mut k: u64 = 0;
             loop {
@@ -145,9 +152,14 @@ pub async fn run_load(
                     break;
                 }
                 if tokio::time::Instant::now() >= end {
-                    // Every step from k on was due before the end and is now too late.
-                    let first_out = (end - start - offset).as_secs_f64() / period.as_secs_f64();
-                    result.behind = (first_out.ceil() as u64).saturating_sub(k);
+                    // Steps k.. were due before the end and never went out: each counts with
+                    // its wait so far as a lower bound of its latency.
+                    while start + offset + period.mul_f64(k as f64) < end {
+                        let due = start + offset + period.mul_f64(k as f64);
+                        result.latencies.push((end - due).as_secs_f64() * 1e3);
+                        result.behind += 1;
+                        k += 1;
+                    }
                     break;
                 }
                 tokio::time::sleep_until(intended).await;
@@ -170,6 +182,7 @@ pub async fn run_load(
                 progress.steps.fetch_add(1, Ordering::Relaxed);
                 k += 1;
             }
+            result.finished = tokio::time::Instant::now();
             let _ = client
                 .end_episode(v1::EndEpisodeRequest { episode_id: id })
                 .await;
@@ -179,6 +192,7 @@ pub async fn run_load(
     let mut latencies = Vec::new();
     let mut codes = BTreeMap::new();
     let mut behind = 0;
+    let mut finished = start;
     for task in tasks {
         let result = task
             .await
@@ -188,14 +202,16 @@ pub async fn run_load(
             *codes.entry(code).or_default() += n;
         }
         behind += result.behind;
+        finished = finished.max(result.finished);
     }
-    let duration_s = start.elapsed().as_secs_f64();
+    let duration_s = (finished - start).as_secs_f64();
+    let count = codes.values().sum();
     Ok(LoadReport {
         episodes: config.episodes,
         rate_hz: config.rate_hz,
         duration_s,
-        count: latencies.len(),
-        rps: latencies.len() as f64 / duration_s,
+        count,
+        rps: count as f64 / duration_s,
         latency_ms: Percentiles::of(latencies),
         codes,
         behind_schedule: behind,

@@ -81,10 +81,18 @@ impl LocalServer {
         let stdout = child.stdout.take().expect("stdout is piped");
         let (sender, receiver) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
-            let mut lines = BufReader::new(stdout).lines().map_while(Result::ok);
+            let mut reader = BufReader::new(stdout);
+            let mut lines = std::iter::from_fn(|| {
+                let mut line = String::new();
+                match reader.read_line(&mut line) {
+                    Ok(0) | Err(_) => None,
+                    Ok(_) => Some(line.trim_end().to_string()),
+                }
+            });
             let _ = sender.send(read_addresses(&mut lines, metrics));
-            // Keep draining so the child never blocks on a full pipe.
-            for _ in lines {}
+            // Keep draining (any bytes) so the child never blocks on, or fails writing to, a
+            // full or closed pipe.
+            let _ = std::io::copy(&mut reader, &mut std::io::sink());
         });
         let mut server = Self {
             child,
@@ -121,7 +129,22 @@ impl LocalServer {
 }
 
 impl Drop for LocalServer {
+    /// SIGTERM first (the server drains and exits within a moment), SIGKILL after 5 s.
     fn drop(&mut self) {
+        #[cfg(unix)]
+        {
+            let asked = Command::new("kill")
+                .args(["-TERM", &self.child.id().to_string()])
+                .status()
+                .is_ok_and(|s| s.success());
+            let deadline = std::time::Instant::now() + Duration::from_secs(5);
+            while asked && std::time::Instant::now() < deadline {
+                if let Ok(Some(_)) = self.child.try_wait() {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }

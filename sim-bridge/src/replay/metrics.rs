@@ -1,9 +1,10 @@
 //! Open-loop metrics of predicted trajectories against what happened next in a step log, as
 //! the SSR paper reports them (after ST-P3/UniAD), for horizons of 1, 2 and 3 s:
 //!
-//! - **L2 at h**: distance between the predicted waypoint at h and where the recorded ego
-//!   actually was h later, both in the ego frame of the prediction's tick; the mean over ticks
-//!   that have both (a model whose plan ends before h has no value there).
+//! - **L2 at h** (UniAD's convention: the error *at* h; ST-P3 and VAD average the errors up to
+//!   h): distance between the predicted waypoint at h and where the recorded ego actually was h
+//!   later, both in the ego frame of the prediction's tick; the mean over ticks that have both
+//!   (a model whose plan ends before h has no value there; non-finite plans are skipped).
 //! - **Collision rate at h**: the share of predictions whose ego box, placed at any predicted
 //!   waypoint up to h (heading along the path), overlaps a recorded actor box at the matching
 //!   time.
@@ -30,9 +31,11 @@ pub struct HorizonMetrics {
     pub samples: usize,
 }
 
-fn pose(p: &Option<v1::Pose>) -> (DVec2, f64) {
-    p.as_ref()
-        .map_or((DVec2::ZERO, 0.0), |p| (DVec2::new(p.x, p.y), p.yaw))
+/// A recorded pose as (position, yaw); `None` when missing or not finite.
+fn pose(p: &Option<v1::Pose>) -> Option<(DVec2, f64)> {
+    let p = p.as_ref()?;
+    let pose = (DVec2::new(p.x, p.y), p.yaw);
+    (pose.0.is_finite() && pose.1.is_finite()).then_some(pose)
 }
 
 fn to_ego(point: DVec2, origin: DVec2, yaw: f64) -> DVec2 {
@@ -61,11 +64,17 @@ pub fn open_loop(log: &StepLog, predictions: &[Vec<DVec2>]) -> Vec<HorizonMetric
             let (mut l2_sum, mut collisions, mut samples) = (0.0, 0usize, 0usize);
             for (t, plan) in predictions.iter().enumerate() {
                 let ahead = (horizon / tick_s).round() as usize;
-                if plan.len() < steps || t + ahead >= log.ticks.len() {
+                if plan.len() < steps
+                    || t + ahead >= log.ticks.len()
+                    || !plan[..steps].iter().all(|p| p.is_finite())
+                {
                     continue;
                 }
-                let (origin, yaw) = pose(&log.ticks[t].ego);
-                let (truth, _) = pose(&log.ticks[t + ahead].ego);
+                let (Some((origin, yaw)), Some((truth, _))) =
+                    (pose(&log.ticks[t].ego), pose(&log.ticks[t + ahead].ego))
+                else {
+                    continue;
+                };
                 l2_sum += plan[steps - 1].distance(to_ego(truth, origin, yaw));
                 samples += 1;
                 let collided = (0..steps).any(|k| {
@@ -86,16 +95,13 @@ pub fn open_loop(log: &StepLog, predictions: &[Vec<DVec2>]) -> Vec<HorizonMetric
                         half,
                     };
                     let index = t + ((k + 1) as f64 * WAYPOINT_STEP_S / tick_s).round() as usize;
-                    log.ticks[index.min(log.ticks.len() - 1)]
-                        .actors
-                        .iter()
-                        .any(|a| {
-                            ego.overlaps(&Obb {
-                                centre: DVec2::new(a.x, a.y),
-                                yaw: a.yaw,
-                                half: DVec2::new(a.half_length, a.half_width),
-                            })
+                    log.ticks[index].actors.iter().any(|a| {
+                        ego.overlaps(&Obb {
+                            centre: DVec2::new(a.x, a.y),
+                            yaw: a.yaw,
+                            half: DVec2::new(a.half_length, a.half_width),
                         })
+                    })
                 });
                 collisions += usize::from(collided);
             }

@@ -20,10 +20,9 @@ use std::time::{Duration, Instant};
 use glam::DVec2;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
-use tonic::transport::Endpoint;
 
 use crate::agent::AgentError;
-use crate::client::grpc::{endpoint_uri, wait_until_serving};
+use crate::client::grpc::{connect_when_serving, status_error};
 use crate::client::load::Percentiles;
 use log::StepLog;
 use metrics::{HorizonMetrics, open_loop};
@@ -61,8 +60,8 @@ pub struct ReplayReport {
     pub steer_diff: Option<Spread>,
     pub throttle_diff: Option<Spread>,
     pub brake_diff: Option<Spread>,
-    /// Mean distance between replayed and recorded waypoints, metres (logs of agents that
-    /// planned).
+    /// Per tick, the mean distance between replayed and recorded waypoints (metres): mean and
+    /// max over ticks (logs of agents that planned).
     pub trajectory_drift_m: Option<Spread>,
     pub open_loop: Vec<HorizonMetrics>,
 }
@@ -80,18 +79,12 @@ pub fn replay(
     runtime.block_on(replay_async(log, target, call_timeout))
 }
 
-fn status_error(what: &str, status: &tonic::Status) -> AgentError {
-    AgentError(format!("{what}: {:?}: {}", status.code(), status.message()))
-}
-
 async fn replay_async(
     log: &StepLog,
     target: &str,
     call_timeout: Duration,
 ) -> Result<ReplayReport, AgentError> {
-    let endpoint = Endpoint::from_shared(endpoint_uri(target))
-        .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?;
-    let channel = wait_until_serving(&endpoint, Duration::from_secs(120), target).await?;
+    let channel = connect_when_serving(target, Duration::from_secs(120)).await?;
     let mut client = AgentServiceClient::new(channel);
     let episode_id = client
         .start_episode(v1::StartEpisodeRequest {
