@@ -74,6 +74,16 @@ fn read_results(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The stdout of a run that must have succeeded (its stderr in the failure message).
+fn succeeded(run: std::process::Output) -> String {
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    String::from_utf8_lossy(&run.stdout).into_owned()
+}
+
 /// `sim-bridge eval` of the bundled short routes without traffic, quiet, results to `out`;
 /// `flags` add to or narrow it (`--limit`, `--timeout`, ...).
 fn eval_command(agent: &str, flags: &[&str], out: &std::path::Path) -> Command {
@@ -335,18 +345,11 @@ fn a_full_queue_sheds_load_and_batches_form_under_concurrency() {
         "0",
     ]);
     runtime().block_on(async {
-        let mut client = server.client().await;
-        let rig = expected_rig(&mut client).await;
-        let mut episodes = Vec::new();
-        for _ in 0..8 {
-            episodes.push(start(&mut client, &rig).await);
-        }
-        let calls = episodes.iter().map(|id| {
-            let mut client = client.clone();
-            let request = step(id, 0, &rig);
-            async move { code_of(client.step(request)).await }
-        });
-        let codes = futures_join(calls).await;
+        let (mut client, rig, episodes, answers) = burst_of_first_steps(&server, 8).await;
+        let codes: Vec<Code> = answers
+            .iter()
+            .map(|a| a.as_ref().map_or_else(|s| s.code(), |_| Code::Ok))
+            .collect();
         assert!(codes.contains(&Code::ResourceExhausted), "{codes:?}");
         assert!(codes.contains(&Code::Ok), "{codes:?}");
         // A refused step leaves its episode as it was: frame 0 is still next.
@@ -359,24 +362,40 @@ fn a_full_queue_sheds_load_and_batches_form_under_concurrency() {
     drop(server);
 
     let server = Server::start(&["--max-batch", "8", "--max-queue-delay-ms", "50"]);
-    let sizes = runtime().block_on(async {
-        let mut client = server.client().await;
-        let rig = expected_rig(&mut client).await;
-        let mut episodes = Vec::new();
-        for _ in 0..8 {
-            episodes.push(start(&mut client, &rig).await);
-        }
-        let calls = episodes.iter().map(|id| {
-            let mut client = client.clone();
-            let request = step(id, 0, &rig);
-            async move {
-                let answer = client.step(request).await.unwrap().into_inner();
-                answer.timings.unwrap().batch_size
-            }
-        });
-        futures_join(calls).await
+    let sizes: Vec<u32> = runtime().block_on(async {
+        let (.., answers) = burst_of_first_steps(&server, 8).await;
+        answers
+            .into_iter()
+            .map(|a| a.unwrap().timings.unwrap().batch_size)
+            .collect()
     });
     assert!(sizes.iter().any(|&s| s > 1), "no batch formed: {sizes:?}");
+}
+
+/// Opens `n` episodes, then sends each one's first step at once; returns the client, the rig,
+/// the episode ids and the answers in episode order.
+async fn burst_of_first_steps(
+    server: &Server,
+    n: usize,
+) -> (
+    Client,
+    v1::Rig,
+    Vec<String>,
+    Vec<Result<v1::StepResponse, tonic::Status>>,
+) {
+    let mut client = server.client().await;
+    let rig = expected_rig(&mut client).await;
+    let mut episodes = Vec::new();
+    for _ in 0..n {
+        episodes.push(start(&mut client, &rig).await);
+    }
+    let calls = episodes.iter().map(|id| {
+        let mut client = client.clone();
+        let request = step(id, 0, &rig);
+        async move { client.step(request).await.map(|a| a.into_inner()) }
+    });
+    let answers = futures_join(calls).await;
+    (client, rig, episodes, answers)
 }
 
 /// Runs futures concurrently on the current runtime and collects their outputs in order.
@@ -566,15 +585,9 @@ fn load_reports_every_step_and_the_server_memory() {
         .arg(&out)
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let stdout = succeeded(run);
     assert!(stdout.contains("status codes: Ok 20"), "{stdout}");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let report = read_results(&out);
     assert_eq!(report["report"]["count"], 20);
     assert!(report["report"]["latency_ms"]["p99"].as_f64().unwrap() > 0.0);
     let memory = report["server_rss_bytes"].as_array().unwrap();
@@ -618,15 +631,9 @@ fn a_recorded_run_replays_without_drift() {
         .arg(&logs)
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let stdout = succeeded(run);
     assert!(stdout.contains("open loop at 1 s: L2"), "{stdout}");
-    let reports: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let reports = read_results(&out);
     let report = &reports[0];
     assert_eq!(report["ticks"], 31);
     assert_eq!(report["codes"]["Ok"], 31);

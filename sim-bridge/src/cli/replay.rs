@@ -61,10 +61,9 @@ fn print(report: &ReplayReport, path: &std::path::Path) {
         if report.truncated { ", cut short" } else { "" },
         report.recorded_agent
     );
-    let l = &report.latency_ms;
     println!(
-        "  latency ms: p50 {:.1} p90 {:.1} p99 {:.1} max {:.1}; codes {:?}",
-        l.p50, l.p90, l.p99, l.max, report.codes
+        "  latency (ms): {}; codes {:?}",
+        report.latency_ms, report.codes
     );
     println!(
         "  |replayed - recorded| mean/max: steer {} throttle {} brake {} trajectory {} m",

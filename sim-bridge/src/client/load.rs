@@ -69,6 +69,16 @@ pub struct Percentiles {
     pub max: f64,
 }
 
+impl std::fmt::Display for Percentiles {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "p50 {:.1}  p90 {:.1}  p99 {:.1}  max {:.1}",
+            self.p50, self.p90, self.p99, self.max
+        )
+    }
+}
+
 impl Percentiles {
     /// Of unsorted samples (NaN when empty).
     pub fn of(mut samples: Vec<f64>) -> Self {
