@@ -12,6 +12,7 @@ pub mod client;
 pub mod dataset;
 pub mod eval;
 pub mod expert;
+pub mod files;
 pub mod image;
 pub mod map;
 pub mod render;

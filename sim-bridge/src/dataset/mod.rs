@@ -180,25 +180,7 @@ pub struct Manifest {
 }
 
 /// A dataset that cannot be read, with the file and the problem.
-#[derive(Debug, thiserror::Error)]
-pub enum DatasetError {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{path}: {problem}")]
-    Invalid { path: PathBuf, problem: String },
-}
-
-impl DatasetError {
-    fn invalid(path: &Path, problem: impl Into<String>) -> Self {
-        DatasetError::Invalid {
-            path: path.to_path_buf(),
-            problem: problem.into(),
-        }
-    }
-}
+pub type DatasetError = crate::files::FileError;
 
 /// Read a whole file, refusing one over `limit` bytes.
 fn read_capped(path: &Path, limit: u64) -> Result<Vec<u8>, DatasetError> {

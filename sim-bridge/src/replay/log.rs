@@ -19,32 +19,7 @@ pub const LOG_VERSION: u32 = 1;
 const MAX_RECORD_BYTES: u64 = 128 << 20;
 
 /// Why a log cannot be read or written.
-#[derive(Debug, thiserror::Error)]
-pub enum LogError {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{path}: {problem}")]
-    Invalid { path: PathBuf, problem: String },
-}
-
-impl LogError {
-    fn io(path: &Path, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.to_path_buf(),
-            source,
-        }
-    }
-
-    fn invalid(path: &Path, problem: impl Into<String>) -> Self {
-        Self::Invalid {
-            path: path.to_path_buf(),
-            problem: problem.into(),
-        }
-    }
-}
+pub type LogError = crate::files::FileError;
 
 /// A log being written.
 pub struct LogWriter {
