@@ -205,7 +205,7 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
             width: camera.width,
             height: camera.height,
             rgb: (0..camera.width * camera.height * 3)
-                .map(|k| (k * 2654435761 >> 24) as u8)
+                .map(|k| ((k * 2654435761) >> 24) as u8)
                 .collect(),
         };
         let mut episode = policy.new_episode();

@@ -37,7 +37,7 @@ enum Command {
     /// temporal state, dynamic batching, health, reflection, Prometheus metrics. Settings come
     /// from --config FILE, then SSR_AGENT_* variables, then flags. Stops on Ctrl-C or SIGTERM
     /// after draining in-flight requests.
-    Serve(serve_args::ServeArgs),
+    Serve(Box<serve_args::ServeArgs>),
     /// Time the network: forward latency with a per-stage breakdown (backbone, BEV encoder,
     /// STL, head), a full policy step from 900x256 camera frames, and optionally a training step.
     /// Without --config it runs the standard set: cpu-default at batch 1 and 8, paper at batch 1.

@@ -113,7 +113,7 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
 fn special_functions_match_known_values() {
     let device = Device::flex();
     let x = Tensor::<1>::from_floats([0.5, 1.0, 2.0, 10.0, 0.05], &device);
-    let expected = [0.572_364_9, 0.0, 0.0, 12.801_827, 2.968_879_9];
+    let expected = [0.572_364_9, 0.0, 0.0, 12.801_827, 2.968_88];
     for (got, want) in float_values(ln_gamma(x)).iter().zip(expected) {
         assert!((got - want).abs() < 1e-4, "ln_gamma: {got} vs {want}");
     }

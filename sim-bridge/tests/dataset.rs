@@ -137,7 +137,7 @@ impl Agent for Watcher {
         Some(Rig::tcp_small())
     }
     fn wants_frames(&self, frame: u64) -> bool {
-        frame % 10 == 0
+        frame.is_multiple_of(10)
     }
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         self.seen.extend(obs.frames.iter().cloned());

@@ -290,7 +290,7 @@ impl SsrConfig {
         if !(g.x_min < g.x_max && g.y_min < g.y_max) {
             return fail("bev ranges must satisfy x_min < x_max and y_min < y_max".into());
         }
-        if v.pillar_heights.is_empty() || v.spatial_points % v.pillar_heights.len() != 0 {
+        if v.pillar_heights.is_empty() || !v.spatial_points.is_multiple_of(v.pillar_heights.len()) {
             return fail(
                 "bev.spatial_points must be a positive multiple of the number of pillar heights"
                     .into(),
@@ -304,7 +304,7 @@ impl SsrConfig {
                 return fail(format!("{what} = {heads} must divide channels = {dim}"));
             }
         }
-        if self.channels % 2 != 0 {
+        if !self.channels.is_multiple_of(2) {
             return fail(
                 "channels must be even (half for rows, half for columns in the BEV position)"
                     .into(),

@@ -189,7 +189,7 @@ impl Agent for Capture {
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
-        if obs.frame % self.every == 0 && self.states.len() < self.wanted {
+        if obs.frame.is_multiple_of(self.every) && self.states.len() < self.wanted {
             self.states.push((
                 world.ego_state(),
                 world.actors(),

@@ -184,7 +184,7 @@ impl Agent for Film<'_> {
     }
 
     fn wants_frames(&self, frame: u64) -> bool {
-        frame % self.args.every == 0 && self.written < self.args.max_frames
+        frame.is_multiple_of(self.args.every) && self.written < self.args.max_frames
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {

@@ -160,7 +160,7 @@ pub fn collect(
 
 /// Ticks per stored frame for a rate, if the rate divides 20 Hz.
 pub fn ticks_per_frame(rate_hz: f64) -> Option<u64> {
-    if !(rate_hz > 0.0) {
+    if !rate_hz.is_finite() || rate_hz <= 0.0 {
         return None;
     }
     let ticks = (1.0 / (rate_hz * DT)).round();

@@ -234,7 +234,7 @@ impl Agent for EpisodeRecorder {
     }
 
     fn wants_frames(&self, frame: u64) -> bool {
-        frame % self.ticks_per_frame == 0
+        frame.is_multiple_of(self.ticks_per_frame)
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {

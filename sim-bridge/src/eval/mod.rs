@@ -125,10 +125,10 @@ pub fn run_route(
         if let Some(end) = scorer.tick(world.time, &ego, &contacts, world.light_states()) {
             break end;
         }
-        if frame % TRACE_EVERY == 0 {
+        if frame.is_multiple_of(TRACE_EVERY) {
             trace.push(ego.position);
         }
-        if frame % 20 == 0 {
+        if frame.is_multiple_of(20) {
             on_tick(scorer.route_completion());
         }
         contacts = world.step(control);

@@ -227,22 +227,21 @@ fn random_walk(
             && l.length() - s > 70.0
             && remaining > 80.0
             && rng.random_range(0.0..1.0) < change_rate
+            && let Some(n) = neighbour.filter(|n| map.lane(*n).kind == LaneKind::Driving)
         {
-            if let Some(n) = neighbour.filter(|n| map.lane(*n).kind == LaneKind::Driving) {
-                let at = s + 20.0;
-                walk.pieces.push((lane, s, at));
-                walk.length += at - s;
-                let proj = map.lane(n).project(
-                    l.pose_at(at + super::planner::LANE_CHANGE_LENGTH)
-                        .position
-                        .truncate(),
-                );
-                lane = n;
-                s = proj.s;
-                walk.lanes.push(lane);
-                walk.changed_lanes = true;
-                continue;
-            }
+            let at = s + 20.0;
+            walk.pieces.push((lane, s, at));
+            walk.length += at - s;
+            let proj = map.lane(n).project(
+                l.pose_at(at + super::planner::LANE_CHANGE_LENGTH)
+                    .position
+                    .truncate(),
+            );
+            lane = n;
+            s = proj.s;
+            walk.lanes.push(lane);
+            walk.changed_lanes = true;
+            continue;
         }
         let end = (s + remaining).min(l.length());
         walk.pieces.push((lane, s, end));

@@ -278,17 +278,17 @@ pub fn place_route_scenarios(
             .iter()
             .find(|l| l.stop_lines.iter().any(|s| s.lane == incoming))
             .map(|l| l.id);
-        if let (Some(ego_light), true) = (light, rng.random_range(0.0..1.0) < 0.5) {
-            if let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light) {
-                let trigger = start.saturating_sub(30);
-                out.scenarios.push(Scenario {
-                    name: "Scenario7",
-                    trigger,
-                    action: ScenarioAction::RedLightRunner { ego_light, lane, s },
-                    fired: false,
-                });
-                continue;
-            }
+        if let (Some(ego_light), true) = (light, rng.random_range(0.0..1.0) < 0.5)
+            && let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light)
+        {
+            let trigger = start.saturating_sub(30);
+            out.scenarios.push(Scenario {
+                name: "Scenario7",
+                trigger,
+                action: ScenarioAction::RedLightRunner { ego_light, lane, s },
+                fired: false,
+            });
+            continue;
         }
         if matches!(option, RoadOption::Left | RoadOption::Right)
             && i + ahead < n
