@@ -176,14 +176,6 @@ pub struct StepLease {
 }
 
 impl StepLease {
-    pub fn episode_id(&self) -> &str {
-        &self.id
-    }
-
-    pub fn frame_index(&self) -> u64 {
-        self.frame_index
-    }
-
     /// The episode's camera rig.
     pub fn rig(&self) -> &Rig {
         &self.rig

@@ -169,7 +169,7 @@ impl Metrics {
 }
 
 /// Resident set size from `/proc/self/statm` (pages x 4 KiB), or `None` off Linux.
-pub fn resident_bytes() -> Option<u64> {
+fn resident_bytes() -> Option<u64> {
     let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
     let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
     Some(pages * 4096)
