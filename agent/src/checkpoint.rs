@@ -90,7 +90,30 @@ pub fn save(
 
 /// Reads and checks a checkpoint's header: config, metadata, and that the file is complete.
 pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
-    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|source| CheckpointError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let actual = file
+        .metadata()
+        .map_err(|source| CheckpointError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .len();
+    read_header(file, actual, path)
+}
+
+/// [`inspect`] for a checkpoint in memory; `label` names it in errors.
+pub fn inspect_bytes(bytes: &[u8], label: &Path) -> Result<CheckpointInfo, CheckpointError> {
+    read_header(bytes, bytes.len() as u64, label)
+}
+
+fn read_header(
+    mut reader: impl std::io::Read,
+    actual: u64,
+    path: &Path,
+) -> Result<CheckpointInfo, CheckpointError> {
     let io = |source| CheckpointError::Io {
         path: path.to_path_buf(),
         source,
@@ -99,10 +122,9 @@ pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
         path: path.to_path_buf(),
         reason,
     };
-    let mut file = std::fs::File::open(path).map_err(io)?;
-    let actual = file.metadata().map_err(io)?.len();
     let mut length = [0u8; 8];
-    file.read_exact(&mut length)
+    reader
+        .read_exact(&mut length)
         .map_err(|_| not_st(format!("only {actual} bytes, no header")))?;
     let header_len = u64::from_le_bytes(length);
     if header_len > MAX_HEADER_BYTES {
@@ -118,7 +140,7 @@ pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
         });
     }
     let mut header = vec![0u8; header_len as usize];
-    file.read_exact(&mut header).map_err(io)?;
+    reader.read_exact(&mut header).map_err(io)?;
     let header: serde_json::Map<String, serde_json::Value> = serde_json::from_slice(&header)
         .map_err(|e| not_st(format!("header is not a JSON object: {e}")))?;
 
@@ -174,15 +196,37 @@ pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
 /// Loads a checkpoint onto `device`: the network its config describes, with its weights.
 pub fn load(path: &Path, device: &Device) -> Result<(SsrModel, CheckpointInfo), CheckpointError> {
     let info = inspect(path)?;
+    apply(SafetensorsStore::from_file(path), info, path, device)
+}
+
+/// [`load`] for a checkpoint in memory; `label` names it in errors.
+pub fn load_bytes(
+    bytes: &[u8],
+    label: &Path,
+    device: &Device,
+) -> Result<(SsrModel, CheckpointInfo), CheckpointError> {
+    let info = inspect_bytes(bytes, label)?;
+    apply(
+        SafetensorsStore::from_bytes(Some(bytes.to_vec())),
+        info,
+        label,
+        device,
+    )
+}
+
+fn apply(
+    store: SafetensorsStore,
+    info: CheckpointInfo,
+    path: &Path,
+    device: &Device,
+) -> Result<(SsrModel, CheckpointInfo), CheckpointError> {
     let mismatch = |details: String| CheckpointError::Mismatch {
         path: path.to_path_buf(),
         config: info.config.name.clone(),
         details,
     };
     let mut model = SsrModel::new(&info.config, device);
-    let mut store = SafetensorsStore::from_file(path)
-        .validate(true)
-        .allow_partial(false);
+    let mut store = store.validate(true).allow_partial(false);
     let result = model
         .load_from(&mut store)
         .map_err(|e| mismatch(e.to_string()))?;
@@ -193,4 +237,20 @@ pub fn load(path: &Path, device: &Device) -> Result<(SsrModel, CheckpointInfo), 
         )));
     }
     Ok((model, info))
+}
+
+/// The checkpoint bundled into the binary (`agent/models/`, see its model card): the CPU
+/// default trained by `ssr-agent train` on the bundled training towns.
+pub mod bundled {
+    use super::*;
+
+    /// How logs and errors name it.
+    pub const NAME: &str = "bundled:ssr-cpu-default";
+    /// The safetensors bytes.
+    pub const BYTES: &[u8] = include_bytes!("../models/ssr-cpu-default.safetensors");
+
+    /// Loads it onto `device`.
+    pub fn load(device: &Device) -> Result<(SsrModel, CheckpointInfo), CheckpointError> {
+        load_bytes(BYTES, Path::new(NAME), device)
+    }
 }

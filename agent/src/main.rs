@@ -1,9 +1,10 @@
-//! `ssr-agent`: serve the SSR network over gRPC, benchmark it, show model configs, inspect
+//! `ssr-agent`: serve the SSR network over gRPC, train it, benchmark it, show model configs, inspect
 //! checkpoints.
 
 mod bench;
 mod bench_serve;
 mod serve_args;
+mod train_args;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -38,6 +39,11 @@ enum Command {
     /// from --config FILE, then SSR_AGENT_* variables, then flags. Stops on Ctrl-C or SIGTERM
     /// after draining in-flight requests.
     Serve(Box<serve_args::ServeArgs>),
+    /// Train the network on a dataset from `sim-bridge collect`: TCP's imitation losses plus
+    /// SSR's future-BEV loss, AdamW with warm-up and decay, validation on held-out routes
+    /// (open-loop L2 at 1/2/3 s, control errors), checkpoints, resume (--resume). Ablations:
+    /// --no-stl, --no-ffp, --tokens N.
+    Train(Box<train_args::TrainArgs>),
     /// Time the network: forward latency with a per-stage breakdown (backbone, BEV encoder,
     /// STL, head), a full policy step from 900x256 camera frames, and optionally a training step.
     /// Without --config it runs the standard set: cpu-default at batch 1 and 8, paper at batch 1.
@@ -131,6 +137,7 @@ fn run_tool(command: Command) -> anyhow::Result<()> {
         Command::Serve(_) => unreachable!("served by main"),
         Command::Bench(args) => bench::run(&args),
         Command::BenchServe(args) => bench_serve::run(&args),
+        Command::Train(args) => train_args::run(&args),
         Command::Config { preset } => {
             let config = SsrConfig::preset(&preset).expect("clap checked the name");
             println!(

@@ -110,7 +110,8 @@ impl EpisodeState {
 /// Debug outputs of one step.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepDebug {
-    /// `[tokens][rows * cols]` TokenLearner attention over the BEV (each row sums to 1).
+    /// `[tokens][rows * cols]` TokenLearner attention over the BEV (each row sums to 1); empty
+    /// for a network without STL.
     pub token_attention: Vec<Vec<f32>>,
     pub bev_rows: usize,
     pub bev_cols: usize,
@@ -382,7 +383,12 @@ impl SsrPolicy {
         let beta = float_values(output.head.beta.clone());
         let speed = float_values(output.head.speed.clone());
         let wants_debug = inputs.iter().any(|i| i.debug);
-        let attention = wants_debug.then(|| float_values(output.scene.attention.clone()));
+        let attention = output
+            .scene
+            .attention
+            .clone()
+            .filter(|_| wants_debug)
+            .map(float_values);
         let tokens = self.config.tokens.num_tokens;
 
         let mut results = Vec::with_capacity(b);
@@ -403,13 +409,13 @@ impl SsrPolicy {
                 .act(&path, input.target_point, input.speed, a, bt);
             let control_time = control_started.elapsed();
             let debug = (input.debug).then(|| {
-                let maps = attention
-                    .as_ref()
-                    .expect("attention read when debug is asked");
-                StepDebug {
-                    token_attention: (0..tokens)
+                let token_attention = attention.as_ref().map(|maps| {
+                    (0..tokens)
                         .map(|s| maps[(i * tokens + s) * q..(i * tokens + s + 1) * q].to_vec())
-                        .collect(),
+                        .collect()
+                });
+                StepDebug {
+                    token_attention: token_attention.unwrap_or_default(),
                     bev_rows: self.config.bev.grid.rows,
                     bev_cols: self.config.bev.grid.cols,
                     alpha: a,

@@ -99,8 +99,12 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
         "{stderr}"
     );
     // ...unless the environment overrides it (then the next problem is the missing model)...
-    let stderr = serve(&[("SSR_AGENT_MAX_BATCH", "3")], &["--config", file]);
-    assert!(stderr.contains("no model: pass --checkpoint"), "{stderr}");
+    let missing = ("SSR_AGENT_CHECKPOINT", "/no/such/model.safetensors");
+    let stderr = serve(
+        &[("SSR_AGENT_MAX_BATCH", "3"), missing],
+        &["--config", file],
+    );
+    assert!(stderr.contains("/no/such/model.safetensors"), "{stderr}");
     // ...and a flag beats the environment.
     let stderr = serve(&[("SSR_AGENT_MAX_BATCH", "3")], &["--max-batch", "0"]);
     assert!(stderr.contains("max_batch = 0"), "{stderr}");
@@ -108,4 +112,54 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
     assert!(stderr.contains("/no/such/file.toml"), "{stderr}");
     let stderr = serve(&[("SSR_AGENT_METRICS_LISTEN", "nowhere")], &[]);
     assert!(stderr.contains("expected HOST:PORT or `off`"), "{stderr}");
+}
+
+#[test]
+fn train_runs_ablations_from_flags_and_names_bad_data() {
+    let dir = std::env::temp_dir().join(format!("ssr-cli-train-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    common::fixture::write_fixture_dataset(&data);
+    let model = dir.join("tiny.json");
+    std::fs::write(
+        &model,
+        serde_json::to_string(&common::tiny_config()).unwrap(),
+    )
+    .unwrap();
+    let out = dir.join("run");
+    let (data, model, out_arg) = (
+        data.to_str().unwrap(),
+        model.to_str().unwrap(),
+        out.to_str().unwrap(),
+    );
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train", "--data", data, "--out", out_arg, "--model", model, "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        ssr_agent(&args)
+    };
+    let (ok, stdout, stderr) =
+        train(&["--steps", "3", "--batch-size", "4", "--no-stl", "--no-ffp"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("3 steps done (3 in this run"), "{stdout}");
+    assert!(stdout.contains("validation at step 3"), "{stdout}");
+    let info = ssr_agent::checkpoint::inspect(&out.join("final.safetensors")).unwrap();
+    assert_eq!(info.config.name, "tiny-no-stl-no-ffp");
+    assert!(info.config.tokens.dense_bev);
+    assert!(info.metadata["training"].contains("\"future_bev\":false"));
+
+    // Resuming a finished run trains nothing more and says so.
+    let (ok, stdout, stderr) = train(&["--resume"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("3 steps done (0 in this run"), "{stdout}");
+
+    let (ok, _, stderr) = train(&["--tokens", "0"]);
+    assert!(!ok && stderr.contains("num_tokens"), "{stderr}");
+    let (ok, _, stderr) = ssr_agent(&["train", "--data", "/no/such/dataset", "--out", out_arg]);
+    assert!(
+        !ok && stderr.contains("/no/such/dataset/manifest.json"),
+        "{stderr}"
+    );
 }

@@ -30,8 +30,11 @@ fn check_shapes(config: &SsrConfig, batch: usize, cameras: usize) {
     let p = config.head.pred_len;
     assert_eq!(out.bev.dims(), [batch, q, config.channels]);
     assert_eq!(out.scene.tokens.dims(), [batch, s, config.channels]);
-    assert_eq!(out.scene.attention.dims(), [batch, s, q]);
-    assert_eq!(out.scene.gate.dims(), [batch, config.channels]);
+    assert_eq!(out.scene.attention.clone().unwrap().dims(), [batch, s, q]);
+    assert_eq!(
+        out.scene.gate.clone().unwrap().dims(),
+        [batch, config.channels]
+    );
     assert_eq!(out.head.waypoints.dims(), [batch, p, 2]);
     assert_eq!(out.head.alpha.dims(), [batch, 2]);
     assert_eq!(out.head.future_beta.dims(), [batch, p, 2]);
@@ -171,7 +174,7 @@ fn token_attention_rows_sum_to_one() {
     let model = SsrModel::new(&config, &device).valid();
     let out = model.forward(&model_input(&config, 2, 1, true, &device));
     let q = config.bev.grid.cells();
-    for row in float_values(out.scene.attention).chunks(q) {
+    for row in float_values(out.scene.attention.unwrap()).chunks(q) {
         assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-4);
         assert!(row.iter().all(|w| *w >= 0.0));
     }

@@ -44,6 +44,52 @@ fn eval_writes_leaderboard_results_and_a_summary() {
 }
 
 #[test]
+fn eval_jobs_run_routes_at_once_with_the_same_results() {
+    let dir = std::env::temp_dir().join(format!("sim-bridge-cli-jobs-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let records = |jobs: &str| {
+        let out = dir.join(format!("jobs{jobs}.json"));
+        let run = sim_bridge(&[
+            "eval",
+            "--routes",
+            "town05-short-style",
+            "--limit",
+            "3",
+            "--repetitions",
+            "2",
+            "--timeout",
+            "20",
+            "--jobs",
+            jobs,
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        let mut records = json["_checkpoint"]["records"].as_array().unwrap().clone();
+        for record in &mut records {
+            record["meta"]["duration_system"] = serde_json::Value::Null;
+        }
+        records
+    };
+    let (one, three) = (records("1"), records("3"));
+    assert_eq!(one.len(), 6);
+    assert_eq!(one, three, "the same runs, in leaderboard order");
+    let repetitions: Vec<_> = one
+        .iter()
+        .map(|r| r["meta"]["repetition"].as_u64())
+        .collect();
+    assert_eq!(repetitions, [0, 0, 0, 1, 1, 1].map(Some));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn bad_arguments_fail_with_a_clear_message() {
     let run = sim_bridge(&["eval", "--routes", "no-such-set"]);
     assert!(!run.status.success());

@@ -8,6 +8,9 @@
 use super::pid::Pid;
 use super::{Control, ControlConfig};
 
+/// Waypoints (0.5 s apart) the trajectory controller reads: TCP's 2 s horizon.
+pub const CONTROL_WAYPOINTS: usize = 4;
+
 /// Normalised angle of an ego-frame vector (x forward, y left), TCP's formula.
 fn tcp_angle(point: [f32; 2]) -> f32 {
     let (forward, right) = (point[0], -point[1]);
@@ -56,6 +59,8 @@ impl TrajectoryFollower {
             waypoints.len() >= 2,
             "trajectory control needs two waypoints"
         );
+        // TCP's controller reads a 2 s horizon; longer plans (for 3 s open-loop metrics) are cut.
+        let waypoints = &waypoints[..waypoints.len().min(CONTROL_WAYPOINTS)];
         let pairs = waypoints.len() - 1;
         let mut desired_speed = 0.0;
         let mut aim = waypoints[0];

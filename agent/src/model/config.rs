@@ -59,6 +59,11 @@ pub struct BevConfig {
 /// Scenes TokenLearner and the self-attention over the scene tokens.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TokenConfig {
+    /// Ablation "no STL": no navigation gate, TokenLearner or token self-attention; the head
+    /// and the FFP attend over every BEV cell (with its position), and `num_tokens`,
+    /// `bottleneck` and `layers` are unused.
+    #[serde(default)]
+    pub dense_bev: bool,
     pub num_tokens: usize,
     pub bottleneck: usize,
     pub layers: usize,
@@ -160,6 +165,7 @@ impl SsrConfig {
                 ffn_dim: 512,
             },
             tokens: TokenConfig {
+                dense_bev: false,
                 num_tokens: 16,
                 bottleneck: 64,
                 layers: 3,
@@ -182,7 +188,9 @@ impl SsrConfig {
     /// The CPU default: every part of [`SsrConfig::paper`], narrower, on a 320x96 image and a
     /// 32x32 BEV of 1.5 m cells, with one sampling point per pillar height in spatial
     /// cross-attention and two per slot in temporal self-attention (chosen with
-    /// `ssr-agent bench`: sampling dominates the BEV encoder on a CPU).
+    /// `ssr-agent bench`: sampling dominates the BEV encoder on a CPU). It plans 6 waypoints
+    /// (3 s) so open-loop L2 can be measured at 1, 2 and 3 s; the controller reads the first 4
+    /// as TCP does.
     pub fn cpu_default() -> Self {
         Self {
             name: "cpu-default".into(),
@@ -212,6 +220,7 @@ impl SsrConfig {
                 ffn_dim: 128,
             },
             tokens: TokenConfig {
+                dense_bev: false,
                 num_tokens: 16,
                 bottleneck: 32,
                 layers: 2,
@@ -222,12 +231,22 @@ impl SsrConfig {
                 measurement_dim: 64,
                 hidden_dim: 128,
                 state_dim: 128,
-                pred_len: 4,
+                pred_len: 6,
             },
             ffp: FfpConfig {
                 layers: 2,
                 fuser_slots: 32,
             },
+        }
+    }
+
+    /// Number of tokens the head and the FFP attend over: the scene tokens, or every BEV cell
+    /// in the "no STL" ablation.
+    pub fn scene_tokens(&self) -> usize {
+        if self.tokens.dense_bev {
+            self.bev.grid.cells()
+        } else {
+            self.tokens.num_tokens
         }
     }
 

@@ -110,7 +110,7 @@ impl FutureFeaturePredictor {
             world_model: (0..config.ffp.layers)
                 .map(|_| SelfAttentionLayer::new(c, t.heads, t.ffn_dim, device))
                 .collect(),
-            fuser: TokenFuser::new(c, t.num_tokens, config.ffp.fuser_slots, device),
+            fuser: TokenFuser::new(c, config.scene_tokens(), config.ffp.fuser_slots, device),
         }
     }
 

@@ -74,32 +74,40 @@ impl TokenLearner {
 /// What STL hands to the head.
 #[derive(Debug, Clone)]
 pub struct SceneTokens {
-    /// `[B, S, C]` after self-attention.
+    /// `[B, S, C]` after self-attention (`[B, Q, C]`: the BEV plus its positions, without STL).
     pub tokens: Tensor<3>,
-    /// `[B, S, Q]` TokenLearner attention over BEV cells.
-    pub attention: Tensor<3>,
-    /// `[B, C]` navigation gate.
-    pub gate: Tensor<2>,
+    /// `[B, S, Q]` TokenLearner attention over BEV cells (none without STL).
+    pub attention: Option<Tensor<3>>,
+    /// `[B, C]` navigation gate (none without STL).
+    pub gate: Option<Tensor<2>>,
+}
+
+/// The navigation gate, TokenLearner and token self-attention; absent in the "no STL"
+/// ablation ([`super::config::TokenConfig::dense_bev`]).
+#[derive(Module, Debug)]
+struct LearnerParts {
+    gate: NavigationGate,
+    learner: TokenLearner,
+    layers: Vec<SelfAttentionLayer>,
 }
 
 #[derive(Module, Debug)]
 pub struct SceneTokenLearner {
-    gate: NavigationGate,
-    learner: TokenLearner,
-    layers: Vec<SelfAttentionLayer>,
+    parts: Option<LearnerParts>,
 }
 
 impl SceneTokenLearner {
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let c = config.channels;
         let t = &config.tokens;
-        Self {
+        let parts = (!t.dense_bev).then(|| LearnerParts {
             gate: NavigationGate::new(c, device),
             learner: TokenLearner::new(2 * c, t.bottleneck, t.num_tokens, device),
             layers: (0..t.layers)
                 .map(|_| SelfAttentionLayer::new(c, t.heads, t.ffn_dim, device))
                 .collect(),
-        }
+        });
+        Self { parts }
     }
 
     /// `bev` `[B, Q, C]`, `pos` `[1, Q, C]`, `command` `[B, 6]`, `target_point` `[B, 2]`.
@@ -111,20 +119,26 @@ impl SceneTokenLearner {
         target_point: Tensor<2>,
     ) -> SceneTokens {
         let [b, q, c] = bev.dims();
-        let gate = self.gate.forward(command, target_point);
+        let pos = pos.expand([b, q, c]);
+        let Some(parts) = &self.parts else {
+            return SceneTokens {
+                tokens: bev + pos,
+                attention: None,
+                gate: None,
+            };
+        };
+        let gate = parts.gate.forward(command, target_point);
         let gated = bev * gate.clone().unsqueeze_dim::<3>(1);
-        let (tokens, attention) = self
-            .learner
-            .forward(Tensor::cat(vec![gated, pos.expand([b, q, c])], 2));
+        let (tokens, attention) = parts.learner.forward(Tensor::cat(vec![gated, pos], 2));
         let s = tokens.dims()[1];
         let content = tokens.clone().narrow(2, 0, c);
         let token_pos = tokens.narrow(2, c, c);
-        let tokens = run_layers(&self.layers, content, Some(token_pos));
+        let tokens = run_layers(&parts.layers, content, Some(token_pos));
         debug_assert_eq!(tokens.dims(), [b, s, c]);
         SceneTokens {
             tokens,
-            attention,
-            gate,
+            attention: Some(attention),
+            gate: Some(gate),
         }
     }
 }

@@ -129,7 +129,7 @@ impl TcpHead {
         let c = config.channels;
         let h = &config.head;
         let (m, hid, state) = (h.measurement_dim, h.hidden_dim, h.state_dim);
-        let tokens = config.tokens.num_tokens;
+        let tokens = config.scene_tokens();
         Self {
             measurements: Mlp::new(&[3 + COMMANDS, m, m], device),
             speed: Mlp::new(&[c, hid, hid], device),

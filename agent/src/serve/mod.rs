@@ -49,23 +49,25 @@ pub const STREAM_WINDOW_BYTES: u32 = 4 << 20;
 /// Checkpoint metadata key holding the rig the network was trained with (JSON).
 pub const RIG_METADATA_KEY: &str = "rig";
 
-/// Loads the network the config names: a checkpoint file or random weights of a config.
+/// Loads the network the config names: a checkpoint file, random weights of a config, or
+/// (with neither) the checkpoint bundled into the binary.
 pub fn load_policy(
     config: &ServeConfig,
     device: &Device,
 ) -> anyhow::Result<(SsrPolicy, ModelInfo)> {
+    let trained = |(model, info): (SsrModel, checkpoint::CheckpointInfo), name: String| {
+        let rig = info
+            .metadata
+            .get(RIG_METADATA_KEY)
+            .map(|json| sim_bridge::camera::Rig::from_json(json))
+            .transpose()
+            .with_context(|| format!("checkpoint {name}: its rig"))?;
+        anyhow::Ok((model, info.config, name, rig))
+    };
     let (model, model_config, checkpoint, rig) =
         match (&config.checkpoint, &config.untrained_config) {
             (Some(path), _) => {
-                let (model, info) = checkpoint::load(path, device)?;
-                let rig = match info.metadata.get(RIG_METADATA_KEY) {
-                    Some(json) => Some(
-                        sim_bridge::camera::Rig::from_json(json)
-                            .with_context(|| format!("checkpoint {}: its rig", path.display()))?,
-                    ),
-                    None => None,
-                };
-                (model, info.config, path.display().to_string(), rig)
+                trained(checkpoint::load(path, device)?, path.display().to_string())?
             }
             (None, Some(spec)) => {
                 let model_config = SsrConfig::from_name_or_file(spec)?;
@@ -81,11 +83,10 @@ pub fn load_policy(
                     None,
                 )
             }
-            (None, None) => anyhow::bail!(
-                "no model: pass --checkpoint FILE (a file written by `ssr-agent train`), or \
-             --untrained-config PRESET for random weights (tests and benchmarks); this build \
-             bundles no trained checkpoint yet"
-            ),
+            (None, None) => trained(
+                checkpoint::bundled::load(device)?,
+                checkpoint::bundled::NAME.to_string(),
+            )?,
         };
     let expected_rig = rig.unwrap_or_else(|| ModelInfo::default_rig(&model_config));
     let info = ModelInfo {

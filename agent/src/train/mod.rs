@@ -1,5 +1,11 @@
-//! Training-side pieces of the network: the losses (imitation and future-BEV), with the special
-//! functions they need.
+//! Training: expert datasets to SSR samples ([`data`], [`augment`], [`loader`]), TCP's
+//! imitation losses plus SSR's future-BEV loss ([`loss`]), and the loop with AdamW, schedule,
+//! validation, checkpoints and resume ([`run`]), configured by [`config`].
 
+pub mod augment;
+pub mod config;
+pub mod data;
+pub mod loader;
 pub mod loss;
+pub mod run;
 pub mod special;

@@ -1,6 +1,8 @@
 //! Shared builders for the agent's integration tests.
 #![allow(dead_code)]
 
+pub mod fixture;
+
 use burn::tensor::{Device, Distribution, Tensor};
 
 use ssr_agent::camera::{CameraSpec, Rig};

@@ -36,7 +36,7 @@ class ClientTest(unittest.TestCase):
                     target_point=(15.0, 0.0),
                     debug=frame == 2,
                 )
-                self.assertEqual(len(result.trajectory), 4)
+                self.assertEqual(len(result.trajectory), 6)  # cpu-default plans 3 s
                 self.assertTrue(-1.0 <= result.control.steer <= 1.0)
                 self.assertTrue(0.0 <= result.control.throttle <= 1.0)
                 self.assertGreater(result.timings["total_ms"], 0.0)

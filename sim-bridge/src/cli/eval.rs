@@ -1,13 +1,16 @@
 //! `sim-bridge eval`: drive an agent over a route set, print a summary table, write the
 //! leaderboard results JSON (after every route, so an interrupted run keeps what it scored) and,
-//! on request, a top-down picture of each run.
+//! on request, a top-down picture of each run. With `--jobs N`, N routes run at once, each
+//! with its own agent (its own connection and episode on a gRPC server, which can batch them).
 
 use std::path::PathBuf;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use sim_bridge::agent::Agent;
 use sim_bridge::camera::Rig;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
@@ -46,6 +49,10 @@ pub struct EvalArgs {
     /// Runs of each route; repetition r uses seed S + r.
     #[arg(long, default_value_t = 1)]
     repetitions: usize,
+    /// Runs at once, each with its own agent (a gRPC server batches their steps); results
+    /// are the same as one at a time.
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
     /// End every route after this many simulated seconds (a timeout without penalty) instead
     /// of the leaderboard's length-based timeout: for quick smoke runs.
     #[arg(long, value_parser = parse_positive)]
@@ -69,34 +76,61 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
-    if args.repetitions == 0 {
-        bail!("--repetitions must be at least 1");
+    if args.repetitions == 0 || args.jobs == 0 {
+        bail!("--repetitions and --jobs must be at least 1");
     }
     let scoring = ScoringConfig {
         timeout: args.timeout,
         ..ScoringConfig::default()
     };
-    let (mut agent, _local_server) = build_agent(&args)?;
-    if let Some(dir) = &args.record {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let rig = Rig::from_name_or_file(&args.record_rig)?;
-        agent = Box::new(LoggingAgent::new(agent, rig, dir.clone()));
-    }
-    eprintln!("agent: {}", agent.name());
+    let (target, _local_server) = agent_target(&args)?;
+    let record_rig = match &args.record {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            Some(Rig::from_name_or_file(&args.record_rig)?)
+        }
+        None => None,
+    };
+    let make_agent = || -> anyhow::Result<Box<dyn Agent>> {
+        let agent = build_agent(&args, target.as_deref())?;
+        Ok(match (&args.record, &record_rig) {
+            (Some(dir), Some(rig)) => Box::new(LoggingAgent::new(agent, rig.clone(), dir.clone())),
+            _ => agent,
+        })
+    };
     let (map, planned) = args.route.load()?;
     if let Some(dir) = &args.pictures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    // Runs in leaderboard order: every route of repetition 0, then of repetition 1, ...
     let total = planned.len() * args.repetitions;
-    let mut crashes = 0;
-    let mut records = Vec::with_capacity(total);
-    for repetition in 0..args.repetitions {
-        for PlannedRoute { spec, dense } in &planned {
+    let next_run = AtomicUsize::new(0);
+    let finished = Mutex::new(Finished {
+        records: vec![None; total],
+        crashes: 0,
+    });
+    let bars = MultiProgress::new();
+    let jobs = args.jobs.min(total);
+    // Each worker makes its own agent on its own thread (agents need not be Send).
+    let worker = |job: usize| -> anyhow::Result<()> {
+        let mut agent = make_agent()?;
+        if job == 0 {
+            bars.suspend(|| eprintln!("agent: {} ({jobs} at once)", agent.name()));
+        }
+        loop {
+            let index = next_run.fetch_add(1, Ordering::Relaxed);
+            if index >= total {
+                return Ok(());
+            }
+            let (repetition, PlannedRoute { spec, dense }) =
+                (index / planned.len(), &planned[index % planned.len()]);
             let world = args
                 .world
                 .config(&map, args.world.seed.wrapping_add(repetition as u64));
-            let bar = progress_bar(args.quiet, &format!("route {} rep {repetition}", spec.id));
-            let index = records.len();
+            let bar = bars.add(progress_bar(
+                args.quiet,
+                &format!("route {} rep {repetition}", spec.id),
+            ));
             let run = run_route(
                 &map,
                 spec,
@@ -109,24 +143,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 |rc| bar.set_position(rc.round() as u64),
             );
             bar.finish_and_clear();
-            if let Some(error) = &run.agent_error {
-                crashes += 1;
-                eprintln!(
-                    "route {} rep {repetition}: the agent crashed: {error}",
-                    spec.id
-                );
-            }
-            let s = run.record.scores;
-            eprintln!(
-                "route {:>4} rep {repetition}: DS {:6.2} RC {:6.2} IS {:.3}  {}  ({:.0} s sim in {:.1} s)",
-                spec.id,
-                s.score_composed,
-                s.score_route,
-                s.score_penalty,
-                run.record.status,
-                run.record.meta.duration_game,
-                run.wall_seconds
-            );
+            bars.remove(&bar);
             if let Some(dir) = &args.pictures {
                 let path = dir.join(format!("route_{}_rep{repetition}.png", spec.id));
                 write_run_png(
@@ -139,27 +156,84 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 )
                 .with_context(|| format!("writing {}", path.display()))?;
             }
-            records.push(run.record);
-            let results = Results::new(records.clone(), total, Vec::new());
+            let mut finished = finished.lock().expect("no worker panics holding it");
+            if let Some(error) = &run.agent_error {
+                finished.crashes += 1;
+                bars.suspend(|| {
+                    eprintln!(
+                        "route {} rep {repetition}: the agent crashed: {error}",
+                        spec.id
+                    )
+                });
+            }
+            let s = run.record.scores;
+            bars.suspend(|| {
+                eprintln!(
+                    "route {:>4} rep {repetition}: DS {:6.2} RC {:6.2} IS {:.3}  {}  ({:.0} s sim in {:.1} s)",
+                    spec.id,
+                    s.score_composed,
+                    s.score_route,
+                    s.score_penalty,
+                    run.record.status,
+                    run.record.meta.duration_game,
+                    run.wall_seconds
+                )
+            });
+            finished.records[index] = Some(run.record);
+            let results = Results::new(finished.done(), total, Vec::new());
             std::fs::write(&args.out, results.to_json())
                 .with_context(|| format!("writing {}", args.out.display()))?;
         }
-    }
-    let results = Results::new(records, total, Vec::new());
+    };
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..jobs)
+            .map(|job| scope.spawn(move || worker(job)))
+            .collect();
+        workers
+            .into_iter()
+            .map(|w| w.join().expect("eval workers do not panic"))
+            .collect::<anyhow::Result<()>>()
+    })?;
+    let finished = finished.into_inner().expect("workers are done");
+    let results = Results::new(finished.done(), total, Vec::new());
     println!("{}", summary_table(&results));
     println!("results written to {}", args.out.display());
-    if crashes > 0 {
-        bail!("the agent crashed on {crashes} of {total} runs (see above)");
+    if finished.crashes > 0 {
+        bail!(
+            "the agent crashed on {} of {total} runs (see above)",
+            finished.crashes
+        );
     }
     Ok(())
 }
 
-/// The agent `--agent` names, and the local server process behind it, if any.
-fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalServer>)> {
-    // `expert` runs in process; everything else names a server.
-    if args.agent == "expert" {
-        return Ok((Box::new(Expert::new()), None));
+/// Runs scored so far, by index.
+struct Finished {
+    records: Vec<Option<sim_bridge::scoring::RouteRecord>>,
+    crashes: usize,
+}
+
+impl Finished {
+    /// The finished runs in leaderboard order.
+    fn done(&self) -> Vec<sim_bridge::scoring::RouteRecord> {
+        self.records.iter().flatten().cloned().collect()
     }
+}
+
+/// The server `--agent` names (started here for `local`), or `None` for the expert.
+fn agent_target(args: &EvalArgs) -> anyhow::Result<(Option<String>, Option<LocalServer>)> {
+    if args.agent == "expert" {
+        return Ok((None, None));
+    }
+    let (target, server) = server_target(&args.agent, false)?;
+    Ok((Some(target), server))
+}
+
+/// One agent: the expert in process, or a connection to the server at `target`.
+fn build_agent(args: &EvalArgs, target: Option<&str>) -> anyhow::Result<Box<dyn Agent>> {
+    let Some(target) = target else {
+        return Ok(Box::new(Expert::new()));
+    };
     let options = GrpcOptions {
         rig: args
             .rig
@@ -171,9 +245,7 @@ fn build_agent(args: &EvalArgs) -> anyhow::Result<(Box<dyn Agent>, Option<LocalS
         client: "sim-bridge eval".into(),
         ..GrpcOptions::default()
     };
-    let (target, server) = server_target(&args.agent, false)?;
-    let agent = GrpcAgent::connect(&target, options)?;
-    Ok((Box::new(agent), server))
+    Ok(Box::new(GrpcAgent::connect(target, options)?))
 }
 
 fn progress_bar(quiet: bool, label: &str) -> ProgressBar {

@@ -1,0 +1,123 @@
+//! Training settings: optimiser, schedule, loss weights, ablations, cadence. Saved beside every
+//! run and inside every checkpoint, so a run can be resumed and a checkpoint traced back.
+
+use serde::{Deserialize, Serialize};
+
+use super::loss::LossWeights;
+use crate::model::config::SsrConfig;
+
+/// How the learning rate decays after the warm-up.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum Schedule {
+    /// Cosine from `lr` down to `lr * final_ratio` at the last step.
+    Cosine { final_ratio: f64 },
+    /// Multiply by `gamma` every `every` steps (TCP halves its rate on a fixed schedule).
+    Step { every: u64, gamma: f64 },
+}
+
+/// Everything a run is defined by (the dataset path is given separately).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainConfig {
+    pub model: SsrConfig,
+    pub batch_size: usize,
+    /// Optimiser steps of the whole run (the schedule spans them).
+    pub steps: u64,
+    /// Peak learning rate (AdamW).
+    pub lr: f64,
+    pub weight_decay: f32,
+    /// Linear warm-up from 0, steps.
+    pub warmup_steps: u64,
+    pub schedule: Schedule,
+    /// Each parameter's gradient is clipped to this L2 norm (burn's per-parameter clipping).
+    pub clip_norm: f32,
+    pub loss: LossWeights,
+    /// Ablation "no FFP": no future-BEV prediction and no BEV loss.
+    pub future_bev: bool,
+    /// Photometric jitter strength (0 = none).
+    pub augment: f32,
+    /// Fraction of routes held out for validation.
+    pub validation_fraction: f64,
+    /// Validate every this many steps (and at the end); 0 = only at the end.
+    pub validate_every: u64,
+    /// Validation samples used (evenly spaced over the held-out set); 0 = all.
+    pub validation_samples: usize,
+    /// Write a checkpoint and the resume state every this many steps (and at the end).
+    pub checkpoint_every: u64,
+    /// Seeds the initial weights, the shuffle and the augmentation.
+    pub seed: u64,
+}
+
+impl TrainConfig {
+    /// Defaults: AdamW at 3e-4 with 300 warm-up steps and a cosine decay to 5 %, batch 8,
+    /// per-parameter clipping at 1.0, TCP/SSR loss weights, FFP on.
+    pub fn new(model: SsrConfig, steps: u64) -> Self {
+        Self {
+            model,
+            batch_size: 8,
+            steps,
+            lr: 3e-4,
+            weight_decay: 1e-2,
+            warmup_steps: 300,
+            schedule: Schedule::Cosine { final_ratio: 0.05 },
+            clip_norm: 1.0,
+            loss: LossWeights::default(),
+            future_bev: true,
+            augment: 1.0,
+            validation_fraction: 0.05,
+            validate_every: 1000,
+            validation_samples: 1024,
+            checkpoint_every: 500,
+            seed: 0,
+        }
+    }
+
+    /// The learning rate of optimiser step `step` (0-based).
+    pub fn lr_at(&self, step: u64) -> f64 {
+        if step < self.warmup_steps {
+            return self.lr * (step + 1) as f64 / self.warmup_steps as f64;
+        }
+        match self.schedule {
+            Schedule::Cosine { final_ratio } => {
+                let span = self.steps.saturating_sub(self.warmup_steps).max(1) as f64;
+                let done = ((step - self.warmup_steps) as f64 / span).min(1.0);
+                let cosine = 0.5 * (1.0 + (std::f64::consts::PI * done).cos());
+                self.lr * (final_ratio + (1.0 - final_ratio) * cosine)
+            }
+            Schedule::Step { every, gamma } => {
+                self.lr * gamma.powf(((step - self.warmup_steps) / every.max(1)) as f64)
+            }
+        }
+    }
+
+    /// Checks every setting; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        self.model.validate().map_err(|e| e.to_string())?;
+        let positive = [
+            ("batch_size", self.batch_size as f64),
+            ("steps", self.steps as f64),
+            ("lr", self.lr),
+            ("checkpoint_every", self.checkpoint_every as f64),
+        ];
+        for (field, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("{field} must be positive, got {value}"));
+            }
+        }
+        if !(0.0..1.0).contains(&self.validation_fraction) {
+            return Err(format!(
+                "validation_fraction must be in [0, 1), got {}",
+                self.validation_fraction
+            ));
+        }
+        let finite = [
+            ("weight_decay", self.weight_decay),
+            ("clip_norm", self.clip_norm),
+            ("augment", self.augment),
+        ];
+        if let Some((field, value)) = finite.iter().find(|(_, v)| !v.is_finite() || *v < 0.0) {
+            return Err(format!("{field} must be finite and >= 0, got {value}"));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,414 @@
+//! Training samples from a collected expert dataset (`sim-bridge collect`).
+//!
+//! A sample is one stored frame t with everything SSR trains on: the frame itself, the frame
+//! before it (its BEV becomes the temporal history, as at inference), the frame
+//! [`FUTURE_BEV_S`] later (its BEV is the FFP's target) and the expert's labels (waypoints,
+//! control now and at each future step, speed). Measurements of every episode are read once
+//! into an index; images are read from disk batch by batch.
+//!
+//! Episodes are split into training and validation by a hash of their route (town, route set,
+//! route id), so every repetition of a route lands on the same side and validation routes are
+//! never trained on.
+//!
+//! Guarantees: a missing or malformed manifest, measurement file or image is a
+//! [`DatasetError`] naming the file; a dataset whose rate, rig or futures cannot feed the
+//! network is refused with the reason before training starts.
+
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor};
+use sim_bridge::dataset::{Dataset, DatasetError, FUTURE_STEP, FrameRecord};
+use sim_bridge::world::ego::Control;
+
+use super::augment::Photometric;
+use super::loss::{BetaTargets, ImitationTargets};
+use crate::camera::Rig;
+use crate::model::backbone::frame_to_input;
+use crate::model::bev::{GeometryTensors, SampleGeometry};
+use crate::model::config::SsrConfig;
+use crate::model::stl::COMMANDS;
+use crate::model::{ModelInput, float_tensor};
+use crate::policy::command_index;
+use crate::pose::{EgoMotion, Pose2};
+
+/// Seconds from a frame to the future frame whose BEV the FFP predicts (SSR's code: 1.5 s).
+pub const FUTURE_BEV_S: f64 = 1.5;
+
+/// One sample: a frame of an episode (indices into [`TrainingData`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SampleRef {
+    pub episode: u32,
+    pub frame: u32,
+}
+
+struct Episode {
+    name: String,
+    frames: Vec<FrameRecord>,
+}
+
+/// The dataset's index, split into training and validation samples.
+pub struct TrainingData {
+    dataset: Dataset,
+    episodes: Vec<Episode>,
+    future_offset: usize,
+    pred_len: usize,
+    pub train: Vec<SampleRef>,
+    pub validation: Vec<SampleRef>,
+    /// Routes (town/set/id) on each side.
+    pub train_routes: usize,
+    pub validation_routes: usize,
+}
+
+/// A stable 64-bit FNV-1a hash (the split must not change between runs or Rust versions).
+pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
+        (hash ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// Whether a route belongs to the validation side for the given fraction.
+fn is_validation(town: &str, route_set: &str, route_id: &str, fraction: f64) -> bool {
+    let key = format!("{town}/{route_set}/{route_id}");
+    (fnv1a(key.as_bytes()) % 10_000) as f64 / 10_000.0 < fraction
+}
+
+impl TrainingData {
+    /// Opens the dataset at `root` and indexes the samples `config` can train on.
+    /// `progress` is called after each episode's measurements are read.
+    pub fn open(
+        root: &Path,
+        config: &SsrConfig,
+        validation_fraction: f64,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<Self, DatasetError> {
+        let dataset = Dataset::open(root)?;
+        let manifest_path = root.join("manifest.json");
+        let m = &dataset.manifest;
+        let refuse = |problem: String| Err(DatasetError::invalid(&manifest_path, problem));
+        if (m.future_step_s - FUTURE_STEP).abs() > 1e-9 {
+            return refuse(format!(
+                "future_step_s = {} but the head plans every {FUTURE_STEP} s",
+                m.future_step_s
+            ));
+        }
+        let pred_len = config.head.pred_len;
+        if m.future_count < pred_len {
+            return refuse(format!(
+                "{} future waypoints per frame, the model plans {pred_len}",
+                m.future_count
+            ));
+        }
+        let future_offset = (FUTURE_BEV_S * m.rate_hz).round() as usize;
+        if !(m.rate_hz.is_finite() && future_offset >= 1) {
+            return refuse(format!(
+                "rate_hz = {} gives no frame {FUTURE_BEV_S} s ahead",
+                m.rate_hz
+            ));
+        }
+        if let Err(e) = m.rig.validate() {
+            return refuse(format!("its camera rig is unusable: {e}"));
+        }
+        let total = m.episode_list.len();
+        let mut episodes = Vec::with_capacity(total);
+        let (mut train, mut validation) = (Vec::new(), Vec::new());
+        let mut routes = (
+            std::collections::BTreeSet::new(),
+            std::collections::BTreeSet::new(),
+        );
+        for (index, entry) in m.episode_list.iter().enumerate() {
+            let frames = dataset.frames(&entry.name)?;
+            let cameras = m.rig.cameras.len();
+            if let Some(bad) = frames.iter().find(|f| f.images.len() != cameras) {
+                return Err(DatasetError::invalid(
+                    &dataset.episode_dir(&entry.name).join("measurements.jsonl"),
+                    format!(
+                        "frame {} lists {} images, the rig has {cameras} cameras",
+                        bad.index,
+                        bad.images.len()
+                    ),
+                ));
+            }
+            let held_out = is_validation(
+                &entry.town,
+                &entry.route_set,
+                &entry.route_id,
+                validation_fraction,
+            );
+            let (side, side_routes) = if held_out {
+                (&mut validation, &mut routes.1)
+            } else {
+                (&mut train, &mut routes.0)
+            };
+            side_routes.insert((&entry.town, &entry.route_set, &entry.route_id));
+            let usable = frames.iter().filter(|f| {
+                f.future_complete
+                    && f.waypoints.len() >= pred_len
+                    && f.future_controls.len() >= pred_len
+                    && f.index + future_offset < frames.len()
+            });
+            side.extend(usable.map(|f| SampleRef {
+                episode: index as u32,
+                frame: f.index as u32,
+            }));
+            episodes.push(Episode {
+                name: entry.name.clone(),
+                frames,
+            });
+            progress(index + 1, total);
+        }
+        if train.is_empty() {
+            return refuse(format!(
+                "no training samples: {total} episodes, {} validation samples, none with a \
+                 complete {pred_len}-step future outside the validation routes",
+                validation.len()
+            ));
+        }
+        let (train_routes, validation_routes) = (routes.0.len(), routes.1.len());
+        Ok(Self {
+            dataset,
+            episodes,
+            future_offset,
+            pred_len,
+            train,
+            validation,
+            train_routes,
+            validation_routes,
+        })
+    }
+
+    /// The camera rig every frame was taken with.
+    pub fn rig(&self) -> &Rig {
+        &self.dataset.manifest.rig
+    }
+
+    /// The manifest: towns, routes and counts, for the model card.
+    pub fn manifest(&self) -> &sim_bridge::dataset::Manifest {
+        &self.dataset.manifest
+    }
+
+    fn record(&self, sample: SampleRef, offset: isize) -> Option<&FrameRecord> {
+        let frames = &self.episodes[sample.episode as usize].frames;
+        let index = sample.frame as isize + offset;
+        usize::try_from(index).ok().and_then(|i| frames.get(i))
+    }
+
+    /// The network inputs of one frame: images at the config's size, augmented if asked.
+    fn images(
+        &self,
+        sample: SampleRef,
+        record: &FrameRecord,
+        config: &SsrConfig,
+        augment: Option<&Photometric>,
+        out: &mut Vec<f32>,
+    ) -> Result<(), DatasetError> {
+        let name = &self.episodes[sample.episode as usize].name;
+        for mut image in self.dataset.images(name, record)? {
+            if let Some(augment) = augment {
+                augment.apply(&mut image.rgb);
+            }
+            out.extend(frame_to_input(
+                &image.rgb,
+                image.width as usize,
+                image.height as usize,
+                config.image_width,
+                config.image_height,
+            ));
+        }
+        Ok(())
+    }
+
+    /// Reads and prepares a batch. `augment` gives each sample's photometric jitter (the same
+    /// for its history, current and future frames, so they still show one scene).
+    pub fn batch(
+        &self,
+        samples: &[SampleRef],
+        config: &SsrConfig,
+        mut augment: impl FnMut(usize) -> Option<Photometric>,
+    ) -> Result<Batch, DatasetError> {
+        let rig = self.rig();
+        let grid = &config.bev.grid;
+        let heights = &config.bev.pillar_heights;
+        let p = self.pred_len;
+        let mut batch = Batch {
+            size: samples.len(),
+            cameras: rig.cameras.len(),
+            ..Batch::default()
+        };
+        // Context order is [history of every sample..., future of every sample...].
+        let mut future_images = Vec::new();
+        let mut future_geometry = Vec::with_capacity(samples.len());
+        for (i, &sample) in samples.iter().enumerate() {
+            let now = self.record(sample, 0).expect("sample refs index frames");
+            let future = self
+                .record(sample, self.future_offset as isize)
+                .expect("samples have their future frame");
+            let history = self.record(sample, -1);
+            let jitter = augment(i);
+            let jitter = jitter.as_ref();
+            self.images(sample, now, config, jitter, &mut batch.current_images)?;
+            self.images(sample, future, config, jitter, &mut future_images)?;
+            match history {
+                Some(h) => self.images(sample, h, config, jitter, &mut batch.context_images)?,
+                None => batch.context_images.extend(std::iter::repeat_n(
+                    0.0,
+                    batch.cameras * 3 * config.image_height * config.image_width,
+                )),
+            }
+            let pose = |r: &FrameRecord| {
+                Pose2::new(r.position[0] as f32, r.position[1] as f32, r.yaw as f32)
+            };
+            let motion = history.map(|h| EgoMotion::between(pose(h), pose(now)));
+            batch.current_geometry.push(SampleGeometry::new(
+                grid,
+                heights,
+                rig,
+                motion,
+                now.speed as f32,
+            ));
+            let still =
+                |r: &FrameRecord| SampleGeometry::new(grid, heights, rig, None, r.speed as f32);
+            batch.context_geometry.push(still(history.unwrap_or(now)));
+            future_geometry.push(still(future));
+            batch.speed.push(now.speed as f32);
+            batch
+                .target_point
+                .extend(now.target_point.map(|v| v as f32));
+            let mut command = [0f32; COMMANDS];
+            command[command_index(now.command).unwrap_or(3)] = 1.0;
+            batch.command.extend(command);
+            for waypoint in &now.waypoints[..p] {
+                batch.waypoints.extend(waypoint.map(|v| v as f32));
+            }
+            for control in std::iter::once(&now.control).chain(&now.future_controls[..p]) {
+                batch.actions.extend(action_of(control));
+            }
+            batch.expert.push(now.control);
+        }
+        batch.context_images.append(&mut future_images);
+        batch.context_geometry.append(&mut future_geometry);
+        Ok(batch)
+    }
+}
+
+/// TCP's action of a control: [acceleration (throttle, or minus the brake), steer].
+pub fn action_of(control: &Control) -> [f32; 2] {
+    let acceleration = if control.brake > 0.0 {
+        -control.brake
+    } else {
+        control.throttle
+    };
+    [acceleration as f32, control.steer as f32]
+}
+
+/// A prepared batch on the CPU.
+#[derive(Debug, Default)]
+pub struct Batch {
+    pub size: usize,
+    pub cameras: usize,
+    /// `[B * cameras, 3, H, W]` the current frames.
+    current_images: Vec<f32>,
+    /// `[2B * cameras, 3, H, W]` history frames (zeros where none) then future frames.
+    context_images: Vec<f32>,
+    current_geometry: Vec<SampleGeometry>,
+    context_geometry: Vec<SampleGeometry>,
+    speed: Vec<f32>,
+    target_point: Vec<f32>,
+    command: Vec<f32>,
+    /// `[B, P, 2]` expert waypoints, ego frame.
+    pub waypoints: Vec<f32>,
+    /// `[B, P + 1, 2]` expert actions now and at each future step.
+    pub actions: Vec<f32>,
+    /// The expert's control now.
+    pub expert: Vec<Control>,
+}
+
+impl Batch {
+    fn input(
+        &self,
+        config: &SsrConfig,
+        images: &[f32],
+        geometry: &[SampleGeometry],
+        previous_bev: Tensor<3>,
+        device: &Device,
+    ) -> ModelInput {
+        let b = geometry.len();
+        let repeat = b / self.size;
+        let repeated = |values: &[f32], width: usize| {
+            let mut out = Vec::with_capacity(values.len() * repeat);
+            for _ in 0..repeat {
+                out.extend_from_slice(values);
+            }
+            float_tensor(out, [b, width], device)
+        };
+        ModelInput {
+            images: float_tensor(
+                images.to_vec(),
+                [b * self.cameras, 3, config.image_height, config.image_width],
+                device,
+            ),
+            cameras: self.cameras,
+            geometry: GeometryTensors::batch(
+                geometry,
+                &config.bev.grid,
+                config.bev.pillar_heights.len(),
+                device,
+            ),
+            previous_bev,
+            speed: repeated(&self.speed, 1),
+            target_point: repeated(&self.target_point, 2),
+            command: repeated(&self.command, COMMANDS),
+        }
+    }
+
+    /// The context frames, each without a previous BEV: the B history frames (their BEVs are
+    /// the current frames' history), then, with `futures`, the B future frames (the FFP's
+    /// targets).
+    pub fn context_input(&self, config: &SsrConfig, futures: bool, device: &Device) -> ModelInput {
+        let count = if futures { 2 * self.size } else { self.size };
+        let zeros = Tensor::zeros([count, config.bev.grid.cells(), config.channels], device);
+        let per_sample = self.context_images.len() / (2 * self.size);
+        self.input(
+            config,
+            &self.context_images[..count * per_sample],
+            &self.context_geometry[..count],
+            zeros,
+            device,
+        )
+    }
+
+    /// The current frames, attending to `previous_bev` `[B, Q, C]` where they have history.
+    pub fn current_input(
+        &self,
+        config: &SsrConfig,
+        previous_bev: Tensor<3>,
+        device: &Device,
+    ) -> ModelInput {
+        self.input(
+            config,
+            &self.current_images,
+            &self.current_geometry,
+            previous_bev,
+            device,
+        )
+    }
+
+    /// The imitation labels as tensors.
+    pub fn targets(
+        &self,
+        pred_len: usize,
+        concentration: f32,
+        device: &Device,
+    ) -> ImitationTargets {
+        ImitationTargets {
+            waypoints: float_tensor(self.waypoints.clone(), [self.size, pred_len, 2], device),
+            actions: BetaTargets::new(
+                &self.actions,
+                self.size,
+                pred_len + 1,
+                concentration,
+                device,
+            ),
+            speed: float_tensor(self.speed.clone(), [self.size, 1], device),
+        }
+    }
+}

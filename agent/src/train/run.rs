@@ -1,0 +1,624 @@
+//! The training loop: batches from the [`BatchLoader`], SSR's forward with a detached history
+//! and future BEV, TCP's losses plus the BEV loss, AdamW, validation, checkpoints and resume.
+//!
+//! # A run's folder
+//! ```text
+//! <out>/train_config.json          TrainConfig (the run's definition)
+//! <out>/metrics.jsonl              a line per step ("kind": "step") and per validation
+//! <out>/checkpoints/step-NNNNNN.safetensors   servable checkpoints (config, rig, notes)
+//! <out>/final.safetensors          the last step's weights
+//! <out>/resume/                    weights with parameter ids, AdamW state, progress
+//! ```
+//! Guarantees: resuming a run continues from its last checkpoint with the same batches,
+//! augmentation and optimiser state, so its loss curve is the one the uninterrupted run would
+//! have drawn; metrics lines past that checkpoint are dropped first, never duplicated. The
+//! resume state is written to `resume.partial/` and renamed, so a crash never leaves half.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{
+    AdamWConfig, GradientsParams, ModuleOptimizer, OptimizerRecord,
+    grad_clipping::GradientClippingConfig,
+};
+use burn::store::{BurnpackStore, ModuleSnapshot};
+use burn::tensor::{Device, Tensor};
+use serde::{Deserialize, Serialize};
+
+use super::config::TrainConfig;
+use super::data::{Batch, SampleRef, TrainingData};
+use super::loader::BatchLoader;
+use super::loss::{Losses, losses};
+use crate::checkpoint::{self, CheckpointError};
+use crate::control::beta::control_from_beta;
+use crate::model::{SsrModel, float_values};
+use crate::serve::RIG_METADATA_KEY;
+use sim_bridge::dataset::DatasetError;
+
+/// Checkpoint metadata key of the training notes (JSON: config, step, data, validation).
+pub const TRAINING_METADATA_KEY: &str = "training";
+/// Horizons of the open-loop L2, seconds (waypoints are 0.5 s apart).
+pub const L2_HORIZONS_S: [f64; 3] = [1.0, 2.0, 3.0];
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("dataset: {0}")]
+    Dataset(#[from] DatasetError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error("training config: {0}")]
+    Config(String),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot resume from {path}: {problem}")]
+    Resume { path: PathBuf, problem: String },
+    #[error("step {step}: the loss is {value}; lower the learning rate or check the data")]
+    Diverged { step: u64, value: f32 },
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
+    move |source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// How to run: where the data is, where the run goes, and when to stop.
+#[derive(Debug, Clone)]
+pub struct TrainOptions {
+    pub data: PathBuf,
+    pub out: PathBuf,
+    /// Continue the run in `out` from its resume state (its own config is used).
+    pub resume: bool,
+    /// Stop after this step (with a checkpoint), though the schedule spans all steps: splits a
+    /// run over several sittings.
+    pub stop_at: Option<u64>,
+    /// Draw a progress bar on stderr.
+    pub progress: bool,
+}
+
+/// One line of `metrics.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum MetricsLine {
+    Step(StepMetrics),
+    Validation(ValidationMetrics),
+}
+
+/// The loss terms of one optimiser step (`step` counts steps done, from 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepMetrics {
+    pub step: u64,
+    pub lr: f64,
+    pub loss: f32,
+    pub waypoints: f32,
+    pub action: f32,
+    pub future_action: f32,
+    pub speed: f32,
+    pub bev: Option<f32>,
+    pub samples_per_s: f64,
+}
+
+/// Open-loop metrics over the validation routes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ValidationMetrics {
+    pub step: u64,
+    pub samples: usize,
+    pub loss: f32,
+    /// L2 of the planned waypoint at [`L2_HORIZONS_S`] to the expert's, metres (`None` where
+    /// the model plans less far).
+    pub l2_m: Vec<Option<f32>>,
+    /// Mean absolute error of the control branch's control against the expert's.
+    pub steer_mae: f32,
+    pub throttle_mae: f32,
+    pub brake_mae: f32,
+}
+
+/// What a finished (or stopped) run reports.
+#[derive(Debug, Clone)]
+pub struct RunSummary {
+    pub steps_done: u64,
+    /// Steps run in this sitting and their wall time (the rate excludes validation).
+    pub steps_run: u64,
+    pub wall_seconds: f64,
+    pub samples_per_s: f64,
+    pub validation: Option<ValidationMetrics>,
+    pub checkpoint: PathBuf,
+}
+
+/// Where the run stands, saved with the resume state.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Progress {
+    step: u64,
+    config: TrainConfig,
+}
+
+/// The training notes stored in every checkpoint.
+#[derive(Debug, Serialize)]
+struct TrainingNotes<'a> {
+    step: u64,
+    config: &'a TrainConfig,
+    data: String,
+    train_samples: usize,
+    train_routes: usize,
+    validation_routes: usize,
+    validation: Option<&'a ValidationMetrics>,
+}
+
+struct Trainer {
+    config: TrainConfig,
+    data: Arc<TrainingData>,
+    options: TrainOptions,
+    /// The autodiff device the model trains on, and its inner device for no-grad passes.
+    device: Device,
+    inner: Device,
+    /// Always set between steps (taken for the optimiser's update).
+    model: Option<SsrModel>,
+    optimizer: ModuleOptimizer,
+    step: u64,
+    metrics: std::fs::File,
+    last_validation: Option<ValidationMetrics>,
+}
+
+/// Trains (or resumes) a run; `config` is ignored when resuming.
+pub fn train(
+    config: TrainConfig,
+    options: TrainOptions,
+    data: Arc<TrainingData>,
+) -> Result<RunSummary, TrainError> {
+    let mut trainer = Trainer::open(config, options, data)?;
+    trainer.run()
+}
+
+/// Reads a resumable run's config (to open its dataset with the right model first).
+pub fn resumed_config(out: &Path) -> Result<TrainConfig, TrainError> {
+    Ok(read_progress(out)?.config)
+}
+
+fn read_progress(out: &Path) -> Result<Progress, TrainError> {
+    let path = out.join("resume").join("progress.json");
+    let resume = |problem: String| TrainError::Resume {
+        path: path.clone(),
+        problem,
+    };
+    let text = std::fs::read_to_string(&path).map_err(|e| resume(e.to_string()))?;
+    let progress: Progress = serde_json::from_str(&text).map_err(|e| resume(e.to_string()))?;
+    progress.config.validate().map_err(resume)?;
+    Ok(progress)
+}
+
+fn optimizer_for(config: &TrainConfig) -> ModuleOptimizer {
+    let mut adamw = AdamWConfig::new().with_weight_decay(config.weight_decay);
+    if config.clip_norm > 0.0 {
+        adamw = adamw.with_grad_clipping(Some(GradientClippingConfig::Norm(config.clip_norm)));
+    }
+    adamw.init()
+}
+
+impl Trainer {
+    fn open(
+        config: TrainConfig,
+        options: TrainOptions,
+        data: Arc<TrainingData>,
+    ) -> Result<Self, TrainError> {
+        let out = options.out.clone();
+        std::fs::create_dir_all(&out).map_err(io_error(&out))?;
+        let device = Device::flex().autodiff();
+        let metrics_path = out.join("metrics.jsonl");
+        let (config, model, optimizer, step) = if options.resume {
+            let resume_dir = out.join("resume");
+            let progress = read_progress(&out)?;
+            let fail = |problem: String| TrainError::Resume {
+                path: resume_dir.clone(),
+                problem,
+            };
+            let config = progress.config;
+            let mut model = SsrModel::new(&config.model, &device);
+            let mut store = BurnpackStore::from_file(resume_dir.join("model.bpk"))
+                .validate(true)
+                .allow_partial(false);
+            model
+                .load_from(&mut store)
+                .map_err(|e| fail(format!("model.bpk: {e}")))?;
+            let record = OptimizerRecord::load(resume_dir.join("optimizer.bpk"))
+                .map_err(|e| fail(format!("optimizer.bpk: {e}")))?;
+            let optimizer = optimizer_for(&config).load_record(record);
+            keep_metrics_until(&metrics_path, progress.step)?;
+            (config, model, optimizer, progress.step)
+        } else {
+            config.validate().map_err(TrainError::Config)?;
+            device.seed(config.seed);
+            let model = SsrModel::new(&config.model, &device);
+            std::fs::write(
+                out.join("train_config.json"),
+                serde_json::to_string_pretty(&config).expect("configs serialise"),
+            )
+            .map_err(io_error(&out))?;
+            std::fs::write(&metrics_path, b"").map_err(io_error(&metrics_path))?;
+            let optimizer = optimizer_for(&config);
+            (config, model, optimizer, 0)
+        };
+        let metrics = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&metrics_path)
+            .map_err(io_error(&metrics_path))?;
+        Ok(Self {
+            config,
+            data,
+            options,
+            device,
+            inner: Device::flex(),
+            model: Some(model),
+            optimizer,
+            step,
+            metrics,
+            last_validation: None,
+        })
+    }
+
+    fn model(&self) -> &SsrModel {
+        self.model
+            .as_ref()
+            .expect("the model is back after every step")
+    }
+
+    fn log(&mut self, line: &MetricsLine) -> Result<(), TrainError> {
+        let path = self.options.out.join("metrics.jsonl");
+        let mut text = serde_json::to_string(line).expect("metrics serialise");
+        text.push('\n');
+        self.metrics
+            .write_all(text.as_bytes())
+            .map_err(io_error(&path))
+    }
+
+    fn run(&mut self) -> Result<RunSummary, TrainError> {
+        let last = self
+            .options
+            .stop_at
+            .map_or(self.config.steps, |s| s.min(self.config.steps));
+        let first = self.step;
+        let bar = progress_bar(self.options.progress, first, self.config.steps);
+        let mut loader = BatchLoader::start(
+            self.data.clone(),
+            self.config.model.clone(),
+            self.config.batch_size,
+            self.config.augment,
+            self.config.seed,
+            first..last,
+        );
+        let started = Instant::now();
+        let mut training_time = 0.0;
+        while self.step < last {
+            let Some((step, batch)) = loader.next_batch() else {
+                break;
+            };
+            debug_assert_eq!(step, self.step);
+            let batch = batch?;
+            let step_started = Instant::now();
+            let metrics = self.optimise(&batch)?;
+            training_time += step_started.elapsed().as_secs_f64();
+            let done_here = self.step - first;
+            let rate = (done_here as usize * self.config.batch_size) as f64 / training_time;
+            self.log(&MetricsLine::Step(StepMetrics {
+                samples_per_s: rate,
+                ..metrics.clone()
+            }))?;
+            bar.set_position(self.step);
+            bar.set_message(format!(
+                "loss {:.3} (wp {:.3}, bev {}) {:.1} samples/s",
+                metrics.loss,
+                metrics.waypoints,
+                metrics.bev.map_or("-".into(), |b| format!("{b:.3}")),
+                rate
+            ));
+            let at_end = self.step == last;
+            let every = self.config.validate_every;
+            if at_end || (every > 0 && self.step.is_multiple_of(every)) {
+                let validation = self.validate();
+                bar.println(format!(
+                    "step {}: validation L2 {} m, steer MAE {:.3}",
+                    self.step,
+                    format_l2(&validation.l2_m),
+                    validation.steer_mae
+                ));
+                self.log(&MetricsLine::Validation(validation.clone()))?;
+                self.last_validation = Some(validation);
+            }
+            if at_end || self.step.is_multiple_of(self.config.checkpoint_every) {
+                self.save_checkpoint()?;
+            }
+        }
+        bar.finish();
+        let checkpoint = if self.step == self.config.steps {
+            let path = self.options.out.join("final.safetensors");
+            self.export(&path)?;
+            path
+        } else {
+            self.checkpoint_path()
+        };
+        let steps_run = self.step - first;
+        Ok(RunSummary {
+            steps_done: self.step,
+            steps_run,
+            wall_seconds: started.elapsed().as_secs_f64(),
+            samples_per_s: (steps_run as usize * self.config.batch_size) as f64
+                / training_time.max(1e-9),
+            validation: self.last_validation.clone(),
+            checkpoint,
+        })
+    }
+
+    /// One optimiser step on a batch.
+    fn optimise(&mut self, batch: &Batch) -> Result<StepMetrics, TrainError> {
+        let config = &self.config;
+        let b = batch.size;
+        let frozen = self.model().valid();
+        let context = batch.context_input(&config.model, config.future_bev, &self.inner);
+        let context_bev =
+            frozen.encode_bev(frozen.image_features(context.images.clone()), &context);
+        let detached = |bev: Tensor<3>| Tensor::from_data(bev.into_data(), &self.device);
+        let history = detached(context_bev.clone().narrow(0, 0, b));
+        let input = batch.current_input(&config.model, history, &self.device);
+        let output = self.model().forward(&input);
+        let bev = config.future_bev.then(|| {
+            let future = detached(context_bev.narrow(0, b, b));
+            (self.model().predict_future_bev(&output), future)
+        });
+        let targets = batch.targets(
+            config.model.head.pred_len,
+            config.loss.target_concentration,
+            &self.device,
+        );
+        let terms = losses(&output.head, &targets, bev, &config.loss);
+        let metrics = step_metrics(&terms, self.step + 1, config.lr_at(self.step));
+        if !metrics.loss.is_finite() {
+            return Err(TrainError::Diverged {
+                step: self.step + 1,
+                value: metrics.loss,
+            });
+        }
+        let grads = GradientsParams::from_grads(terms.total.backward(), self.model());
+        let model = self
+            .model
+            .take()
+            .expect("the model is back after every step");
+        self.model = Some(self.optimizer.step(metrics.lr, model, grads));
+        self.step += 1;
+        Ok(metrics)
+    }
+
+    /// Open-loop metrics over (a spread subset of) the validation samples.
+    fn validate(&self) -> ValidationMetrics {
+        let config = &self.config;
+        let samples = spread(&self.data.validation, config.validation_samples);
+        let model = self.model().valid();
+        let device = &self.inner;
+        let p = config.model.head.pred_len;
+        let mut sums = ValidationSums::default();
+        for chunk in samples.chunks(config.batch_size) {
+            let Ok(batch) = self.data.batch(chunk, &config.model, |_| None) else {
+                continue;
+            };
+            let context = batch.context_input(&config.model, config.future_bev, device);
+            let context_bev =
+                model.encode_bev(model.image_features(context.images.clone()), &context);
+            let b = batch.size;
+            let input =
+                batch.current_input(&config.model, context_bev.clone().narrow(0, 0, b), device);
+            let output = model.forward(&input);
+            let bev = config.future_bev.then(|| {
+                (
+                    model.predict_future_bev(&output),
+                    context_bev.narrow(0, b, b),
+                )
+            });
+            let targets = batch.targets(p, config.loss.target_concentration, device);
+            let loss = float_values(losses(&output.head, &targets, bev, &config.loss).total)[0];
+            sums.add(&batch, &output.head, p, loss);
+        }
+        sums.finish(self.step, p)
+    }
+
+    fn checkpoint_path(&self) -> PathBuf {
+        self.options
+            .out
+            .join("checkpoints")
+            .join(format!("step-{:06}.safetensors", self.step))
+    }
+
+    /// A servable checkpoint at `path` with the config, rig and training notes.
+    fn export(&self, path: &Path) -> Result<(), TrainError> {
+        let notes = TrainingNotes {
+            step: self.step,
+            config: &self.config,
+            data: self.options.data.display().to_string(),
+            train_samples: self.data.train.len(),
+            train_routes: self.data.train_routes,
+            validation_routes: self.data.validation_routes,
+            validation: self.last_validation.as_ref(),
+        };
+        let rig = serde_json::to_string(self.data.rig()).expect("rigs serialise");
+        checkpoint::save(
+            &self.model().valid(),
+            &self.config.model,
+            &[
+                (RIG_METADATA_KEY, rig),
+                (
+                    TRAINING_METADATA_KEY,
+                    serde_json::to_string(&notes).expect("notes serialise"),
+                ),
+            ],
+            path,
+        )?;
+        Ok(())
+    }
+
+    /// A checkpoint plus the resume state (weights with ids, optimiser, progress).
+    fn save_checkpoint(&self) -> Result<(), TrainError> {
+        self.export(&self.checkpoint_path())?;
+        let out = &self.options.out;
+        let partial = out.join("resume.partial");
+        let _ = std::fs::remove_dir_all(&partial);
+        std::fs::create_dir_all(&partial).map_err(io_error(&partial))?;
+        let fail = |problem: String| TrainError::Io {
+            path: partial.clone(),
+            source: std::io::Error::other(problem),
+        };
+        let mut store = BurnpackStore::from_file(partial.join("model.bpk")).overwrite(true);
+        self.model()
+            .save_into(&mut store)
+            .map_err(|e| fail(e.to_string()))?;
+        self.optimizer
+            .to_record()
+            .save(partial.join("optimizer.bpk"))
+            .map_err(|e| fail(e.to_string()))?;
+        let progress = Progress {
+            step: self.step,
+            config: self.config.clone(),
+        };
+        std::fs::write(
+            partial.join("progress.json"),
+            serde_json::to_string_pretty(&progress).expect("progress serialises"),
+        )
+        .map_err(io_error(&partial))?;
+        let resume = out.join("resume");
+        let _ = std::fs::remove_dir_all(&resume);
+        std::fs::rename(&partial, &resume).map_err(io_error(&resume))
+    }
+}
+
+fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
+    let value = |t: &Tensor<1>| float_values(t.clone())[0];
+    StepMetrics {
+        step,
+        lr,
+        loss: value(&terms.total),
+        waypoints: value(&terms.waypoints),
+        action: value(&terms.action),
+        future_action: value(&terms.future_action),
+        speed: value(&terms.speed),
+        bev: terms.bev.as_ref().map(value),
+        samples_per_s: 0.0,
+    }
+}
+
+/// Up to `limit` samples spread evenly over `samples` (all when `limit` is 0).
+fn spread(samples: &[SampleRef], limit: usize) -> Vec<SampleRef> {
+    if limit == 0 || samples.len() <= limit {
+        return samples.to_vec();
+    }
+    (0..limit)
+        .map(|i| samples[i * samples.len() / limit])
+        .collect()
+}
+
+/// Running sums of the validation metrics.
+#[derive(Default)]
+struct ValidationSums {
+    samples: usize,
+    loss: f64,
+    l2: [f64; L2_HORIZONS_S.len()],
+    steer: f64,
+    throttle: f64,
+    brake: f64,
+}
+
+impl ValidationSums {
+    fn add(
+        &mut self,
+        batch: &Batch,
+        head: &crate::model::tcp_head::HeadOutput,
+        p: usize,
+        loss: f32,
+    ) {
+        let waypoints = float_values(head.waypoints.clone());
+        let alpha = float_values(head.alpha.clone());
+        let beta = float_values(head.beta.clone());
+        for i in 0..batch.size {
+            for (h, horizon) in L2_HORIZONS_S.iter().enumerate() {
+                let k = (horizon / sim_bridge::dataset::FUTURE_STEP).round() as usize - 1;
+                if k < p {
+                    let at = (i * p + k) * 2;
+                    let dx = waypoints[at] - batch.waypoints[at];
+                    let dy = waypoints[at + 1] - batch.waypoints[at + 1];
+                    self.l2[h] += (dx * dx + dy * dy).sqrt() as f64;
+                }
+            }
+            let control = control_from_beta(
+                [alpha[2 * i], alpha[2 * i + 1]],
+                [beta[2 * i], beta[2 * i + 1]],
+            );
+            let expert = &batch.expert[i];
+            self.steer += (control.steer as f64 - expert.steer).abs();
+            self.throttle += (control.throttle as f64 - expert.throttle).abs();
+            self.brake += (control.brake as f64 - expert.brake).abs();
+        }
+        self.loss += loss as f64 * batch.size as f64;
+        self.samples += batch.size;
+    }
+
+    fn finish(self, step: u64, p: usize) -> ValidationMetrics {
+        let n = self.samples.max(1) as f64;
+        let mean = |sum: f64| (sum / n) as f32;
+        ValidationMetrics {
+            step,
+            samples: self.samples,
+            loss: mean(self.loss),
+            l2_m: L2_HORIZONS_S
+                .iter()
+                .zip(self.l2)
+                .map(|(horizon, sum)| {
+                    let k = (horizon / sim_bridge::dataset::FUTURE_STEP).round() as usize;
+                    (k <= p && self.samples > 0).then(|| mean(sum))
+                })
+                .collect(),
+            steer_mae: mean(self.steer),
+            throttle_mae: mean(self.throttle),
+            brake_mae: mean(self.brake),
+        }
+    }
+}
+
+/// "0.41 / 0.93 / 1.62" for the horizons, "-" where not planned.
+pub fn format_l2(l2: &[Option<f32>]) -> String {
+    l2.iter()
+        .map(|v| v.map_or("-".into(), |v| format!("{v:.2}")))
+        .collect::<Vec<_>>()
+        .join(" / ")
+}
+
+/// Keeps the metrics lines of steps up to `step` (a resumed run redraws the rest).
+fn keep_metrics_until(path: &Path, step: u64) -> Result<(), TrainError> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let kept: String = text
+        .lines()
+        .filter(|line| match serde_json::from_str::<MetricsLine>(line) {
+            Ok(MetricsLine::Step(m)) => m.step <= step,
+            Ok(MetricsLine::Validation(m)) => m.step <= step,
+            Err(_) => false,
+        })
+        .flat_map(|line| [line, "\n"])
+        .collect();
+    std::fs::write(path, kept).map_err(io_error(path))
+}
+
+fn progress_bar(visible: bool, position: u64, steps: u64) -> indicatif::ProgressBar {
+    if !visible {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(steps).with_position(position);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] step {pos}/{len} (eta {eta}) {msg}",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    bar
+}

@@ -1,0 +1,199 @@
+//! `ssr-agent train`: flags to a [`TrainConfig`], the dataset index, the run and its summary.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::Context as _;
+use clap::{Args, ValueEnum};
+use ssr_agent::model::config::SsrConfig;
+use ssr_agent::train::config::{Schedule, TrainConfig};
+use ssr_agent::train::data::TrainingData;
+use ssr_agent::train::run::{self, TrainOptions, format_l2};
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ScheduleKind {
+    Cosine,
+    Step,
+}
+
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Dataset folder written by `sim-bridge collect` (holds manifest.json).
+    #[arg(long)]
+    data: PathBuf,
+    /// Run folder: config, metrics.jsonl, checkpoints/, final.safetensors, resume/.
+    #[arg(long, default_value = "runs/train")]
+    out: PathBuf,
+    /// Continue the run in --out from its last checkpoint (with its own settings; only
+    /// --stop-at and --quiet apply).
+    #[arg(long)]
+    resume: bool,
+    /// Stop after this step with a checkpoint, keeping the schedule of --steps (split a run
+    /// over several sittings, then --resume).
+    #[arg(long)]
+    stop_at: Option<u64>,
+    /// Model preset (cpu-default, paper) or a JSON config file.
+    #[arg(long, default_value = "cpu-default")]
+    model: String,
+    /// Optimiser steps of the whole run.
+    #[arg(long, default_value_t = 4000)]
+    steps: u64,
+    #[arg(long, default_value_t = 8)]
+    batch_size: usize,
+    /// Peak learning rate (AdamW).
+    #[arg(long, default_value_t = 3e-4)]
+    lr: f64,
+    #[arg(long, default_value_t = 1e-2)]
+    weight_decay: f32,
+    /// Steps of linear warm-up.
+    #[arg(long, default_value_t = 300)]
+    warmup_steps: u64,
+    /// Decay after the warm-up: cosine to 5 % of --lr, or step (x --step-gamma every
+    /// --step-every steps).
+    #[arg(long, value_enum, default_value = "cosine")]
+    schedule: ScheduleKind,
+    #[arg(long, default_value_t = 1000)]
+    step_every: u64,
+    #[arg(long, default_value_t = 0.5)]
+    step_gamma: f64,
+    /// Per-parameter gradient norm clip (0 = none).
+    #[arg(long, default_value_t = 1.0)]
+    clip_norm: f32,
+    /// Photometric jitter strength (0 = none).
+    #[arg(long, default_value_t = 1.0)]
+    augment: f32,
+    /// Weight of the future-BEV loss (SSR: 1).
+    #[arg(long, default_value_t = 1.0)]
+    bev_weight: f32,
+    /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
+    #[arg(long)]
+    no_stl: bool,
+    /// Ablation: no Future Feature Predictor and no BEV loss.
+    #[arg(long)]
+    no_ffp: bool,
+    /// Number of scene tokens (SSR: 16).
+    #[arg(long)]
+    tokens: Option<usize>,
+    /// Share of routes held out for validation.
+    #[arg(long, default_value_t = 0.05)]
+    validation_fraction: f64,
+    /// Validate every N steps (and at the end); 0 = only at the end.
+    #[arg(long, default_value_t = 1000)]
+    validate_every: u64,
+    /// Validation samples, spread over the held-out routes (0 = all).
+    #[arg(long, default_value_t = 1024)]
+    validation_samples: usize,
+    /// Checkpoint (and resume state) every N steps, and at the end.
+    #[arg(long, default_value_t = 500)]
+    checkpoint_every: u64,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+impl TrainArgs {
+    fn config(&self) -> anyhow::Result<TrainConfig> {
+        let mut model = SsrConfig::from_name_or_file(&self.model)?;
+        model.tokens.dense_bev |= self.no_stl;
+        if let Some(tokens) = self.tokens {
+            model.tokens.num_tokens = tokens;
+        }
+        if self.no_stl || self.no_ffp || self.tokens.is_some() {
+            let mut name = model.name.clone();
+            for (on, tag) in [(self.no_stl, "-no-stl"), (self.no_ffp, "-no-ffp")] {
+                if on {
+                    name.push_str(tag);
+                }
+            }
+            if let Some(tokens) = self.tokens {
+                name.push_str(&format!("-{tokens}tok"));
+            }
+            model.name = name;
+        }
+        let mut config = TrainConfig::new(model, self.steps);
+        config.batch_size = self.batch_size;
+        config.lr = self.lr;
+        config.weight_decay = self.weight_decay;
+        config.warmup_steps = self.warmup_steps;
+        config.schedule = match self.schedule {
+            ScheduleKind::Cosine => Schedule::Cosine { final_ratio: 0.05 },
+            ScheduleKind::Step => Schedule::Step {
+                every: self.step_every,
+                gamma: self.step_gamma,
+            },
+        };
+        config.clip_norm = self.clip_norm;
+        config.augment = self.augment;
+        config.loss.bev = self.bev_weight;
+        config.future_bev = !self.no_ffp;
+        config.validation_fraction = self.validation_fraction;
+        config.validate_every = self.validate_every;
+        config.validation_samples = self.validation_samples;
+        config.checkpoint_every = self.checkpoint_every;
+        config.seed = self.seed;
+        config.validate().map_err(anyhow::Error::msg)?;
+        Ok(config)
+    }
+}
+
+pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
+    let config = if args.resume {
+        run::resumed_config(&args.out)?
+    } else {
+        args.config()?
+    };
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(0).with_message("reading measurements")
+    };
+    let data = TrainingData::open(
+        &args.data,
+        &config.model,
+        config.validation_fraction,
+        |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        },
+    )
+    .with_context(|| format!("opening the dataset {}", args.data.display()))?;
+    bar.finish_and_clear();
+    eprintln!(
+        "{}: {} training samples on {} routes, {} validation samples on {} routes; model {}, {} steps of {}",
+        args.data.display(),
+        data.train.len(),
+        data.train_routes,
+        data.validation.len(),
+        data.validation_routes,
+        config.model.name,
+        config.steps,
+        config.batch_size,
+    );
+    let options = TrainOptions {
+        data: args.data.clone(),
+        out: args.out.clone(),
+        resume: args.resume,
+        stop_at: args.stop_at,
+        progress: !args.quiet,
+    };
+    let summary = run::train(config, options, Arc::new(data))?;
+    println!(
+        "{} steps done ({} in this run, {:.0} s, {:.1} samples/s)",
+        summary.steps_done, summary.steps_run, summary.wall_seconds, summary.samples_per_s
+    );
+    if let Some(v) = &summary.validation {
+        println!(
+            "validation at step {} ({} samples): L2 at 1/2/3 s {} m, steer/throttle/brake MAE {:.3}/{:.3}/{:.3}",
+            v.step,
+            v.samples,
+            format_l2(&v.l2_m),
+            v.steer_mae,
+            v.throttle_mae,
+            v.brake_mae
+        );
+    }
+    println!("checkpoint: {}", summary.checkpoint.display());
+    Ok(())
+}

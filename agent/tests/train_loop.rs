@@ -1,0 +1,296 @@
+//! `ssr_agent::train` end to end on a tiny dataset fixture: the loss falls, a resumed run
+//! redraws the same loss curve, checkpoints round-trip, and bad datasets or run folders give
+//! errors naming the problem.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use burn::tensor::Device;
+use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
+use common::tiny_config;
+use sim_bridge::world::ego::Control;
+use ssr_agent::checkpoint;
+use ssr_agent::model::float_values;
+use ssr_agent::train::augment::Photometric;
+use ssr_agent::train::config::{Schedule, TrainConfig};
+use ssr_agent::train::data::{TrainingData, action_of};
+use ssr_agent::train::run::{MetricsLine, StepMetrics, TrainError, TrainOptions, train};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("ssr-train-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn fixture(name: &str) -> PathBuf {
+    let root = scratch(name);
+    write_fixture_dataset(&root);
+    root
+}
+
+fn config(steps: u64) -> TrainConfig {
+    let mut config = TrainConfig::new(tiny_config(), steps);
+    config.batch_size = 4;
+    config.lr = 2e-3;
+    config.warmup_steps = 2;
+    config.validation_fraction = 0.3;
+    config.validate_every = 0;
+    config.checkpoint_every = 3;
+    config
+}
+
+fn open(data: &Path, config: &TrainConfig) -> Arc<TrainingData> {
+    Arc::new(
+        TrainingData::open(data, &config.model, config.validation_fraction, |_, _| {}).unwrap(),
+    )
+}
+
+fn options(data: &Path, out: &Path) -> TrainOptions {
+    TrainOptions {
+        data: data.to_path_buf(),
+        out: out.to_path_buf(),
+        resume: false,
+        stop_at: None,
+        progress: false,
+    }
+}
+
+fn step_lines(out: &Path) -> Vec<StepMetrics> {
+    std::fs::read_to_string(out.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .filter_map(|line| match serde_json::from_str(line).unwrap() {
+            MetricsLine::Step(step) => Some(step),
+            MetricsLine::Validation(_) => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
+    let data = fixture("falls");
+    let out = scratch("falls-run");
+    let config = config(16);
+    let summary = train(config.clone(), options(&data, &out), open(&data, &config)).unwrap();
+    assert_eq!(summary.steps_done, 16);
+    assert!(summary.samples_per_s > 0.0);
+    let losses: Vec<f32> = step_lines(&out).iter().map(|s| s.loss).collect();
+    assert_eq!(losses.len(), 16);
+    let first: f32 = losses[..4].iter().sum();
+    let last: f32 = losses[12..].iter().sum();
+    assert!(last < 0.8 * first, "loss did not fall: {losses:?}");
+    let validation = summary.validation.expect("validated at the end");
+    assert!(validation.samples > 0);
+    assert_eq!(validation.l2_m.len(), 3);
+    assert!(
+        validation.l2_m[1].is_some() && validation.l2_m[2].is_none(),
+        "tiny plans 2 s"
+    );
+
+    // The final checkpoint loads back into the same network, with the rig and notes.
+    assert_eq!(summary.checkpoint, out.join("final.safetensors"));
+    let (model, info) = checkpoint::load(&summary.checkpoint, &Device::flex()).unwrap();
+    assert_eq!(info.config, config.model);
+    assert!(info.metadata.contains_key("rig"));
+    assert!(info.metadata["training"].contains("\"step\":16"));
+    let (again, _) = checkpoint::load(
+        &out.join("checkpoints/step-000015.safetensors"),
+        &Device::flex(),
+    )
+    .unwrap();
+    let input = common::model_input(&config.model, 2, 1, true, &Device::flex());
+    let waypoints = |m: &ssr_agent::model::SsrModel| float_values(m.forward(&input).head.waypoints);
+    assert_ne!(
+        waypoints(&model),
+        waypoints(&again),
+        "step 15 and 16 differ"
+    );
+    let (reloaded, _) = checkpoint::load(&summary.checkpoint, &Device::flex()).unwrap();
+    assert_eq!(waypoints(&model), waypoints(&reloaded));
+}
+
+#[test]
+fn resuming_redraws_the_same_loss_curve() {
+    let data = fixture("resume");
+    let config = config(6);
+    let straight = scratch("resume-straight");
+    train(
+        config.clone(),
+        options(&data, &straight),
+        open(&data, &config),
+    )
+    .unwrap();
+
+    let split = scratch("resume-split");
+    let first = TrainOptions {
+        stop_at: Some(3),
+        ..options(&data, &split)
+    };
+    let stopped = train(config.clone(), first, open(&data, &config)).unwrap();
+    assert_eq!((stopped.steps_done, stopped.steps_run), (3, 3));
+    let resumed = TrainOptions {
+        resume: true,
+        ..options(&data, &split)
+    };
+    let ignored = TrainConfig {
+        lr: 1.0,
+        ..config.clone()
+    };
+    let finished = train(ignored, resumed, open(&data, &config)).unwrap();
+    assert_eq!((finished.steps_done, finished.steps_run), (6, 3));
+
+    let (a, b) = (step_lines(&straight), step_lines(&split));
+    assert_eq!(b.len(), 6, "no step is logged twice");
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x.step, y.step);
+        assert_eq!(x.lr, y.lr);
+        let tolerance = 1e-4 * x.loss.abs().max(1.0);
+        assert!(
+            (x.loss - y.loss).abs() <= tolerance,
+            "step {}: {} vs {}",
+            x.step,
+            x.loss,
+            y.loss
+        );
+    }
+}
+
+#[test]
+fn routes_split_whole_and_samples_need_a_future() {
+    let data = fixture("split");
+    let config = config(1);
+    let set = TrainingData::open(&data, &config.model, 0.5, |_, _| {}).unwrap();
+    assert_eq!(set.train_routes + set.validation_routes, FIXTURE_ROUTES);
+    assert!(set.train_routes > 0 && set.validation_routes > 0);
+    let episodes = |samples: &[ssr_agent::train::data::SampleRef]| {
+        samples
+            .iter()
+            .map(|s| s.episode)
+            .collect::<std::collections::BTreeSet<_>>()
+    };
+    assert!(episodes(&set.train).is_disjoint(&episodes(&set.validation)));
+    // 10 frames at 2 Hz: the last 3 have no frame 1.5 s ahead.
+    assert_eq!(set.train.len() + set.validation.len(), FIXTURE_ROUTES * 7);
+    let none = TrainingData::open(&data, &config.model, 0.0, |_, _| {}).unwrap();
+    assert_eq!(none.validation.len(), 0);
+}
+
+#[test]
+fn bad_datasets_and_run_folders_are_named() {
+    let config = config(2);
+    let missing = scratch("missing");
+    let error = TrainingData::open(&missing, &config.model, 0.1, |_, _| {})
+        .err()
+        .unwrap();
+    assert!(error.to_string().contains("manifest.json"), "{error}");
+
+    let broken = fixture("broken-line");
+    let measurements = broken.join("episodes/fixture__fixture__2__r0/measurements.jsonl");
+    let text = std::fs::read_to_string(&measurements).unwrap();
+    std::fs::write(
+        &measurements,
+        text.replacen("{\"index\":3", "{\"index\":oops", 1),
+    )
+    .unwrap();
+    let error = TrainingData::open(&broken, &config.model, 0.1, |_, _| {})
+        .err()
+        .unwrap();
+    assert!(
+        error.to_string().contains("measurements.jsonl") && error.to_string().contains("line 4"),
+        "{error}"
+    );
+
+    let mut far = config.clone();
+    far.model.head.pred_len = 8;
+    let error = TrainingData::open(&fixture("far"), &far.model, 0.1, |_, _| {})
+        .err()
+        .unwrap();
+    assert!(error.to_string().contains("plans 8"), "{error}");
+
+    // A missing image stops training with its path; what was written so far stays.
+    let holes = fixture("holes");
+    for route in 0..FIXTURE_ROUTES {
+        let _ = std::fs::remove_file(holes.join(format!(
+            "episodes/fixture__fixture__{route}__r0/cam0/000004.png"
+        )));
+    }
+    let out = scratch("holes-run");
+    let mut long = config.clone();
+    long.steps = 40;
+    let error = train(long.clone(), options(&holes, &out), open(&holes, &long))
+        .err()
+        .unwrap();
+    assert!(
+        matches!(error, TrainError::Dataset(_)) && error.to_string().contains("000004.png"),
+        "{error}"
+    );
+    assert!(out.join("train_config.json").exists());
+
+    let empty = scratch("no-resume");
+    let resume = TrainOptions {
+        resume: true,
+        ..options(&holes, &empty)
+    };
+    let error = train(config.clone(), resume, open(&holes, &config))
+        .err()
+        .unwrap();
+    assert!(
+        matches!(error, TrainError::Resume { .. }) && error.to_string().contains("progress.json"),
+        "{error}"
+    );
+
+    let mut bad = config.clone();
+    bad.batch_size = 0;
+    let error = train(
+        bad,
+        options(&holes, &scratch("bad-config")),
+        open(&holes, &config),
+    )
+    .err()
+    .unwrap();
+    assert!(error.to_string().contains("batch_size"), "{error}");
+}
+
+#[test]
+fn schedule_actions_and_augmentation() {
+    let mut config = TrainConfig::new(tiny_config(), 100);
+    config.warmup_steps = 10;
+    config.lr = 1e-3;
+    assert!((config.lr_at(0) - 1e-4).abs() < 1e-12);
+    assert!((config.lr_at(9) - 1e-3).abs() < 1e-12);
+    assert!(
+        (config.lr_at(99) - 1e-3 * 0.05).abs() < 1e-6,
+        "{}",
+        config.lr_at(99)
+    );
+    config.schedule = Schedule::Step {
+        every: 30,
+        gamma: 0.5,
+    };
+    assert!((config.lr_at(45) - 5e-4).abs() < 1e-12);
+
+    let brake = Control {
+        steer: 0.3,
+        throttle: 0.0,
+        brake: 0.7,
+    };
+    assert_eq!(action_of(&brake), [-0.7, 0.3]);
+    let drive = Control {
+        steer: -0.1,
+        throttle: 0.6,
+        brake: 0.0,
+    };
+    assert_eq!(action_of(&drive), [0.6, -0.1]);
+
+    let mut rgb: Vec<u8> = (0..300).map(|i| (i % 256) as u8).collect();
+    let original = rgb.clone();
+    Photometric::draw(7, 0.0).apply(&mut rgb);
+    assert_eq!(rgb, original, "strength 0 is the identity");
+    let jitter = Photometric::draw(7, 1.0);
+    assert_eq!(jitter, Photometric::draw(7, 1.0), "seeded");
+    jitter.apply(&mut rgb);
+    assert_ne!(rgb, original);
+}
