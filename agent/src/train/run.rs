@@ -320,7 +320,7 @@ impl Trainer {
             let at_end = self.step == last;
             let every = self.config.validate_every;
             if at_end || (every > 0 && self.step.is_multiple_of(every)) {
-                let validation = self.validate();
+                let validation = self.validate()?;
                 bar.println(format!(
                     "step {}: validation L2 {} m, steer MAE {:.3}",
                     self.step,
@@ -394,7 +394,7 @@ impl Trainer {
     }
 
     /// Open-loop metrics over (a spread subset of) the validation samples.
-    fn validate(&self) -> ValidationMetrics {
+    fn validate(&self) -> Result<ValidationMetrics, TrainError> {
         let config = &self.config;
         let samples = spread(&self.data.validation, config.validation_samples);
         let model = self.model().valid();
@@ -402,9 +402,7 @@ impl Trainer {
         let p = config.model.head.pred_len;
         let mut sums = ValidationSums::default();
         for chunk in samples.chunks(config.batch_size) {
-            let Ok(batch) = self.data.batch(chunk, &config.model, |_| None) else {
-                continue;
-            };
+            let batch = self.data.batch(chunk, &config.model, |_| None)?;
             let context = batch.context_input(&config.model, config.future_bev, device);
             let context_bev =
                 model.encode_bev(model.image_features(context.images.clone()), &context);
@@ -422,7 +420,7 @@ impl Trainer {
             let loss = float_values(losses(&output.head, &targets, bev, &config.loss).total)[0];
             sums.add(&batch, &output.head, p, loss);
         }
-        sums.finish(self.step, p)
+        Ok(sums.finish(self.step, p))
     }
 
     fn checkpoint_path(&self) -> PathBuf {

@@ -191,8 +191,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             .collect();
         workers
             .into_iter()
-            .map(|w| w.join().expect("eval workers do not panic"))
-            .collect::<anyhow::Result<()>>()
+            .try_for_each(|w| w.join().expect("eval workers do not panic"))
     })?;
     let finished = finished.into_inner().expect("workers are done");
     let results = Results::new(finished.done(), total, Vec::new());
