@@ -90,17 +90,12 @@ pub fn save(
 
 /// Reads and checks a checkpoint's header: config, metadata, and that the file is complete.
 pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
-    let file = std::fs::File::open(path).map_err(|source| CheckpointError::Io {
+    let io = |source| CheckpointError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
-    let actual = file
-        .metadata()
-        .map_err(|source| CheckpointError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .len();
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let actual = file.metadata().map_err(io)?.len();
     read_header(file, actual, path)
 }
 

@@ -34,6 +34,7 @@ use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::beta::control_from_beta;
+use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
 use crate::serve::RIG_METADATA_KEY;
 use sim_bridge::dataset::DatasetError;
@@ -357,25 +358,15 @@ impl Trainer {
     /// One optimiser step on a batch.
     fn optimise(&mut self, batch: &Batch) -> Result<StepMetrics, TrainError> {
         let config = &self.config;
-        let b = batch.size;
         let frozen = self.model().valid();
-        let context = batch.context_input(&config.model, config.future_bev, &self.inner);
-        let context_bev =
-            frozen.encode_bev(frozen.image_features(context.images.clone()), &context);
-        let detached = |bev: Tensor<3>| Tensor::from_data(bev.into_data(), &self.device);
-        let history = detached(context_bev.clone().narrow(0, 0, b));
-        let input = batch.current_input(&config.model, history, &self.device);
-        let output = self.model().forward(&input);
-        let bev = config.future_bev.then(|| {
-            let future = detached(context_bev.narrow(0, b, b));
-            (self.model().predict_future_bev(&output), future)
-        });
-        let targets = batch.targets(
-            config.model.head.pred_len,
-            config.loss.target_concentration,
+        let (terms, _) = batch_losses(
+            self.model(),
+            &frozen,
+            batch,
+            config,
+            &self.inner,
             &self.device,
         );
-        let terms = losses(&output.head, &targets, bev, &config.loss);
         let metrics = step_metrics(&terms, self.step + 1, config.lr_at(self.step));
         if !metrics.loss.is_finite() {
             return Err(TrainError::Diverged {
@@ -403,22 +394,8 @@ impl Trainer {
         let mut sums = ValidationSums::default();
         for chunk in samples.chunks(config.batch_size) {
             let batch = self.data.batch(chunk, &config.model, |_| None)?;
-            let context = batch.context_input(&config.model, config.future_bev, device);
-            let context_bev =
-                model.encode_bev(model.image_features(context.images.clone()), &context);
-            let b = batch.size;
-            let input =
-                batch.current_input(&config.model, context_bev.clone().narrow(0, 0, b), device);
-            let output = model.forward(&input);
-            let bev = config.future_bev.then(|| {
-                (
-                    model.predict_future_bev(&output),
-                    context_bev.narrow(0, b, b),
-                )
-            });
-            let targets = batch.targets(p, config.loss.target_concentration, device);
-            let loss = float_values(losses(&output.head, &targets, bev, &config.loss).total)[0];
-            sums.add(&batch, &output.head, p, loss);
+            let (terms, head) = batch_losses(&model, &model, &batch, config, device, device);
+            sums.add(&batch, &head, p, float_values(terms.total)[0]);
         }
         Ok(sums.finish(self.step, p))
     }
@@ -491,6 +468,47 @@ impl Trainer {
     }
 }
 
+/// The losses of a batch and the head's output. `context_model` (without gradients, on
+/// `inner`) gives the history BEVs and the FFP's targets; `model` (on `device`) runs the
+/// current frames.
+fn batch_losses(
+    model: &SsrModel,
+    context_model: &SsrModel,
+    batch: &Batch,
+    config: &TrainConfig,
+    inner: &Device,
+    device: &Device,
+) -> (Losses, HeadOutput) {
+    let b = batch.size;
+    let context = batch.context_input(&config.model, config.future_bev, inner);
+    let context_bev = context_model.encode_bev(
+        context_model.image_features(context.images.clone()),
+        &context,
+    );
+    let detached = |bev: Tensor<3>| Tensor::from_data(bev.into_data(), device);
+    let history = detached(context_bev.clone().narrow(0, 0, b));
+    let output = model.forward(&batch.current_input(&config.model, history, device));
+    let bev = config.future_bev.then(|| {
+        let future = detached(context_bev.narrow(0, b, b));
+        (model.predict_future_bev(&output), future)
+    });
+    let targets = batch.targets(
+        config.model.head.pred_len,
+        config.loss.target_concentration,
+        device,
+    );
+    (
+        losses(&output.head, &targets, bev, &config.loss),
+        output.head,
+    )
+}
+
+/// Waypoints up to `horizon_s` (waypoints are 0.5 s apart): the horizon's waypoint is the
+/// one before this index.
+fn waypoints_until(horizon_s: f64) -> usize {
+    (horizon_s / sim_bridge::dataset::FUTURE_STEP).round() as usize
+}
+
 fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
     let value = |t: &Tensor<1>| float_values(t.clone())[0];
     StepMetrics {
@@ -528,19 +546,13 @@ struct ValidationSums {
 }
 
 impl ValidationSums {
-    fn add(
-        &mut self,
-        batch: &Batch,
-        head: &crate::model::tcp_head::HeadOutput,
-        p: usize,
-        loss: f32,
-    ) {
+    fn add(&mut self, batch: &Batch, head: &HeadOutput, p: usize, loss: f32) {
         let waypoints = float_values(head.waypoints.clone());
         let alpha = float_values(head.alpha.clone());
         let beta = float_values(head.beta.clone());
         for i in 0..batch.size {
             for (h, horizon) in L2_HORIZONS_S.iter().enumerate() {
-                let k = (horizon / sim_bridge::dataset::FUTURE_STEP).round() as usize - 1;
+                let k = waypoints_until(*horizon) - 1;
                 if k < p {
                     let at = (i * p + k) * 2;
                     let dx = waypoints[at] - batch.waypoints[at];
@@ -572,7 +584,7 @@ impl ValidationSums {
                 .iter()
                 .zip(self.l2)
                 .map(|(horizon, sum)| {
-                    let k = (horizon / sim_bridge::dataset::FUTURE_STEP).round() as usize;
+                    let k = waypoints_until(*horizon);
                     (k <= p && self.samples > 0).then(|| mean(sum))
                 })
                 .collect(),
