@@ -210,6 +210,25 @@ fn bad_datasets_and_run_folders_are_named() {
         .unwrap();
     assert!(error.to_string().contains("plans 8"), "{error}");
 
+    // At 0.5 Hz there is no frame 0.5 s back to be the history.
+    let slow = fixture("slow");
+    let manifest = slow.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(
+        &manifest,
+        text.replace("\"rate_hz\": 2.0", "\"rate_hz\": 0.5"),
+    )
+    .unwrap();
+    let error = TrainingData::open(&slow, &config.model, 0.1, |_, _| {})
+        .err()
+        .unwrap();
+    assert!(
+        error
+            .to_string()
+            .contains("rate_hz = 0.5 gives no frame 0.5 s back"),
+        "{error}"
+    );
+
     // A missing image stops training with its path; what was written so far stays.
     let holes = fixture("holes");
     for route in 0..FIXTURE_ROUTES {

@@ -90,6 +90,75 @@ fn eval_jobs_run_routes_at_once_with_the_same_results() {
 }
 
 #[test]
+fn eval_resume_keeps_scored_runs_and_refuses_another_plan() {
+    let dir = scratch("eval-resume");
+    let out = dir.join("results.json");
+    let eval = |repetitions: &str, seed: &str, resume: bool| {
+        let mut args = vec![
+            "eval",
+            "--routes",
+            "town05-short-style",
+            "--limit",
+            "2",
+            "--timeout",
+            "10",
+            "--repetitions",
+            repetitions,
+            "--seed",
+            seed,
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if resume {
+            args.push("--resume");
+        }
+        sim_bridge(&args)
+    };
+    let records = || -> Vec<serde_json::Value> {
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        json["_checkpoint"]["records"].as_array().unwrap().clone()
+    };
+    // Nothing to resume from yet: a fresh run.
+    let first = eval("1", "0", true);
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let scored = records();
+    assert_eq!(scored.len(), 2);
+
+    // The second repetition is added; the first one's records are kept as they were.
+    let second = eval("2", "0", true);
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert!(second.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("resuming: 2 of 4 runs already scored"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.matches(" rep 1:").count(), 2, "{stderr}");
+    assert_eq!(stderr.matches(" rep 0:").count(), 0, "{stderr}");
+    let all = records();
+    assert_eq!(all.len(), 4);
+    assert_eq!(all[..2], scored[..]);
+
+    let refused = |run: std::process::Output, needles: [&str; 2]| {
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{stderr}");
+        assert!(needles.iter().all(|n| stderr.contains(n)), "{stderr}");
+    };
+    // Another seed is another plan: refused, and the file is left alone.
+    refused(eval("2", "7", true), ["cannot resume from", "seed 7"]);
+    assert_eq!(records(), all);
+    // A broken file is named.
+    std::fs::write(&out, "{ not json").unwrap();
+    refused(eval("2", "0", true), ["resuming from", "malformed"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn bad_arguments_fail_with_a_clear_message() {
     let run = sim_bridge(&["eval", "--routes", "no-such-set"]);
     assert!(!run.status.success());

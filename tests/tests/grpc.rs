@@ -586,15 +586,22 @@ fn load_reports_every_step_and_the_server_memory() {
         .output()
         .unwrap();
     let stdout = succeeded(run);
-    assert!(stdout.contains("status codes: Ok 20"), "{stdout}");
+    // 2 episodes x 5 Hz x 2 s = 20 steps due: each one answered OK, or (on a machine too busy
+    // to keep up) reported as behind schedule, never lost.
     let report = read_results(&out);
-    assert_eq!(report["report"]["count"], 20);
+    let count = report["report"]["count"].as_u64().unwrap();
+    let behind = report["report"]["behind_schedule"].as_u64().unwrap();
+    assert_eq!(count + behind, 20, "{stdout}");
+    assert!(
+        stdout.contains(&format!("status codes: Ok {count}\n")),
+        "{stdout}"
+    );
     assert!(report["report"]["latency_ms"]["p99"].as_f64().unwrap() > 0.0);
     let memory = report["server_rss_bytes"].as_array().unwrap();
     assert!(memory.len() >= 2, "{memory:?}");
     assert!(memory.last().unwrap()["bytes"].as_u64().unwrap() > 10 << 20);
     let steps = server.metric(r#"ssr_requests_total{method="Step",code="OK"}"#);
-    assert_eq!(steps, 20.0);
+    assert_eq!(steps, count as f64);
 }
 
 #[test]

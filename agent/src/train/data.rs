@@ -1,7 +1,8 @@
 //! Training samples from a collected expert dataset (`sim-bridge collect`).
 //!
 //! A sample is one stored frame t with everything SSR trains on: the frame itself, the frame
-//! before it (its BEV becomes the temporal history, as at inference), the frame
+//! [`HISTORY_S`] before it (its BEV, encoded without history, is the temporal history), the
+//! frame
 //! [`FUTURE_BEV_S`] later (its BEV is the FFP's target) and the expert's labels (waypoints,
 //! control now and at each future step, speed). Measurements of every episode are read once
 //! into an index; images are read from disk batch by batch.
@@ -24,7 +25,7 @@ use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
 use crate::camera::Rig;
 use crate::model::backbone::frame_to_input;
-use crate::model::bev::{GeometryTensors, SampleGeometry};
+use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
 use crate::model::config::SsrConfig;
 use crate::model::stl::COMMANDS;
 use crate::model::{ModelInput, float_tensor};
@@ -50,6 +51,7 @@ struct Episode {
 pub struct TrainingData {
     dataset: Dataset,
     episodes: Vec<Episode>,
+    history_offset: usize,
     future_offset: usize,
     pred_len: usize,
     pub train: Vec<SampleRef>,
@@ -98,10 +100,12 @@ impl TrainingData {
                 m.future_count
             ));
         }
-        let future_offset = (FUTURE_BEV_S * m.rate_hz).round() as usize;
-        if !(m.rate_hz.is_finite() && future_offset >= 1) {
+        let frames_in = |seconds: f64| (seconds * m.rate_hz).round() as usize;
+        let (history_offset, future_offset) = (frames_in(HISTORY_S), frames_in(FUTURE_BEV_S));
+        if !(m.rate_hz.is_finite() && history_offset >= 1 && future_offset >= 1) {
             return refuse(format!(
-                "rate_hz = {} gives no frame {FUTURE_BEV_S} s ahead",
+                "rate_hz = {} gives no frame {HISTORY_S} s back (the history) or \
+                 {FUTURE_BEV_S} s ahead (the FFP target)",
                 m.rate_hz
             ));
         }
@@ -167,6 +171,7 @@ impl TrainingData {
         Ok(Self {
             dataset,
             episodes,
+            history_offset,
             future_offset,
             pred_len,
             train,
@@ -242,7 +247,7 @@ impl TrainingData {
             let future = self
                 .record(sample, self.future_offset as isize)
                 .expect("samples have their future frame");
-            let history = self.record(sample, -1);
+            let history = self.record(sample, -(self.history_offset as isize));
             let jitter = augment(i);
             let jitter = jitter.as_ref();
             self.images(sample, now, config, jitter, &mut batch.current_images)?;

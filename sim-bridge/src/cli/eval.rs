@@ -2,8 +2,10 @@
 //! leaderboard results JSON (after every route, so an interrupted run keeps what it scored) and,
 //! on request, a top-down picture of each run. With `--jobs N`, N routes run at once, each
 //! with its own agent (its own connection and episode on a gRPC server, which can batch them).
+//! `--resume` keeps the runs an earlier, interrupted evaluation of the same plan wrote to
+//! `--out` and drives only the rest (and any run whose agent crashed).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
@@ -19,7 +21,7 @@ use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
-use sim_bridge::scoring::{Results, ScoringConfig, summary_table};
+use sim_bridge::scoring::{Results, RouteEnd, RouteRecord, ScoringConfig, summary_table};
 
 use super::args::{
     PlannedRoute, RouteArgs, WorldArgs, parse_positive, parse_seconds, server_target,
@@ -60,6 +62,10 @@ pub struct EvalArgs {
     /// Where to write the leaderboard results JSON.
     #[arg(long, default_value = "results.json")]
     out: PathBuf,
+    /// Keep the runs already in --out (from an interrupted evaluation with the same routes,
+    /// repetitions and seed) and drive only the missing ones and those whose agent crashed.
+    #[arg(long)]
+    resume: bool,
     /// Write a step log of each run into this folder (requests with PNG frames, the agent's
     /// controls and plans, ground truth), for `sim-bridge replay`.
     #[arg(long)]
@@ -104,13 +110,25 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     }
     // Runs in leaderboard order: every route of repetition 0, then of repetition 1, ...
     let total = planned.len() * args.repetitions;
+    let records = if args.resume {
+        earlier_records(&args.out, &planned, total, args.world.seed)?
+    } else {
+        vec![None; total]
+    };
+    let kept = records.iter().flatten().count();
+    if args.resume {
+        eprintln!(
+            "resuming: {kept} of {total} runs already scored in {}",
+            args.out.display()
+        );
+    }
     let next_run = AtomicUsize::new(0);
     let finished = Mutex::new(Finished {
-        records: vec![None; total],
+        records,
         crashes: 0,
     });
     let bars = MultiProgress::new();
-    let jobs = args.jobs.min(total);
+    let jobs = args.jobs.min(total - kept).max(1);
     // Each worker makes its own agent on its own thread (agents need not be Send).
     let worker = |job: usize| -> anyhow::Result<()> {
         let mut agent = make_agent()?;
@@ -121,6 +139,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             let index = next_run.fetch_add(1, Ordering::Relaxed);
             if index >= total {
                 return Ok(());
+            }
+            if finished
+                .lock()
+                .expect("no worker panics holding it")
+                .records[index]
+                .is_some()
+            {
+                continue;
             }
             let (repetition, PlannedRoute { spec, dense }) =
                 (index / planned.len(), &planned[index % planned.len()]);
@@ -208,15 +234,68 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
 /// Runs scored so far, by index.
 struct Finished {
-    records: Vec<Option<sim_bridge::scoring::RouteRecord>>,
+    records: Vec<Option<RouteRecord>>,
     crashes: usize,
 }
 
 impl Finished {
     /// The finished runs in leaderboard order.
-    fn done(&self) -> Vec<sim_bridge::scoring::RouteRecord> {
+    fn done(&self) -> Vec<RouteRecord> {
         self.records.iter().flatten().cloned().collect()
     }
+}
+
+/// The records an earlier evaluation of the same plan wrote to `path`, by run index (none if
+/// there is no file yet). Runs whose agent crashed are dropped so they run again. A record of
+/// another route, repetition or seed at its index means another plan: an error, as the file
+/// would otherwise mix two evaluations.
+fn earlier_records(
+    path: &Path,
+    planned: &[PlannedRoute],
+    total: usize,
+    seed: u64,
+) -> anyhow::Result<Vec<Option<RouteRecord>>> {
+    let mut records = vec![None; total];
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(records),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    let results =
+        Results::from_json(&text).with_context(|| format!("resuming from {}", path.display()))?;
+    for record in results.checkpoint.records {
+        let index = record.index;
+        let spec = &planned[index % planned.len()].spec;
+        let repetition = index / planned.len();
+        let expected_seed = seed.wrapping_add(repetition as u64);
+        if index >= total
+            || record.route_id != spec.id
+            || record.meta.repetition != Some(repetition)
+            || record.meta.seed != Some(expected_seed)
+        {
+            bail!(
+                "cannot resume from {}: its run {index} is route {} repetition {:?} seed {:?}, \
+                 but this evaluation plans {} there; resume with the same --routes, \
+                 --route-ids, --limit, --repetitions and --seed, or write to another --out",
+                path.display(),
+                record.route_id,
+                record.meta.repetition,
+                record.meta.seed,
+                if index < total {
+                    format!(
+                        "route {} repetition {repetition} seed {expected_seed}",
+                        spec.id
+                    )
+                } else {
+                    format!("only {total} runs")
+                },
+            );
+        }
+        if record.status != RouteEnd::AgentCrashed.status() {
+            records[index] = Some(record);
+        }
+    }
+    Ok(records)
 }
 
 /// The server `--agent` names (started here for `local`), or `None` for the expert.

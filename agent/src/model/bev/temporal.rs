@@ -18,6 +18,11 @@ use crate::model::sampling::{bilinear_sample, deformable_aggregate};
 /// Queue slots: the aligned previous BEV and the current queries.
 const SLOTS: usize = 2;
 
+/// How far before a training sample its history frame is, seconds: SSR trains on 2 Hz
+/// keyframes with a queue of two, the history frame's BEV encoded without a history of its
+/// own. At inference the previous tick's BEV is the history (see the model card for why).
+pub const HISTORY_S: f64 = 0.5;
+
 /// Resamples the previous BEV (`[B, Q, C]`) into the current ego frame: cell i takes the
 /// previous BEV at `previous_points[:, i]` (normalised coordinates in the previous grid,
 /// `[B, Q, 2]`); cells that were outside the previous grid become zero.
