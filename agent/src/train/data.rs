@@ -2,9 +2,8 @@
 //!
 //! A sample is one stored frame t with everything SSR trains on: the frame itself, the frame
 //! [`HISTORY_S`] before it (its BEV, encoded without history, is the temporal history), the
-//! frame
-//! [`FUTURE_BEV_S`] later (its BEV is the FFP's target) and the expert's labels (waypoints,
-//! control now and at each future step, speed). Measurements of every episode are read once
+//! frame [`FUTURE_BEV_S`] later (its BEV is the FFP's target) and the expert's labels
+//! (waypoints, control now and at each future step, speed). Measurements of every episode are read once
 //! into an index; images are read from disk batch by batch.
 //!
 //! Episodes are split into training and validation by a hash of their route (town, route set,
