@@ -12,6 +12,7 @@ use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use sim_bridge::world::ego::Control;
 use ssr_agent::checkpoint;
+use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::float_values;
 use ssr_agent::train::augment::Photometric;
 use ssr_agent::train::config::{Schedule, TrainConfig};
@@ -178,54 +179,54 @@ fn routes_split_whole_and_samples_need_a_future() {
     assert_eq!(none.validation.len(), 0);
 }
 
+/// Why `TrainingData::open` refused `data`.
+fn open_error(data: &Path, model: &SsrConfig) -> String {
+    TrainingData::open(data, model, 0.1, |_, _| {})
+        .err()
+        .expect("the dataset is refused")
+        .to_string()
+}
+
+/// Replaces the first `from` in the file at `path` by `to`.
+fn edit(path: &Path, from: &str, to: &str) {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(text.contains(from), "{} has no {from}", path.display());
+    std::fs::write(path, text.replacen(from, to, 1)).unwrap();
+}
+
 #[test]
 fn bad_datasets_and_run_folders_are_named() {
     let config = config(2);
-    let missing = scratch("missing");
-    let error = TrainingData::open(&missing, &config.model, 0.1, |_, _| {})
-        .err()
-        .unwrap();
-    assert!(error.to_string().contains("manifest.json"), "{error}");
+    let error = open_error(&scratch("missing"), &config.model);
+    assert!(error.contains("manifest.json"), "{error}");
 
     let broken = fixture("broken-line");
-    let measurements = broken.join("episodes/fixture__fixture__2__r0/measurements.jsonl");
-    let text = std::fs::read_to_string(&measurements).unwrap();
-    std::fs::write(
-        &measurements,
-        text.replacen("{\"index\":3", "{\"index\":oops", 1),
-    )
-    .unwrap();
-    let error = TrainingData::open(&broken, &config.model, 0.1, |_, _| {})
-        .err()
-        .unwrap();
+    edit(
+        &broken.join("episodes/fixture__fixture__2__r0/measurements.jsonl"),
+        "{\"index\":3",
+        "{\"index\":oops",
+    );
+    let error = open_error(&broken, &config.model);
     assert!(
-        error.to_string().contains("measurements.jsonl") && error.to_string().contains("line 4"),
+        error.contains("measurements.jsonl") && error.contains("line 4"),
         "{error}"
     );
 
     let mut far = config.clone();
     far.model.head.pred_len = 8;
-    let error = TrainingData::open(&fixture("far"), &far.model, 0.1, |_, _| {})
-        .err()
-        .unwrap();
-    assert!(error.to_string().contains("plans 8"), "{error}");
+    let error = open_error(&fixture("far"), &far.model);
+    assert!(error.contains("plans 8"), "{error}");
 
     // At 0.5 Hz there is no frame 0.5 s back to be the history.
     let slow = fixture("slow");
-    let manifest = slow.join("manifest.json");
-    let text = std::fs::read_to_string(&manifest).unwrap();
-    std::fs::write(
-        &manifest,
-        text.replace("\"rate_hz\": 2.0", "\"rate_hz\": 0.5"),
-    )
-    .unwrap();
-    let error = TrainingData::open(&slow, &config.model, 0.1, |_, _| {})
-        .err()
-        .unwrap();
+    edit(
+        &slow.join("manifest.json"),
+        "\"rate_hz\": 2.0",
+        "\"rate_hz\": 0.5",
+    );
+    let error = open_error(&slow, &config.model);
     assert!(
-        error
-            .to_string()
-            .contains("rate_hz = 0.5 gives no frame 0.5 s back"),
+        error.contains("rate_hz = 0.5 gives no frame 0.5 s back"),
         "{error}"
     );
 
