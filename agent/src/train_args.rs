@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
+use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::train::config::{Schedule, TrainConfig};
 use ssr_agent::train::data::TrainingData;
@@ -35,6 +36,10 @@ pub struct TrainArgs {
     /// Model preset (cpu-default, paper) or a JSON config file.
     #[arg(long, default_value = "cpu-default")]
     model: String,
+    /// Start from this checkpoint's weights and network (fine-tuning) instead of fresh
+    /// weights; for example agent/models/ssr-cpu-default.safetensors, the bundled one.
+    #[arg(long, conflicts_with_all = ["model", "no_stl", "tokens"])]
+    init: Option<PathBuf>,
     /// Optimiser steps of the whole run.
     #[arg(long, default_value_t = 4000)]
     steps: u64,
@@ -62,6 +67,10 @@ pub struct TrainArgs {
     /// Photometric jitter strength (0 = none).
     #[arg(long, default_value_t = 1.0)]
     augment: f32,
+    /// Share of samples (0 to 1) trained without history BEV and ego motion, as on an
+    /// episode's first tick, so the network cannot just repeat what the expert was doing.
+    #[arg(long, default_value_t = 0.0)]
+    history_dropout: f64,
     /// Weight of the future-BEV loss (SSR: 1).
     #[arg(long, default_value_t = 1.0)]
     bev_weight: f32,
@@ -95,7 +104,10 @@ pub struct TrainArgs {
 
 impl TrainArgs {
     fn config(&self) -> anyhow::Result<TrainConfig> {
-        let mut model = SsrConfig::from_name_or_file(&self.model)?;
+        let mut model = match &self.init {
+            Some(path) => checkpoint::inspect(path)?.config,
+            None => SsrConfig::from_name_or_file(&self.model)?,
+        };
         model.tokens.dense_bev |= self.no_stl;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
@@ -126,6 +138,8 @@ impl TrainArgs {
         };
         config.clip_norm = self.clip_norm;
         config.augment = self.augment;
+        config.history_dropout = self.history_dropout;
+        config.init = self.init.clone();
         config.loss.bev = self.bev_weight;
         config.future_bev = !self.no_ffp;
         config.validation_fraction = self.validation_fraction;

@@ -7,16 +7,16 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use sim_bridge::world::ego::Control;
 use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::float_values;
+use ssr_agent::model::{SsrModel, float_values};
 use ssr_agent::train::augment::Photometric;
 use ssr_agent::train::config::{Schedule, TrainConfig};
-use ssr_agent::train::data::{TrainingData, action_of};
+use ssr_agent::train::data::{SampleDraw, TrainingData, action_of};
 use ssr_agent::train::run::{MetricsLine, StepMetrics, TrainError, TrainOptions, train};
 
 fn scratch(name: &str) -> PathBuf {
@@ -116,7 +116,11 @@ fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
 #[test]
 fn resuming_redraws_the_same_loss_curve() {
     let data = fixture("resume");
-    let config = config(6);
+    // History dropout draws per sample too; a resumed run must redraw them.
+    let config = TrainConfig {
+        history_dropout: 0.5,
+        ..config(6)
+    };
     let straight = scratch("resume-straight");
     train(
         config.clone(),
@@ -157,6 +161,115 @@ fn resuming_redraws_the_same_loss_curve() {
             y.loss
         );
     }
+}
+
+#[test]
+fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
+    let data = fixture("init");
+    let config = config(8);
+    let first = scratch("init-first");
+    let trained = train(config.clone(), options(&data, &first), open(&data, &config))
+        .unwrap()
+        .checkpoint;
+
+    // Step 1's loss is measured before the update: from the trained weights it is lower than
+    // from fresh ones on the same batch.
+    let first_loss = |init: Option<PathBuf>, name: &str| {
+        let run = TrainConfig {
+            init,
+            ..config.clone()
+        };
+        let out = scratch(name);
+        let stop = TrainOptions {
+            stop_at: Some(1),
+            ..options(&data, &out)
+        };
+        train(run, stop, open(&data, &config)).unwrap();
+        step_lines(&out)[0].loss
+    };
+    let fresh = first_loss(None, "init-fresh");
+    let tuned = first_loss(Some(trained.clone()), "init-tuned");
+    assert!(tuned < 0.8 * fresh, "fine-tune {tuned} vs fresh {fresh}");
+
+    let mut other = config.clone();
+    other.model.tokens.num_tokens += 1;
+    other.init = Some(trained);
+    let error = train(
+        other,
+        options(&data, &scratch("init-other")),
+        open(&data, &config),
+    )
+    .err()
+    .unwrap();
+    assert!(
+        matches!(error, TrainError::Config(_)) && error.to_string().contains("tokens.num_tokens"),
+        "{error}"
+    );
+    let missing = TrainConfig {
+        init: Some(first.join("no-such.safetensors")),
+        ..config.clone()
+    };
+    let error = train(
+        missing,
+        options(&data, &scratch("init-missing")),
+        open(&data, &config),
+    )
+    .err()
+    .unwrap();
+    assert!(error.to_string().contains("no-such.safetensors"), "{error}");
+}
+
+#[test]
+fn a_dropped_history_trains_the_first_frame_path() {
+    let data = fixture("dropout");
+    let config = config(1);
+    let set = open(&data, &config);
+    let with_history: Vec<_> = set
+        .train
+        .iter()
+        .filter(|s| s.frame >= 1)
+        .take(2)
+        .copied()
+        .collect();
+    let device = Device::flex();
+    let model = SsrModel::new(&config.model, &device);
+    let waypoints = |drop_history: bool, history_value: f32| {
+        let batch = set
+            .batch(&with_history, &config.model, |_| SampleDraw {
+                photometric: None,
+                drop_history,
+            })
+            .unwrap();
+        let shape = [2, config.model.bev.grid.cells(), config.model.channels];
+        let history = Tensor::full(shape, history_value, &device);
+        float_values(
+            model
+                .forward(&batch.current_input(&config.model, history, &device))
+                .head
+                .waypoints,
+        )
+    };
+    assert_ne!(
+        waypoints(false, 0.0),
+        waypoints(false, 1.0),
+        "the history is read"
+    );
+    assert_eq!(
+        waypoints(true, 0.0),
+        waypoints(true, 1.0),
+        "dropped, it is not"
+    );
+
+    let error = TrainConfig {
+        history_dropout: 1.5,
+        ..config.clone()
+    }
+    .validate()
+    .unwrap_err();
+    assert!(
+        error.contains("history_dropout must be in [0, 1]"),
+        "{error}"
+    );
 }
 
 #[test]

@@ -10,6 +10,7 @@ pub mod agent;
 pub mod camera;
 pub mod client;
 pub mod dataset;
+pub mod error_text;
 pub mod eval;
 pub mod expert;
 pub mod files;

@@ -134,6 +134,31 @@ impl SsrConfig {
         Ok(config)
     }
 
+    /// The fields (dotted paths, like `tokens.num_tokens`) where `other` differs from this
+    /// config, each with both values; empty when they are equal.
+    pub fn differences(&self, other: &Self) -> Vec<String> {
+        fn walk(path: String, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+            match (a, b) {
+                (serde_json::Value::Object(a), serde_json::Value::Object(b)) => {
+                    for (key, value) in a {
+                        let inner = if path.is_empty() {
+                            key.clone()
+                        } else {
+                            format!("{path}.{key}")
+                        };
+                        walk(inner, value, &b[key], out);
+                    }
+                }
+                _ if a != b => out.push(format!("{path}: {a} vs {b}")),
+                _ => {}
+            }
+        }
+        let json = |c: &Self| serde_json::to_value(c).expect("configs serialise");
+        let mut out = Vec::new();
+        walk(String::new(), &json(self), &json(other), &mut out);
+        out
+    }
+
     /// SSR's closed-loop setting: ResNet-34 on TCP's 900x256 camera, 256 channels, a 100x100
     /// BEV (0.6 m cells, 15 m behind to 45 m ahead), 3 encoder layers, 16 tokens, TCP head.
     pub fn paper() -> Self {

@@ -36,6 +36,14 @@ pub struct TrainConfig {
     pub future_bev: bool,
     /// Photometric jitter strength (0 = none).
     pub augment: f32,
+    /// Share of samples trained on the first-frame path: no history BEV and no ego motion, as
+    /// on an episode's first tick. Against the copycat shortcut (a network that reads what the
+    /// expert was just doing from the history instead of the scene); 0 = never.
+    #[serde(default)]
+    pub history_dropout: f64,
+    /// The checkpoint the weights start from (fine-tuning); `None` = fresh weights from `seed`.
+    #[serde(default)]
+    pub init: Option<std::path::PathBuf>,
     /// Fraction of routes held out for validation.
     pub validation_fraction: f64,
     /// Validate every this many steps (and at the end); 0 = only at the end.
@@ -64,6 +72,8 @@ impl TrainConfig {
             loss: LossWeights::default(),
             future_bev: true,
             augment: 1.0,
+            history_dropout: 0.0,
+            init: None,
             validation_fraction: 0.05,
             validate_every: 1000,
             validation_samples: 1024,
@@ -103,6 +113,12 @@ impl TrainConfig {
             if !(value.is_finite() && value > 0.0) {
                 return Err(format!("{field} must be positive, got {value}"));
             }
+        }
+        if !(0.0..=1.0).contains(&self.history_dropout) {
+            return Err(format!(
+                "history_dropout must be in [0, 1], got {}",
+                self.history_dropout
+            ));
         }
         if !(0.0..1.0).contains(&self.validation_fraction) {
             return Err(format!(

@@ -34,6 +34,14 @@ use crate::pose::{EgoMotion, Pose2};
 /// Seconds from a frame to the future frame whose BEV the FFP predicts (SSR's code: 1.5 s).
 pub const FUTURE_BEV_S: f64 = 1.5;
 
+/// How one sample of a batch is varied: its photometric jitter and whether it trains the
+/// first-frame path (history and ego motion dropped, as on an episode's first tick).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SampleDraw {
+    pub photometric: Option<Photometric>,
+    pub drop_history: bool,
+}
+
 /// One sample: a frame of an episode (indices into [`TrainingData`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SampleRef {
@@ -221,13 +229,14 @@ impl TrainingData {
         Ok(())
     }
 
-    /// Reads and prepares a batch. `augment` gives each sample's photometric jitter (the same
-    /// for its history, current and future frames, so they still show one scene).
+    /// Reads and prepares a batch. `draw` gives each sample's variation: its photometric jitter
+    /// (the same for its history, current and future frames, so they still show one scene) and
+    /// whether its history is dropped.
     pub fn batch(
         &self,
         samples: &[SampleRef],
         config: &SsrConfig,
-        mut augment: impl FnMut(usize) -> Option<Photometric>,
+        mut draw: impl FnMut(usize) -> SampleDraw,
     ) -> Result<Batch, DatasetError> {
         let rig = self.rig();
         let grid = &config.bev.grid;
@@ -246,9 +255,14 @@ impl TrainingData {
             let future = self
                 .record(sample, self.future_offset as isize)
                 .expect("samples have their future frame");
-            let history = self.record(sample, -(self.history_offset as isize));
-            let jitter = augment(i);
-            let jitter = jitter.as_ref();
+            let SampleDraw {
+                photometric,
+                drop_history,
+            } = draw(i);
+            let history = (!drop_history)
+                .then(|| self.record(sample, -(self.history_offset as isize)))
+                .flatten();
+            let jitter = photometric.as_ref();
             self.images(sample, now, config, jitter, &mut batch.current_images)?;
             self.images(sample, future, config, jitter, &mut future_images)?;
             match history {

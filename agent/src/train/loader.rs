@@ -1,26 +1,26 @@
 //! A background thread that reads and prepares the batches of a run, a few ahead of the
 //! optimiser. Batch k of a run is a pure function of the seed and k (the epoch's shuffle and
-//! each sample's augmentation are seeded by them), so a resumed run sees exactly the batches
-//! the interrupted one would have.
+//! each sample's augmentation and history dropout are seeded by them), so a resumed run sees
+//! exactly the batches the interrupted one would have.
 
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, sync_channel};
 use std::thread::JoinHandle;
 
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::augment::Photometric;
-use super::data::{Batch, SampleRef, TrainingData, fnv1a};
-use crate::model::config::SsrConfig;
+use super::config::TrainConfig;
+use super::data::{Batch, SampleDraw, SampleRef, TrainingData, fnv1a};
 use sim_bridge::dataset::DatasetError;
 
 /// Batches prepared ahead of the optimiser.
 const PREFETCH: usize = 3;
 
-/// The augmentation seed of sample `index` of step `step`.
-fn augment_seed(seed: u64, step: u64, index: usize) -> u64 {
+/// The variation seed of sample `index` of step `step`.
+fn sample_seed(seed: u64, step: u64, index: usize) -> u64 {
     fnv1a(
         &[
             seed.to_le_bytes(),
@@ -40,13 +40,12 @@ pub struct BatchLoader {
 impl BatchLoader {
     pub fn start(
         data: Arc<TrainingData>,
-        model: SsrConfig,
-        batch_size: usize,
-        augment: f32,
-        seed: u64,
+        config: &TrainConfig,
         steps: std::ops::Range<u64>,
     ) -> Self {
         let (sender, batches) = sync_channel(PREFETCH);
+        let config = config.clone();
+        let (batch_size, seed) = (config.batch_size, config.seed);
         let worker = std::thread::Builder::new()
             .name("batch-loader".into())
             .spawn(move || {
@@ -68,9 +67,8 @@ impl BatchLoader {
                         .take(batch_size)
                         .copied()
                         .collect();
-                    let batch = data.batch(&samples, &model, |i| {
-                        (augment > 0.0)
-                            .then(|| Photometric::draw(augment_seed(seed, step, i), augment))
+                    let batch = data.batch(&samples, &config.model, |i| {
+                        draw(&config, sample_seed(seed, step, i))
                     });
                     let failed = batch.is_err();
                     if sender.send((step, batch)).is_err() || failed {
@@ -102,6 +100,16 @@ impl Drop for BatchLoader {
     }
 }
 
+/// A sample's photometric jitter and history dropout, from its seed.
+fn draw(config: &TrainConfig, seed: u64) -> SampleDraw {
+    let augment = config.augment;
+    SampleDraw {
+        photometric: (augment > 0.0).then(|| Photometric::draw(seed, augment)),
+        drop_history: config.history_dropout > 0.0
+            && ChaCha8Rng::seed_from_u64(!seed).random_bool(config.history_dropout),
+    }
+}
+
 /// Epoch `epoch`'s seeded shuffle of the training samples. Step k of the epoch takes the k-th
 /// full batch of it (the remainder waits for the next epoch's shuffle).
 fn shuffled(train: &[SampleRef], seed: u64, epoch: u64) -> Vec<SampleRef> {
@@ -110,4 +118,26 @@ fn shuffled(train: &[SampleRef], seed: u64, epoch: u64) -> Vec<SampleRef> {
         seed ^ epoch.wrapping_mul(0x9e37_79b9),
     ));
     order
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::config::SsrConfig;
+
+    #[test]
+    fn history_dropout_drops_its_share_of_samples() {
+        let mut config = TrainConfig::new(SsrConfig::cpu_default(), 1);
+        let dropped = |config: &TrainConfig| {
+            (0..2000)
+                .filter(|&i| draw(config, sample_seed(3, i / 8, (i % 8) as usize)).drop_history)
+                .count()
+        };
+        assert_eq!(dropped(&config), 0, "off by default");
+        config.history_dropout = 0.3;
+        let share = dropped(&config) as f64 / 2000.0;
+        assert!((0.25..0.35).contains(&share), "{share}");
+        config.history_dropout = 1.0;
+        assert_eq!(dropped(&config), 2000);
+    }
 }

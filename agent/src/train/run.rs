@@ -29,11 +29,12 @@ use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use super::config::TrainConfig;
-use super::data::{Batch, SampleRef, TrainingData};
+use super::data::{Batch, SampleDraw, SampleRef, TrainingData};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::beta::control_from_beta;
+use crate::model::config::SsrConfig;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
 use crate::serve::RIG_METADATA_KEY;
@@ -194,6 +195,25 @@ fn read_progress(out: &Path) -> Result<Progress, TrainError> {
     Ok(progress)
 }
 
+/// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
+/// (a fine-tune changes the training, not the network).
+fn initial_weights(
+    path: &Path,
+    model: &SsrConfig,
+    device: &Device,
+) -> Result<SsrModel, TrainError> {
+    let (weights, info) = checkpoint::load(path, device)?;
+    let differences = info.config.differences(model);
+    if !differences.is_empty() {
+        return Err(TrainError::Config(format!(
+            "the initial checkpoint {} was saved from another network than this run's: {}",
+            path.display(),
+            differences.join("; ")
+        )));
+    }
+    Ok(weights)
+}
+
 fn optimizer_for(config: &TrainConfig) -> ModuleOptimizer {
     let mut adamw = AdamWConfig::new().with_weight_decay(config.weight_decay);
     if config.clip_norm > 0.0 {
@@ -235,7 +255,10 @@ impl Trainer {
         } else {
             config.validate().map_err(TrainError::Config)?;
             device.seed(config.seed);
-            let model = SsrModel::new(&config.model, &device);
+            let model = match &config.init {
+                Some(path) => initial_weights(path, &config.model, &device)?,
+                None => SsrModel::new(&config.model, &device),
+            };
             std::fs::write(
                 out.join("train_config.json"),
                 serde_json::to_string_pretty(&config).expect("configs serialise"),
@@ -285,14 +308,7 @@ impl Trainer {
             .map_or(self.config.steps, |s| s.min(self.config.steps));
         let first = self.step;
         let bar = progress_bar(self.options.progress, first, self.config.steps);
-        let mut loader = BatchLoader::start(
-            self.data.clone(),
-            self.config.model.clone(),
-            self.config.batch_size,
-            self.config.augment,
-            self.config.seed,
-            first..last,
-        );
+        let mut loader = BatchLoader::start(self.data.clone(), &self.config, first..last);
         let started = Instant::now();
         let mut training_time = 0.0;
         while self.step < last {
@@ -393,7 +409,9 @@ impl Trainer {
         let p = config.model.head.pred_len;
         let mut sums = ValidationSums::default();
         for chunk in samples.chunks(config.batch_size) {
-            let batch = self.data.batch(chunk, &config.model, |_| None)?;
+            let batch = self
+                .data
+                .batch(chunk, &config.model, |_| SampleDraw::default())?;
             let (terms, head) = batch_losses(&model, &model, &batch, config, device, device);
             sums.add(&batch, &head, p, float_values(terms.total)[0]);
         }
