@@ -70,6 +70,14 @@ fn step_lines(out: &Path) -> Vec<StepMetrics> {
         .collect()
 }
 
+/// Why a fresh run of `config` on `data` into `out` failed.
+fn train_error(config: TrainConfig, data: &Path, out: &Path) -> TrainError {
+    let set = open(data, &config);
+    train(config, options(data, out), set)
+        .err()
+        .expect("the run fails")
+}
+
 #[test]
 fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
     let data = fixture("falls");
@@ -194,13 +202,7 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
     let mut other = config.clone();
     other.model.tokens.num_tokens += 1;
     other.init = Some(trained);
-    let error = train(
-        other,
-        options(&data, &scratch("init-other")),
-        open(&data, &config),
-    )
-    .err()
-    .unwrap();
+    let error = train_error(other, &data, &scratch("init-other"));
     assert!(
         matches!(error, TrainError::Config(_)) && error.to_string().contains("tokens.num_tokens"),
         "{error}"
@@ -209,13 +211,7 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
         init: Some(first.join("no-such.safetensors")),
         ..config.clone()
     };
-    let error = train(
-        missing,
-        options(&data, &scratch("init-missing")),
-        open(&data, &config),
-    )
-    .err()
-    .unwrap();
+    let error = train_error(missing, &data, &scratch("init-missing"));
     assert!(error.to_string().contains("no-such.safetensors"), "{error}");
 }
 
@@ -353,9 +349,7 @@ fn bad_datasets_and_run_folders_are_named() {
     let out = scratch("holes-run");
     let mut long = config.clone();
     long.steps = 40;
-    let error = train(long.clone(), options(&holes, &out), open(&holes, &long))
-        .err()
-        .unwrap();
+    let error = train_error(long, &holes, &out);
     assert!(
         matches!(error, TrainError::Dataset(_)) && error.to_string().contains("000004.png"),
         "{error}"
@@ -377,13 +371,7 @@ fn bad_datasets_and_run_folders_are_named() {
 
     let mut bad = config.clone();
     bad.batch_size = 0;
-    let error = train(
-        bad,
-        options(&holes, &scratch("bad-config")),
-        open(&holes, &config),
-    )
-    .err()
-    .unwrap();
+    let error = train_error(bad, &holes, &scratch("bad-config"));
     assert!(error.to_string().contains("batch_size"), "{error}");
 }
 
