@@ -1,6 +1,7 @@
 //! `ssr-agent`: serve the SSR network over gRPC, train it, benchmark it, show model configs, inspect
 //! checkpoints.
 
+mod allocator;
 mod bench;
 mod bench_serve;
 mod serve_args;
@@ -10,11 +11,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-
-/// Large tensors are allocated and freed every forward pass; glibc would unmap and page-fault
-/// them each time (see the workspace Cargo.toml).
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use ssr_agent::checkpoint;
 use ssr_agent::device::Backend;
@@ -74,6 +70,7 @@ fn init_logs(format: LogFormat) {
 }
 
 fn main() -> ExitCode {
+    allocator::keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Serve(args) => serve(&args),
