@@ -18,6 +18,7 @@ use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
 use super::init::{constant_linear, xavier_linear};
+use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
 
 /// Layer norm over the last dimension without learned scale or shift.
@@ -84,11 +85,11 @@ impl TokenFuser {
 
     /// `tokens` `[B, S, C]`, `bev` `[B, Q, C]` to `[B, Q, C]`.
     fn forward(&self, tokens: Tensor<3>, bev: Tensor<3>) -> Tensor<3> {
-        let slots = self.norm_slots.forward(
-            self.expand
-                .forward(self.norm_tokens.forward(tokens.swap_dims(1, 2))),
-        );
-        let bev = self.norm_bev.forward(bev.swap_dims(1, 2)).swap_dims(1, 2);
+        let tokens = single_group_norm(&self.norm_tokens, tokens);
+        let slots = self
+            .norm_slots
+            .forward(self.expand.forward(tokens.swap_dims(1, 2)));
+        let bev = single_group_norm(&self.norm_bev, bev);
         let mix = sigmoid(self.mix_out.forward(gelu(self.mix_in.forward(bev))));
         mix.matmul(slots.swap_dims(1, 2))
     }

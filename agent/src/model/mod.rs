@@ -11,6 +11,7 @@ pub mod bev;
 pub mod config;
 pub mod ffp;
 mod init;
+mod norm;
 pub mod sampling;
 pub mod stl;
 pub mod tcp_head;

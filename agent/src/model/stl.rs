@@ -14,6 +14,7 @@ use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
 use super::init::xavier_linear;
+use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
 
 /// RoadOption classes after mapping VOID to LANEFOLLOW (one-hot index = value - 1).
@@ -64,7 +65,7 @@ impl TokenLearner {
 
     /// `x` `[B, Q, D]` to tokens `[B, S, D]` and attention `[B, S, Q]` (each row sums to 1).
     pub fn forward(&self, x: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
-        let normalised = self.norm.forward(x.clone().swap_dims(1, 2)).swap_dims(1, 2);
+        let normalised = single_group_norm(&self.norm, x.clone());
         let logits = self.fc_out.forward(gelu(self.fc_in.forward(normalised)));
         let attention = softmax(logits.swap_dims(1, 2), 2);
         (attention.clone().matmul(x), attention)
