@@ -1,4 +1,3 @@
-# syntax=docker/dockerfile:1
 # sim-bridge: the kinematic simulator, leaderboard-style scorer, load generator and replay.
 # Build from the repository root:
 #   docker build -f docker/sim-bridge.Dockerfile -t ssrdrive/sim-bridge .
@@ -10,7 +9,8 @@ WORKDIR /src
 COPY . .
 RUN --mount=type=cache,target=/usr/local/cargo/registry \
     --mount=type=cache,target=/src/target \
-    cargo build --release -p sim-bridge && cp target/release/sim-bridge /usr/local/bin/
+    cargo build --release -p sim-bridge \
+    && strip -o /usr/local/bin/sim-bridge target/release/sim-bridge
 
 FROM debian:bookworm-slim
 COPY --from=build /usr/local/bin/sim-bridge /usr/local/bin/sim-bridge
