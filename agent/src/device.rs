@@ -4,7 +4,18 @@
 use burn::tensor::Device;
 
 /// Which backend to run on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Backend {
     /// Burn's Flex CPU backend (SIMD, all cores through rayon).
     #[default]

@@ -13,7 +13,6 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 use ssr_agent::checkpoint;
-use ssr_agent::device::Backend;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::serve::{self, LogFormat};
 
@@ -91,7 +90,7 @@ fn main() -> ExitCode {
 fn serve(args: &serve_args::ServeArgs) -> anyhow::Result<()> {
     let config = args.resolve()?;
     init_logs(config.log_format);
-    let device = Backend::Cpu.device()?;
+    let device = config.backend.device()?;
     let (policy, info) = serve::load_policy(&config, &device)?;
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()

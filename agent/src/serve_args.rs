@@ -5,6 +5,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::Args;
+use ssr_agent::device::Backend;
 use ssr_agent::serve::{LogFormat, ServeConfig};
 
 #[derive(Debug, Args)]
@@ -62,6 +63,10 @@ pub struct ServeArgs {
     /// Log format [default: human].
     #[arg(long, env = "SSR_AGENT_LOG_FORMAT")]
     log_format: Option<LogFormat>,
+    /// Where the network runs [default: cpu]; `wgpu` needs a build with `--features wgpu`
+    /// and a Vulkan, Metal or DX12 adapter.
+    #[arg(long, env = "SSR_AGENT_BACKEND")]
+    backend: Option<Backend>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -117,6 +122,7 @@ impl ServeArgs {
         set(&mut config.drain_grace_s, &self.drain_grace_s);
         set(&mut config.drain_timeout_s, &self.drain_timeout_s);
         set(&mut config.log_format, &self.log_format);
+        set(&mut config.backend, &self.backend);
         config.validate()?;
         Ok(config)
     }

@@ -112,6 +112,15 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
     assert!(stderr.contains("/no/such/file.toml"), "{stderr}");
     let stderr = serve(&[("SSR_AGENT_METRICS_LISTEN", "nowhere")], &[]);
     assert!(stderr.contains("expected HOST:PORT or `off`"), "{stderr}");
+    let stderr = serve(&[("SSR_AGENT_BACKEND", "tpu")], &[]);
+    assert!(stderr.contains("[possible values: cpu, wgpu]"), "{stderr}");
+    if cfg!(not(feature = "wgpu")) {
+        let stderr = serve(&[], &["--backend", "wgpu"]);
+        assert!(
+            stderr.contains("rebuild with `--features wgpu`"),
+            "{stderr}"
+        );
+    }
 }
 
 #[test]

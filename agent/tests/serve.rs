@@ -6,6 +6,7 @@ mod common;
 use std::time::{Duration, Instant};
 
 use ssr_agent::camera::{CameraSpec, Rig};
+use ssr_agent::device::Backend;
 use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::ServeConfig;
 use ssr_agent::serve::config::ServeConfigError;
@@ -68,10 +69,11 @@ fn write_temp(name: &str, text: &str) -> std::path::PathBuf {
 fn config_files_override_defaults_and_bad_values_are_named() {
     let path = write_temp(
         "ok.toml",
-        "max_batch = 4\nidle_timeout_s = 5.0\nlog_format = \"json\"\n",
+        "max_batch = 4\nidle_timeout_s = 5.0\nlog_format = \"json\"\nbackend = \"wgpu\"\n",
     );
     let config = ServeConfig::from_file(&path).unwrap();
     assert_eq!(config.max_batch, 4);
+    assert_eq!(config.backend, Backend::Wgpu);
     assert_eq!(config.idle_timeout_s, 5.0);
     assert_eq!(config.max_episodes, ServeConfig::default().max_episodes);
     config.validate().unwrap();

@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use crate::device::Backend;
+
 /// Largest config file read, bytes.
 const MAX_CONFIG_BYTES: u64 = 1 << 20;
 
@@ -59,6 +61,9 @@ pub struct ServeConfig {
     pub drain_timeout_s: f64,
     /// Log format.
     pub log_format: LogFormat,
+    /// Where the network runs: the CPU, or a GPU through wgpu (a build with the `wgpu`
+    /// feature).
+    pub backend: Backend,
 }
 
 impl Default for ServeConfig {
@@ -80,6 +85,7 @@ impl Default for ServeConfig {
             drain_grace_s: 0.0,
             drain_timeout_s: 30.0,
             log_format: LogFormat::Human,
+            backend: Backend::Cpu,
         }
     }
 }
