@@ -73,9 +73,7 @@ fn step_lines(out: &Path) -> Vec<StepMetrics> {
 /// Why a fresh run of `config` on `data` into `out` failed.
 fn train_error(config: TrainConfig, data: &Path, out: &Path) -> TrainError {
     let set = open(data, &config);
-    train(config, options(data, out), set)
-        .err()
-        .expect("the run fails")
+    train(config, options(data, out), set).expect_err("the run fails")
 }
 
 #[test]
