@@ -3,8 +3,8 @@
 //! Every forward pass and training step allocates and frees the same large tensors. glibc
 //! unmaps each freed block over 32 MB and page-faults it back in on the next pass (a batch-8
 //! forward pass ran 2x slower). mimalloc reuses freed blocks, but by default still hands idle
-//! pages back to the OS after a delay: `ssr-agent bench --train` (six batch-8 training steps)
-//! took 41,500 page faults, and the kernel zeroing fresh pages was 28 % of a step. With purging
+//! pages back to the OS after a delay: `ssr-agent bench --config cpu-default --train
+//! --iterations 5` (eight batch-8 training steps) took 41,500 page faults, and the kernel zeroing fresh pages was 28 % of a step. With purging
 //! off it takes 830, all while the first step grows the heap; the resident size stays at the
 //! process's high-water mark instead (a few hundred MiB when serving).
 
