@@ -4,13 +4,16 @@
 mod common;
 
 use burn::module::Module;
+use burn::nn::PaddingConfig2d;
+use burn::nn::pool::MaxPool2dConfig;
 use burn::tensor::ops::GridSampleOptions;
 use burn::tensor::{Device, Distribution, Tensor};
 
 use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::model::bev::align_previous_bev;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::sampling::bilinear_sample;
+use ssr_agent::model::cpu_kernels;
+use ssr_agent::model::sampling::{bilinear_sample, deformable_aggregate};
 use ssr_agent::model::stl::NavigationGate;
 use ssr_agent::model::{SsrModel, float_tensor, float_values};
 use ssr_agent::pose::{EgoMotion, Pose2};
@@ -198,30 +201,99 @@ fn command_and_target_point_change_the_gate() {
     assert!(max_abs_diff(base, other_target) > 1e-3);
 }
 
+/// Both sampler implementations (the fused CPU loop in inference, tensor ops under autodiff)
+/// against `grid_sample_2d`.
 #[test]
 fn sampler_matches_grid_sample() {
+    for device in [Device::flex(), Device::flex().autodiff()] {
+        assert_eq!(cpu_kernels::apply(&device), !device.is_autodiff());
+        let (n, c, h, w, l) = (3, 5, 6, 9, 40);
+        let maps = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
+        // Inside, on the border, and outside the map.
+        let locations = Tensor::<3>::random([n, l, 2], Distribution::Uniform(-0.3, 1.3), &device);
+        let reference = maps
+            .clone()
+            .grid_sample_2d(
+                locations
+                    .clone()
+                    .mul_scalar(2.0)
+                    .sub_scalar(1.0)
+                    .reshape([n, l, 1, 2]),
+                GridSampleOptions::default(),
+            )
+            .reshape([n, c, l])
+            .swap_dims(1, 2);
+        let values = maps.reshape([n, c, h * w]).swap_dims(1, 2);
+        let ours = bilinear_sample(values, h, w, locations);
+        let diff = max_abs_diff(float_values(ours), float_values(reference));
+        assert!(
+            diff < 1e-5,
+            "bilinear_sample on {device:?} differs from grid_sample_2d by {diff}"
+        );
+    }
+}
+
+/// The fused CPU aggregation equals the tensor-op form for weighted multi-point sums,
+/// including points outside the map and a non-contiguous value tensor.
+#[test]
+fn fused_aggregation_matches_tensor_ops() {
+    let (n, hw_c, h, w, q, p) = (2, 8, 5, 7, 30, 6);
     let device = Device::flex();
-    let (n, c, h, w, l) = (3, 5, 6, 9, 40);
-    let maps = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
-    // Inside, on the border, and outside the map.
-    let locations = Tensor::<3>::random([n, l, 2], Distribution::Uniform(-0.3, 1.3), &device);
-    let reference = maps
-        .clone()
-        .grid_sample_2d(
-            locations
-                .clone()
-                .mul_scalar(2.0)
-                .sub_scalar(1.0)
-                .reshape([n, l, 1, 2]),
-            GridSampleOptions::default(),
-        )
-        .reshape([n, c, l])
+    let values = Tensor::<3>::random([n, hw_c, h * w], Distribution::Normal(0.0, 1.0), &device)
         .swap_dims(1, 2);
-    let values = maps.reshape([n, c, h * w]).swap_dims(1, 2);
-    let ours = bilinear_sample(values, h, w, locations);
-    let diff = max_abs_diff(float_values(ours), float_values(reference));
+    let locations = Tensor::<4>::random([n, q, p, 2], Distribution::Uniform(-0.5, 1.5), &device);
+    let weights = Tensor::<3>::random([n, q, p], Distribution::Uniform(-1.0, 1.0), &device);
+    let fused = deformable_aggregate(values.clone(), h, w, locations.clone(), weights.clone());
+    let autodiff = device.autodiff();
+    let reference = deformable_aggregate(
+        values.to_device(&autodiff),
+        h,
+        w,
+        locations.to_device(&autodiff),
+        weights.to_device(&autodiff),
+    );
+    assert_eq!(fused.dims(), [n, q, hw_c]);
+    let diff = max_abs_diff(float_values(fused), float_values(reference));
     assert!(
         diff < 1e-5,
-        "bilinear_sample differs from grid_sample_2d by {diff}"
+        "fused and tensor-op aggregation differ by {diff}"
+    );
+}
+
+/// The fused max pool equals Burn's for the stem's window and others, on even and odd sizes,
+/// and lets NaN win as Burn's does.
+#[test]
+fn fused_max_pool_matches_burn() {
+    let device = Device::flex();
+    for (kernel, stride, padding) in [(3, 2, 1), (2, 2, 0), (3, 1, 1)] {
+        for [h, w] in [[48, 160], [7, 9], [1, 2]] {
+            if h + 2 * padding < kernel || w + 2 * padding < kernel {
+                continue;
+            }
+            let x = Tensor::<4>::random([2, 3, h, w], Distribution::Normal(0.0, 1.0), &device);
+            let expected = MaxPool2dConfig::new([kernel, kernel])
+                .with_strides([stride, stride])
+                .with_padding(PaddingConfig2d::Explicit(
+                    padding, padding, padding, padding,
+                ))
+                .init()
+                .forward(x.clone());
+            let actual = cpu_kernels::max_pool2d(x, kernel, stride, padding);
+            assert_eq!(
+                actual.dims(),
+                expected.dims(),
+                "{kernel}/{stride}/{padding} {h}x{w}"
+            );
+            assert_eq!(float_values(actual), float_values(expected));
+        }
+    }
+    let mut values = vec![0.0f32; 16];
+    values[5] = f32::NAN;
+    let x = float_tensor(values, [1, 1, 4, 4], &device);
+    let pooled = float_values(cpu_kernels::max_pool2d(x, 3, 2, 1));
+    assert_eq!(
+        pooled.iter().filter(|v| v.is_nan()).count(),
+        4,
+        "{pooled:?}"
     );
 }

@@ -14,6 +14,7 @@ use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
+use super::cpu_kernels;
 
 /// ImageNet mean and standard deviation of RGB in [0, 1].
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
@@ -164,6 +165,9 @@ pub struct Backbone {
 }
 
 impl Backbone {
+    /// The stem pool's padding (ResNet's 3x3 stride-2 pool).
+    const POOL_PADDING: usize = 1;
+
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let b = &config.backbone;
         let mut blocks = Vec::new();
@@ -184,7 +188,12 @@ impl Backbone {
             stem: Stem::new(b.stem_width, device),
             pool: MaxPool2dConfig::new([3, 3])
                 .with_strides([2, 2])
-                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                .with_padding(PaddingConfig2d::Explicit(
+                    Self::POOL_PADDING,
+                    Self::POOL_PADDING,
+                    Self::POOL_PADDING,
+                    Self::POOL_PADDING,
+                ))
                 .init(),
             blocks,
             lateral: Conv2dConfig::new([cin, c], [1, 1]).init(device),
@@ -196,7 +205,13 @@ impl Backbone {
 
     /// `[N, 3, H, W]` normalised images to `[N, C, h, w]` features.
     pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
-        let mut x = self.pool.forward(relu(self.stem.forward(images)));
+        let x = relu(self.stem.forward(images));
+        let mut x = if cpu_kernels::apply(&x.device()) {
+            let [kernel, _] = self.pool.kernel_size;
+            cpu_kernels::max_pool2d(x, kernel, self.pool.stride[0], Self::POOL_PADDING)
+        } else {
+            self.pool.forward(x)
+        };
         for block in &self.blocks {
             x = block.forward(x);
         }

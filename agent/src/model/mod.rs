@@ -9,6 +9,7 @@
 pub mod backbone;
 pub mod bev;
 pub mod config;
+pub mod cpu_kernels;
 pub mod ffp;
 mod init;
 mod norm;

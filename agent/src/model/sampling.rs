@@ -6,13 +6,20 @@
 //! top-left corner of the map, (1, 1) the bottom-right corner, and the centre of cell (i, j)
 //! is ((i + 0.5) / W, (j + 0.5) / H). Outside the map the features are zero.
 //!
-//! All four corners of all points are fetched with one row gather (`select`), whose backward
-//! pass is a cheap scatter-add, rather than with `grid_sample_2d`, which has no autodiff kernel
-//! in Burn and falls back to a slow decomposition in training. A test checks it against
-//! `grid_sample_2d`.
+//! Two implementations, one result:
+//! - Tensor ops (any backend, differentiable): all four corners of all points are fetched with
+//!   one row gather (`select`), whose backward pass is a cheap scatter-add, rather than with
+//!   `grid_sample_2d`, which has no autodiff kernel in Burn and falls back to a slow
+//!   decomposition in training.
+//! - On the CPU backend in inference, a fused loop ([`cpu_kernels::deformable_aggregate`])
+//!   that never materialises the gathered corners.
+//!
+//! Tests check both against `grid_sample_2d` and against each other.
 
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Int, Tensor};
+
+use super::cpu_kernels;
 
 /// Deformable aggregation: samples `values` (`[N, H*W, C]`, rows in row-major (y, x) order) at
 /// `locations` (`[N, Q, P, 2]`, normalised (x, y)) and sums the P samples of each query with
@@ -32,6 +39,9 @@ pub fn deformable_aggregate(
         "values hold {hw} rows for a {height}x{width} map"
     );
     let device = values.device();
+    if cpu_kernels::apply(&device) {
+        return cpu_kernels::deformable_aggregate(values, height, width, locations, weights);
+    }
     let l = q * p;
     // A zero border (1 before, 2 after) lets every corner of a clamped point be gathered
     // without masks: points are clamped to [-1, size], whose corners fall in [-1, size + 1].

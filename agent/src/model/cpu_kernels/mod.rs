@@ -1,0 +1,67 @@
+//! Fused CPU kernels for inference, where Burn's CPU backend (Flex) is slowest.
+//!
+//! Each kernel computes exactly what the tensor-op form it replaces computes, as one pass over
+//! the data in plain Rust (parallel through rayon, on the same global pool as Flex). They run
+//! only when [`apply`] holds: on the Flex device without autodiff. Training keeps the tensor-op
+//! forms, whose gradients Burn derives; a GPU keeps its data on the device. Tests check every
+//! kernel against its tensor-op form.
+
+mod deformable;
+mod max_pool;
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+/// Whether the fused kernels serve this device: Flex, in inference.
+pub fn apply(device: &Device) -> bool {
+    !device.is_autodiff() && *device == Device::flex()
+}
+
+fn floats<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    tensor
+        .into_data()
+        .try_into_vec::<f32>()
+        .expect("the model's tensors are float32")
+}
+
+/// [`crate::model::sampling::deformable_aggregate`]: `values` `[N, H*W, C]`, `locations`
+/// `[N, Q, P, 2]`, `weights` `[N, Q, P]`, to `[N, Q, C]`.
+pub fn deformable_aggregate(
+    values: Tensor<3>,
+    height: usize,
+    width: usize,
+    locations: Tensor<4>,
+    weights: Tensor<3>,
+) -> Tensor<3> {
+    let [n, _, channels] = values.dims();
+    let [_, queries, points, _] = locations.dims();
+    let device = values.device();
+    let output = deformable::aggregate(
+        &floats(values),
+        &floats(locations),
+        &floats(weights),
+        deformable::Shape {
+            n,
+            height,
+            width,
+            channels,
+            queries,
+            points,
+        },
+    );
+    Tensor::from_data(TensorData::new(output, [n, queries, channels]), &device)
+}
+
+/// Max pooling of `[N, C, H, W]` with a square window, a stride and symmetric padding (padded
+/// cells never win: they count as -inf), as Burn's `max_pool2d` in floor mode.
+pub fn max_pool2d(x: Tensor<4>, kernel: usize, stride: usize, padding: usize) -> Tensor<4> {
+    let [n, c, height, width] = x.dims();
+    let device = x.device();
+    let window = max_pool::Window {
+        kernel,
+        stride,
+        padding,
+    };
+    let (out_h, out_w) = (window.output_len(height), window.output_len(width));
+    let output = max_pool::max_pool2d(&floats(x), n * c, height, width, window);
+    Tensor::from_data(TensorData::new(output, [n, c, out_h, out_w]), &device)
+}
