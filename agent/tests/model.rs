@@ -6,7 +6,7 @@ mod common;
 use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::pool::MaxPool2dConfig;
-use burn::tensor::ops::GridSampleOptions;
+use burn::tensor::ops::{ConvOptions, GridSampleOptions};
 use burn::tensor::{Device, Distribution, Tensor};
 
 use common::{max_abs_diff, model_input, tiny_config};
@@ -296,4 +296,45 @@ fn fused_max_pool_matches_burn() {
         4,
         "{pooled:?}"
     );
+}
+
+/// The fused convolution equals Burn's for the backbone's geometries and a few more: every
+/// kernel, stride and padding it meets, with and without bias, batch 1 and 3, odd sizes.
+#[test]
+fn fused_convolution_matches_burn() {
+    let device = Device::flex();
+    // (cin, cout, kernel, stride, padding, height, width)
+    let cases = [
+        (3, 8, 3, 1, 1, 9, 13),
+        (4, 6, 3, 2, 1, 9, 13),
+        (5, 7, 1, 2, 0, 8, 11),
+        (6, 5, 1, 1, 0, 7, 7),
+        (3, 4, 7, 2, 3, 15, 21),
+        (2, 3, 4, 1, 0, 6, 5),
+    ];
+    for (cin, cout, kernel, stride, padding, h, w) in cases {
+        for (batch, bias) in [(1, false), (3, true)] {
+            let x =
+                Tensor::<4>::random([batch, cin, h, w], Distribution::Normal(0.0, 1.0), &device);
+            let weight = Tensor::<4>::random(
+                [cout, cin, kernel, kernel],
+                Distribution::Normal(0.0, 0.3),
+                &device,
+            );
+            let bias =
+                bias.then(|| Tensor::<1>::random([cout], Distribution::Normal(0.0, 1.0), &device));
+            let expected = burn::tensor::module::conv2d(
+                x.clone(),
+                weight.clone(),
+                bias.clone(),
+                ConvOptions::new([stride, stride], [padding, padding], [1, 1], 1),
+            );
+            let actual = cpu_kernels::conv2d(x, weight, bias, [stride, stride], [padding, padding]);
+            let case =
+                format!("{cin}->{cout} k{kernel} s{stride} p{padding} {h}x{w} batch {batch}");
+            assert_eq!(actual.dims(), expected.dims(), "{case}");
+            let diff = max_abs_diff(float_values(actual), float_values(expected));
+            assert!(diff < 1e-4, "{case}: differs from Burn's conv2d by {diff}");
+        }
+    }
 }

@@ -45,7 +45,7 @@ impl ConvBn {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        self.bn.forward(self.conv.forward(x))
+        self.bn.forward(cpu_kernels::conv2d_layer(&self.conv, x))
     }
 }
 
@@ -82,7 +82,7 @@ impl Stem {
         let y = if self.conv.weight.dims()[0] <= Self::DIRECT_MAX_WIDTH {
             self.space_to_depth_conv(images)
         } else {
-            self.conv.forward(images)
+            cpu_kernels::conv2d_layer(&self.conv, images)
         };
         self.bn.forward(y)
     }
@@ -115,12 +115,16 @@ impl Stem {
             .reshape([cout, c, taps, s, taps, s])
             .permute([0, 1, 3, 5, 2, 4])
             .reshape([cout, c * s * s, taps, taps]);
-        let y = conv2d(
-            phases,
-            weight,
-            None,
-            ConvOptions::new([1, 1], [0, 0], [1, 1], 1),
-        );
+        let y = if cpu_kernels::apply(&phases.device()) {
+            cpu_kernels::conv2d(phases, weight, None, [1, 1], [0, 0])
+        } else {
+            conv2d(
+                phases,
+                weight,
+                None,
+                ConvOptions::new([1, 1], [0, 0], [1, 1], 1),
+            )
+        };
         y.slice([0..n, 0..cout, 0..out_h, 0..out_w])
     }
 }
@@ -215,7 +219,8 @@ impl Backbone {
         for block in &self.blocks {
             x = block.forward(x);
         }
-        self.smooth.forward(self.lateral.forward(x))
+        let lateral = cpu_kernels::conv2d_layer(&self.lateral, x);
+        cpu_kernels::conv2d_layer(&self.smooth, lateral)
     }
 }
 

@@ -6,9 +6,12 @@
 //! forms, whose gradients Burn derives; a GPU keeps its data on the device. Tests check every
 //! kernel against its tensor-op form.
 
+mod conv;
 mod deformable;
 mod max_pool;
 
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
 use burn::tensor::{Device, Tensor, TensorData};
 
 /// Whether the fused kernels serve this device: Flex, in inference.
@@ -64,4 +67,63 @@ pub fn max_pool2d(x: Tensor<4>, kernel: usize, stride: usize, padding: usize) ->
     let (out_h, out_w) = (window.output_len(height), window.output_len(width));
     let output = max_pool::max_pool2d(&floats(x), n * c, height, width, window);
     Tensor::from_data(TensorData::new(output, [n, c, out_h, out_w]), &device)
+}
+
+/// `layer.forward(x)`, through [`conv2d`] where the kernels apply and the layer is a plain one
+/// (one group, no dilation, symmetric explicit or no padding).
+pub fn conv2d_layer(layer: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let padding = match layer.padding {
+        PaddingConfig2d::Valid => Some([0, 0]),
+        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => {
+            Some([top, left])
+        }
+        _ => None,
+    };
+    match padding {
+        Some(padding) if apply(&x.device()) && layer.groups == 1 && layer.dilation == [1, 1] => {
+            conv2d(
+                x,
+                layer.weight.val(),
+                layer.bias.as_ref().map(|bias| bias.val()),
+                layer.stride,
+                padding,
+            )
+        }
+        _ => layer.forward(x),
+    }
+}
+
+/// Convolution of `x` `[N, Cin, H, W]` by `weight` `[Cout, Cin, kh, kw]` plus `bias` `[Cout]`,
+/// one group, no dilation, symmetric zero `padding` (`[rows, columns]`), as Burn's `conv2d`.
+pub fn conv2d(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    stride: [usize; 2],
+    padding: [usize; 2],
+) -> Tensor<4> {
+    let [batch, channels_in, height, width] = x.dims();
+    let [channels_out, weight_in, kh, kw] = weight.dims();
+    assert_eq!(weight_in, channels_in, "weight input channels");
+    let device = x.device();
+    let geometry = conv::Geometry {
+        batch,
+        channels_in,
+        channels_out,
+        input: [height, width],
+        kernel: [kh, kw],
+        stride,
+        padding,
+    };
+    let [out_h, out_w] = geometry.output();
+    let output = conv::conv2d(
+        &floats(x),
+        &floats(weight),
+        bias.map(floats).as_deref(),
+        geometry,
+    );
+    Tensor::from_data(
+        TensorData::new(output, [batch, channels_out, out_h, out_w]),
+        &device,
+    )
 }
