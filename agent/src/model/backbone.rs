@@ -169,9 +169,6 @@ pub struct Backbone {
 }
 
 impl Backbone {
-    /// The stem pool's padding (ResNet's 3x3 stride-2 pool).
-    const POOL_PADDING: usize = 1;
-
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let b = &config.backbone;
         let mut blocks = Vec::new();
@@ -192,12 +189,7 @@ impl Backbone {
             stem: Stem::new(b.stem_width, device),
             pool: MaxPool2dConfig::new([3, 3])
                 .with_strides([2, 2])
-                .with_padding(PaddingConfig2d::Explicit(
-                    Self::POOL_PADDING,
-                    Self::POOL_PADDING,
-                    Self::POOL_PADDING,
-                    Self::POOL_PADDING,
-                ))
+                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
                 .init(),
             blocks,
             lateral: Conv2dConfig::new([cin, c], [1, 1]).init(device),
@@ -209,13 +201,7 @@ impl Backbone {
 
     /// `[N, 3, H, W]` normalised images to `[N, C, h, w]` features.
     pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
-        let x = relu(self.stem.forward(images));
-        let mut x = if cpu_kernels::apply(&x.device()) {
-            let [kernel, _] = self.pool.kernel_size;
-            cpu_kernels::max_pool2d(x, kernel, self.pool.stride[0], Self::POOL_PADDING)
-        } else {
-            self.pool.forward(x)
-        };
+        let mut x = cpu_kernels::max_pool2d_layer(&self.pool, relu(self.stem.forward(images)));
         for block in &self.blocks {
             x = block.forward(x);
         }

@@ -12,6 +12,7 @@ mod max_pool;
 
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::Conv2d;
+use burn::nn::pool::MaxPool2d;
 use burn::tensor::{Device, Tensor, TensorData};
 
 /// Whether the fused kernels serve this device: Flex, in inference.
@@ -52,6 +53,27 @@ pub fn deformable_aggregate(
         },
     );
     Tensor::from_data(TensorData::new(output, [n, queries, channels]), &device)
+}
+
+/// `layer.forward(x)`, through [`max_pool2d`] where the kernels apply and the layer is a plain
+/// one (square window and stride, symmetric padding, no dilation, floor mode).
+pub fn max_pool2d_layer(layer: &MaxPool2d, x: Tensor<4>) -> Tensor<4> {
+    let [kernel, kernel_w] = layer.kernel_size;
+    let [stride, stride_w] = layer.stride;
+    match layer.padding {
+        PaddingConfig2d::Explicit(top, left, bottom, right)
+            if apply(&x.device())
+                && kernel == kernel_w
+                && stride == stride_w
+                && [left, bottom, right] == [top; 3]
+                && top < kernel
+                && layer.dilation == [1, 1]
+                && !layer.ceil_mode =>
+        {
+            max_pool2d(x, kernel, stride, top)
+        }
+        _ => layer.forward(x),
+    }
 }
 
 /// Max pooling of `[N, C, H, W]` with a square window, a stride and symmetric padding (padded
