@@ -21,7 +21,19 @@ pub struct Shape {
     pub points: usize,
 }
 
-/// Queries per parallel task: enough work (16 to 32 corner rows each) to dwarf the scheduling.
+impl Shape {
+    /// Floats in one map of `values`.
+    fn map_len(&self) -> usize {
+        self.height * self.width * self.channels
+    }
+
+    /// Points over all queries of all maps.
+    fn total_points(&self) -> usize {
+        self.n * self.queries * self.points
+    }
+}
+
+/// Queries per parallel task: enough corner rows (4 per point) to dwarf the scheduling.
 const QUERIES_PER_TASK: usize = 64;
 
 /// `[n, queries, channels]`: per query, the sum over its points of the weight times the
@@ -29,28 +41,21 @@ const QUERIES_PER_TASK: usize = 64;
 ///
 /// Panics if a slice's length does not match `shape` (the caller checks the tensor shapes).
 pub fn aggregate(values: &[f32], locations: &[f32], weights: &[f32], shape: Shape) -> Vec<f32> {
-    let Shape {
-        n,
-        height,
-        width,
-        channels,
-        queries,
-        points,
-    } = shape;
-    assert_eq!(values.len(), n * height * width * channels, "values length");
+    assert_eq!(values.len(), shape.n * shape.map_len(), "values length");
     assert_eq!(
         locations.len(),
-        n * queries * points * 2,
+        2 * shape.total_points(),
         "locations length"
     );
-    assert_eq!(weights.len(), n * queries * points, "weights length");
+    assert_eq!(weights.len(), shape.total_points(), "weights length");
+    let channels = shape.channels;
     let inputs = Inputs {
         values,
         locations,
         weights,
         shape,
     };
-    let mut output = vec![0f32; n * queries * channels];
+    let mut output = vec![0f32; shape.n * shape.queries * channels];
     output
         .par_chunks_mut(channels * QUERIES_PER_TASK)
         .enumerate()
@@ -84,6 +89,7 @@ fn accumulate_avx2(out: &mut [f32], first_query: usize, inputs: &Inputs) {
 
 #[inline(always)]
 fn accumulate_rows(out: &mut [f32], first_query: usize, inputs: &Inputs) {
+    let shape = inputs.shape;
     let Shape {
         height,
         width,
@@ -91,8 +97,8 @@ fn accumulate_rows(out: &mut [f32], first_query: usize, inputs: &Inputs) {
         queries,
         points,
         ..
-    } = inputs.shape;
-    let map_len = height * width * channels;
+    } = shape;
+    let map_len = shape.map_len();
     for (query, out) in (first_query..).zip(out.chunks_exact_mut(channels)) {
         let map = &inputs.values[query / queries * map_len..][..map_len];
         for point in query * points..(query + 1) * points {
