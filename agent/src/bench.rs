@@ -251,7 +251,18 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
         &device,
     );
     let weights = LossWeights::default();
-    let step = time_ms(args.warmup.min(2), args.iterations.min(5), || {
+    // Each phase ends with its device work done, so the phases add up to the step.
+    let mut phases: [Vec<f64>; 3] = Default::default();
+    let warmup = args.warmup.min(2);
+    for run in 0..warmup + args.iterations.clamp(1, 5) {
+        let mut lap = Instant::now();
+        let mut record = |phase: usize| {
+            sync(&device);
+            if run >= warmup {
+                phases[phase].push(lap.elapsed().as_secs_f64() * 1e3);
+            }
+            lap = Instant::now();
+        };
         let output = model.forward(&input);
         let predicted = model.predict_future_bev(&output);
         let loss = losses(
@@ -260,14 +271,25 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
             Some((predicted, future.clone())),
             &weights,
         );
+        record(0);
         let grads = GradientsParams::from_grads(loss.total.backward(), &model);
+        record(1);
         model = optimizer.step(1e-4, model.clone(), grads);
-        sync(&device);
-    });
+        record(2);
+    }
+    let steps: Vec<f64> = (0..phases[0].len())
+        .map(|k| phases[0][k] + phases[1][k] + phases[2][k])
+        .collect();
+    let [forward, backward, optimizer] = phases.map(median);
     Report {
         config: config.name.clone(),
         batch,
-        rows: vec![("train_step_ms", step)],
+        rows: vec![
+            ("train_step_ms", median(steps)),
+            ("train_forward_loss_ms", forward),
+            ("train_backward_ms", backward),
+            ("train_optimizer_ms", optimizer),
+        ],
     }
 }
 

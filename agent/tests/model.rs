@@ -13,7 +13,9 @@ use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::model::bev::align_previous_bev;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::cpu_kernels;
-use ssr_agent::model::sampling::{bilinear_sample, deformable_aggregate};
+use ssr_agent::model::sampling::{
+    bilinear_sample, deformable_aggregate, deformable_aggregate_by_tensor_ops,
+};
 use ssr_agent::model::stl::NavigationGate;
 use ssr_agent::model::{SsrModel, float_tensor, float_values};
 use ssr_agent::pose::{EgoMotion, Pose2};
@@ -234,30 +236,76 @@ fn sampler_matches_grid_sample() {
 }
 
 /// The fused CPU aggregation equals the tensor-op form for weighted multi-point sums,
-/// including points outside the map and a non-contiguous value tensor.
+/// including points outside the map and a non-contiguous value tensor, in inference and in
+/// training, where its gradients with respect to values, locations and weights match too.
 #[test]
 fn fused_aggregation_matches_tensor_ops() {
     let (n, hw_c, h, w, q, p) = (2, 8, 5, 7, 30, 6);
-    let device = Device::flex();
+    let device = Device::flex().autodiff();
     let values = Tensor::<3>::random([n, hw_c, h * w], Distribution::Normal(0.0, 1.0), &device)
-        .swap_dims(1, 2);
-    let locations = Tensor::<4>::random([n, q, p, 2], Distribution::Uniform(-0.5, 1.5), &device);
-    let weights = Tensor::<3>::random([n, q, p], Distribution::Uniform(-1.0, 1.0), &device);
-    let fused = deformable_aggregate(values.clone(), h, w, locations.clone(), weights.clone());
-    let autodiff = device.autodiff();
-    let reference = deformable_aggregate(
-        values.to_device(&autodiff),
+        .swap_dims(1, 2)
+        .require_grad();
+    // Inside, near the border, and far enough outside to be clamped.
+    let locations =
+        Tensor::<4>::random([n, q, p, 2], Distribution::Uniform(-0.5, 1.5), &device).require_grad();
+    let weights =
+        Tensor::<3>::random([n, q, p], Distribution::Uniform(-1.0, 1.0), &device).require_grad();
+    let output_grad = Tensor::<3>::random([n, q, hw_c], Distribution::Normal(0.0, 1.0), &device);
+
+    let inference = deformable_aggregate(
+        values.clone().inner(),
         h,
         w,
-        locations.to_device(&autodiff),
-        weights.to_device(&autodiff),
+        locations.clone().inner(),
+        weights.clone().inner(),
+    );
+    let fused = deformable_aggregate(values.clone(), h, w, locations.clone(), weights.clone());
+    let reference = deformable_aggregate_by_tensor_ops(
+        values.clone(),
+        h,
+        w,
+        locations.clone(),
+        weights.clone(),
     );
     assert_eq!(fused.dims(), [n, q, hw_c]);
-    let diff = max_abs_diff(float_values(fused), float_values(reference));
-    assert!(
-        diff < 1e-5,
-        "fused and tensor-op aggregation differ by {diff}"
+    let expected = float_values(reference.clone());
+    for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
+        let diff = max_abs_diff(float_values(output), expected.clone());
+        assert!(
+            diff < 1e-5,
+            "fused ({path}) and tensor-op aggregation differ by {diff}"
+        );
+    }
+
+    let fused_grads = (fused * output_grad.clone()).sum().backward();
+    let reference_grads = (reference * output_grad).sum().backward();
+    let values_of = |grad: Option<Tensor<3>>| float_values(grad.expect("a gradient"));
+    let gradient_pairs = [
+        (
+            "values",
+            values.grad(&fused_grads),
+            values.grad(&reference_grads),
+        ),
+        (
+            "weights",
+            weights.grad(&fused_grads),
+            weights.grad(&reference_grads),
+        ),
+    ]
+    .map(|(name, fused, reference)| (name, values_of(fused), values_of(reference)));
+    let location_pair = (
+        "locations",
+        float_values(locations.grad(&fused_grads).expect("a gradient")),
+        float_values(locations.grad(&reference_grads).expect("a gradient")),
     );
+    for (name, fused, reference) in gradient_pairs.into_iter().chain([location_pair]) {
+        let scale = reference.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let diff = max_abs_diff(fused, reference);
+        assert!(
+            scale > 0.1 && diff < 1e-4 * scale,
+            "{name} gradients differ by {diff} (largest {scale})"
+        );
+    }
 }
 
 /// The fused max pool equals Burn's for the stem's window and others, on even and odd sizes,

@@ -6,13 +6,12 @@
 //! top-left corner of the map, (1, 1) the bottom-right corner, and the centre of cell (i, j)
 //! is ((i + 0.5) / W, (j + 0.5) / H). Outside the map the features are zero.
 //!
-//! Two implementations, one result:
-//! - Tensor ops (any backend, differentiable): all four corners of all points are fetched with
-//!   one row gather (`select`), whose backward pass is a cheap scatter-add, rather than with
-//!   `grid_sample_2d`, which has no autodiff kernel in Burn and falls back to a slow
-//!   decomposition in training.
-//! - On the CPU backend in inference, a fused loop ([`cpu_kernels::deformable_aggregate`])
-//!   that never materialises the gathered corners.
+//! Two implementations, one result, both differentiable:
+//! - Tensor ops (any backend): all four corners of all points are fetched with one row gather
+//!   (`select`), whose backward pass is a cheap scatter-add, rather than with `grid_sample_2d`,
+//!   which has no autodiff kernel in Burn and falls back to a slow decomposition in training.
+//! - On the CPU backend, a fused loop ([`cpu_kernels::deformable_aggregate`]) that never
+//!   materialises the gathered corners, with a fused backward pass.
 //!
 //! Tests check both against `grid_sample_2d` and against each other.
 
@@ -31,17 +30,30 @@ pub fn deformable_aggregate(
     locations: Tensor<4>,
     weights: Tensor<3>,
 ) -> Tensor<3> {
-    let [n, hw, c] = values.dims();
-    let [_, q, p, _] = locations.dims();
+    let [_, hw, _] = values.dims();
     assert_eq!(
         hw,
         height * width,
         "values hold {hw} rows for a {height}x{width} map"
     );
-    let device = values.device();
-    if cpu_kernels::apply(&device) {
-        return cpu_kernels::deformable_aggregate(values, height, width, locations, weights);
+    if cpu_kernels::apply_differentiable(&values.device()) {
+        cpu_kernels::deformable_aggregate(values, height, width, locations, weights)
+    } else {
+        deformable_aggregate_by_tensor_ops(values, height, width, locations, weights)
     }
+}
+
+/// [`deformable_aggregate`] composed of Burn tensor ops, on any backend.
+pub fn deformable_aggregate_by_tensor_ops(
+    values: Tensor<3>,
+    height: usize,
+    width: usize,
+    locations: Tensor<4>,
+    weights: Tensor<3>,
+) -> Tensor<3> {
+    let [n, _, c] = values.dims();
+    let [_, q, p, _] = locations.dims();
+    let device = values.device();
     let l = q * p;
     // A zero border (1 before, 2 after) lets every corner of a clamped point be gathered
     // without masks: points are clamped to [-1, size], whose corners fall in [-1, size + 1].

@@ -90,42 +90,204 @@ fn accumulate_avx2(out: &mut [f32], first_query: usize, inputs: &Inputs) {
 #[inline(always)]
 fn accumulate_rows(out: &mut [f32], first_query: usize, inputs: &Inputs) {
     let shape = inputs.shape;
-    let Shape {
-        height,
-        width,
-        channels,
-        queries,
-        points,
-        ..
-    } = shape;
+    let (channels, queries, points) = (shape.channels, shape.queries, shape.points);
     let map_len = shape.map_len();
     for (query, out) in (first_query..).zip(out.chunks_exact_mut(channels)) {
         let map = &inputs.values[query / queries * map_len..][..map_len];
         for point in query * points..(query + 1) * points {
-            let x = inputs.locations[2 * point] * width as f32 - 0.5;
-            let y = inputs.locations[2 * point + 1] * height as f32 - 0.5;
-            if !(x.is_finite() && y.is_finite()) {
+            let Some(footprint) = Footprint::new(&inputs.locations[2 * point..], &shape) else {
+                continue;
+            };
+            footprint.for_each_corner(&shape, |cell, wx, wy, _| {
+                let weight = inputs.weights[point] * wx * wy;
+                for (acc, value) in out.iter_mut().zip(&map[cell * channels..][..channels]) {
+                    *acc += weight * value;
+                }
+            });
+        }
+    }
+}
+
+/// Where one point samples its map: the top-left corner cell of its bilinear footprint and its
+/// fractional offset from it, in pixels.
+struct Footprint {
+    x0: isize,
+    y0: isize,
+    fx: f32,
+    fy: f32,
+    /// Whether x (y) lies inside the clamp range, where the sample depends on it.
+    moves_x: bool,
+    moves_y: bool,
+}
+
+impl Footprint {
+    /// `location` starts with the point's normalised (x, y); `None` when either is not finite
+    /// (the point samples zero).
+    #[inline(always)]
+    fn new(location: &[f32], shape: &Shape) -> Option<Self> {
+        let (width, height) = (shape.width as f32, shape.height as f32);
+        let x = location[0] * width - 0.5;
+        let y = location[1] * height - 0.5;
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        // Beyond -1 and the size every corner is outside; within, x + 2 >= 1 truncates to
+        // floor(x) + 2 (baseline x86-64 has no rounding instruction for floor).
+        let (cx, cy) = (x.clamp(-1.0, width), y.clamp(-1.0, height));
+        let (x0, y0) = ((cx + 2.0) as isize - 2, (cy + 2.0) as isize - 2);
+        Some(Self {
+            x0,
+            y0,
+            fx: cx - x0 as f32,
+            fy: cy - y0 as f32,
+            moves_x: (-1.0..=width).contains(&x),
+            moves_y: (-1.0..=height).contains(&y),
+        })
+    }
+
+    /// Calls `f(cell, wx, wy, [dwx/dx, dwy/dy])` for each corner inside the map, where
+    /// `wx * wy` is the corner's bilinear weight.
+    #[inline(always)]
+    fn for_each_corner(&self, shape: &Shape, mut f: impl FnMut(usize, f32, f32, [f32; 2])) {
+        for (row, wy, dy) in [(self.y0, 1.0 - self.fy, -1.0), (self.y0 + 1, self.fy, 1.0)] {
+            if row < 0 || row >= shape.height as isize {
                 continue;
             }
-            // Beyond -1 and the size every corner is outside; within, x + 2 >= 1 truncates to
-            // floor(x) + 2 (baseline x86-64 has no rounding instruction for floor).
-            let (x, y) = (x.clamp(-1.0, width as f32), y.clamp(-1.0, height as f32));
-            let (x0, y0) = ((x + 2.0) as isize - 2, (y + 2.0) as isize - 2);
-            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-            for (row, wy) in [(y0, 1.0 - fy), (y0 + 1, fy)] {
-                if row < 0 || row >= height as isize {
-                    continue;
+            for (column, wx, dx) in [(self.x0, 1.0 - self.fx, -1.0), (self.x0 + 1, self.fx, 1.0)] {
+                if column >= 0 && column < shape.width as isize {
+                    f(
+                        row as usize * shape.width + column as usize,
+                        wx,
+                        wy,
+                        [dx, dy],
+                    );
                 }
-                for (column, wx) in [(x0, 1.0 - fx), (x0 + 1, fx)] {
-                    if column < 0 || column >= width as isize {
-                        continue;
-                    }
-                    let weight = inputs.weights[point] * wy * wx;
-                    let cell = row as usize * width + column as usize;
-                    let features = &map[cell * channels..][..channels];
-                    for (acc, value) in out.iter_mut().zip(features) {
-                        *acc += weight * value;
-                    }
+            }
+        }
+    }
+}
+
+/// Gradients of [`aggregate`] with respect to its three inputs.
+pub struct Gradients {
+    pub values: Vec<f32>,
+    pub locations: Vec<f32>,
+    pub weights: Vec<f32>,
+}
+
+/// The gradients of [`aggregate`]'s output with respect to `values`, `locations` and `weights`,
+/// given the output's gradient `grad` (`[n, queries, channels]`). A location gets no gradient
+/// along an axis where it lies outside the clamp range or is not finite, as in the tensor-op
+/// form.
+///
+/// Maps run in parallel: every query reads and scatters into its own map only.
+pub fn aggregate_backward(
+    values: &[f32],
+    locations: &[f32],
+    weights: &[f32],
+    grad: &[f32],
+    shape: Shape,
+) -> Gradients {
+    assert_eq!(values.len(), shape.n * shape.map_len(), "values length");
+    assert_eq!(
+        locations.len(),
+        2 * shape.total_points(),
+        "locations length"
+    );
+    assert_eq!(weights.len(), shape.total_points(), "weights length");
+    assert_eq!(
+        grad.len(),
+        shape.n * shape.queries * shape.channels,
+        "gradient length"
+    );
+    let mut gradients = Gradients {
+        values: vec![0.0; values.len()],
+        locations: vec![0.0; locations.len()],
+        weights: vec![0.0; weights.len()],
+    };
+    let map_points = shape.queries * shape.points;
+    gradients
+        .values
+        .par_chunks_mut(shape.map_len())
+        .zip(gradients.locations.par_chunks_mut(2 * map_points))
+        .zip(gradients.weights.par_chunks_mut(map_points))
+        .enumerate()
+        .for_each(|(map, ((d_values, d_locations), d_weights))| {
+            let map_inputs = MapInputs {
+                values: &values[map * shape.map_len()..][..shape.map_len()],
+                locations: &locations[2 * map * map_points..][..2 * map_points],
+                weights: &weights[map * map_points..][..map_points],
+                grad: &grad[map * shape.queries * shape.channels..]
+                    [..shape.queries * shape.channels],
+                shape,
+            };
+            backward_map(&map_inputs, d_values, d_locations, d_weights);
+        });
+    gradients
+}
+
+/// One map's slices of the backward inputs.
+struct MapInputs<'a> {
+    values: &'a [f32],
+    locations: &'a [f32],
+    weights: &'a [f32],
+    grad: &'a [f32],
+    shape: Shape,
+}
+
+/// [`backward_map_rows`] with AVX2 where the CPU has it.
+fn backward_map(inputs: &MapInputs, d_values: &mut [f32], d_loc: &mut [f32], d_w: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2, the only feature the function is compiled for.
+        return unsafe { backward_map_avx2(inputs, d_values, d_loc, d_w) };
+    }
+    backward_map_rows(inputs, d_values, d_loc, d_w)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn backward_map_avx2(inputs: &MapInputs, d_values: &mut [f32], d_loc: &mut [f32], d_w: &mut [f32]) {
+    backward_map_rows(inputs, d_values, d_loc, d_w)
+}
+
+#[inline(always)]
+fn backward_map_rows(
+    inputs: &MapInputs,
+    d_values: &mut [f32],
+    d_locations: &mut [f32],
+    d_weights: &mut [f32],
+) {
+    let shape = inputs.shape;
+    let (channels, points) = (shape.channels, shape.points);
+    let scale = [shape.width as f32, shape.height as f32];
+    for (query, grad) in inputs.grad.chunks_exact(channels).enumerate() {
+        for point in query * points..(query + 1) * points {
+            let Some(footprint) = Footprint::new(&inputs.locations[2 * point..], &shape) else {
+                continue;
+            };
+            let weight = inputs.weights[point];
+            // d output / d (point weight) and d output / d (pixel x, pixel y), dotted with grad.
+            let (mut d_weight, mut d_pixel) = (0.0, [0.0f32; 2]);
+            footprint.for_each_corner(&shape, |cell, wx, wy, [dwx, dwy]| {
+                let features = &inputs.values[cell * channels..][..channels];
+                let d_features = &mut d_values[cell * channels..][..channels];
+                let share = weight * wx * wy;
+                let mut dot = 0.0;
+                for ((d, value), g) in d_features.iter_mut().zip(features).zip(grad) {
+                    dot += value * g;
+                    *d += share * g;
+                }
+                d_weight += wx * wy * dot;
+                d_pixel[0] += dwx * wy * dot;
+                d_pixel[1] += wx * dwy * dot;
+            });
+            d_weights[point] = d_weight;
+            for (axis, moves) in [footprint.moves_x, footprint.moves_y]
+                .into_iter()
+                .enumerate()
+            {
+                if moves {
+                    d_locations[2 * point + axis] = weight * d_pixel[axis] * scale[axis];
                 }
             }
         }

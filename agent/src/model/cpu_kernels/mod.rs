@@ -8,16 +8,26 @@
 
 mod conv;
 mod deformable;
+mod extension;
 mod max_pool;
 
+use burn::backend::Dispatch;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::Conv2d;
 use burn::nn::pool::MaxPool2d;
 use burn::tensor::{Device, Tensor, TensorData};
 
+use extension::KernelOps;
+
 /// Whether the fused kernels serve this device: Flex, in inference.
 pub fn apply(device: &Device) -> bool {
     !device.is_autodiff() && *device == Device::flex()
+}
+
+/// Whether the differentiable kernels of [`extension`] serve this device: Flex, with or
+/// without autodiff.
+pub fn apply_differentiable(device: &Device) -> bool {
+    device.clone().without_autodiff() == Device::flex()
 }
 
 fn floats<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
@@ -28,7 +38,8 @@ fn floats<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
 }
 
 /// [`crate::model::sampling::deformable_aggregate`]: `values` `[N, H*W, C]`, `locations`
-/// `[N, Q, P, 2]`, `weights` `[N, Q, P]`, to `[N, Q, C]`.
+/// `[N, Q, P, 2]`, `weights` `[N, Q, P]`, to `[N, Q, C]`. Differentiable: with autodiff the
+/// backward pass is the fused one of [`extension`].
 pub fn deformable_aggregate(
     values: Tensor<3>,
     height: usize,
@@ -36,23 +47,13 @@ pub fn deformable_aggregate(
     locations: Tensor<4>,
     weights: Tensor<3>,
 ) -> Tensor<3> {
-    let [n, _, channels] = values.dims();
-    let [_, queries, points, _] = locations.dims();
-    let device = values.device();
-    let output = deformable::aggregate(
-        &floats(values),
-        &floats(locations),
-        &floats(weights),
-        deformable::Shape {
-            n,
-            height,
-            width,
-            channels,
-            queries,
-            points,
-        },
-    );
-    Tensor::from_data(TensorData::new(output, [n, queries, channels]), &device)
+    Tensor::from_dispatch(<Dispatch as KernelOps>::deformable_aggregate(
+        values.into_dispatch(),
+        locations.into_dispatch(),
+        weights.into_dispatch(),
+        height,
+        width,
+    ))
 }
 
 /// `layer.forward(x)`, through [`max_pool2d`] where the kernels apply and the layer is a plain
