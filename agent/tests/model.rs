@@ -279,33 +279,14 @@ fn fused_aggregation_matches_tensor_ops() {
 
     let fused_grads = (fused * output_grad.clone()).sum().backward();
     let reference_grads = (reference * output_grad).sum().backward();
-    let values_of = |grad: Option<Tensor<3>>| float_values(grad.expect("a gradient"));
-    let gradient_pairs = [
-        (
-            "values",
-            values.grad(&fused_grads),
-            values.grad(&reference_grads),
-        ),
-        (
-            "weights",
-            weights.grad(&fused_grads),
-            weights.grad(&reference_grads),
-        ),
-    ]
-    .map(|(name, fused, reference)| (name, values_of(fused), values_of(reference)));
-    let location_pair = (
-        "locations",
-        float_values(locations.grad(&fused_grads).expect("a gradient")),
-        float_values(locations.grad(&reference_grads).expect("a gradient")),
-    );
-    for (name, fused, reference) in gradient_pairs.into_iter().chain([location_pair]) {
-        let scale = reference.iter().fold(0f32, |m, v| m.max(v.abs()));
-        let diff = max_abs_diff(fused, reference);
-        assert!(
-            scale > 0.1 && diff < 1e-4 * scale,
-            "{name} gradients differ by {diff} (largest {scale})"
-        );
+    for (name, input) in [("values", &values), ("weights", &weights)] {
+        assert_gradients_match(name, input.grad(&fused_grads), input.grad(&reference_grads));
     }
+    assert_gradients_match(
+        "locations",
+        locations.grad(&fused_grads),
+        locations.grad(&reference_grads),
+    );
 }
 
 /// The fused max pool equals Burn's for the stem's window and others, on even and odd sizes,
@@ -347,10 +328,12 @@ fn fused_max_pool_matches_burn() {
 }
 
 /// The fused convolution equals Burn's for the backbone's geometries and a few more: every
-/// kernel, stride and padding it meets, with and without bias, batch 1 and 3, odd sizes.
+/// kernel, stride and padding it meets, with and without bias, batch 1 and 3, odd sizes; in
+/// inference and in training, where its gradients with respect to the input, the weight and
+/// the bias match Burn's too.
 #[test]
 fn fused_convolution_matches_burn() {
-    let device = Device::flex();
+    let device = Device::flex().autodiff();
     // (cin, cout, kernel, stride, padding, height, width)
     let cases = [
         (3, 8, 3, 1, 1, 9, 13),
@@ -360,29 +343,77 @@ fn fused_convolution_matches_burn() {
         (3, 4, 7, 2, 3, 15, 21),
         (2, 3, 4, 1, 0, 6, 5),
     ];
+    let random = |shape: [usize; 4], std: f64| {
+        Tensor::<4>::random(shape, Distribution::Normal(0.0, std), &device).require_grad()
+    };
     for (cin, cout, kernel, stride, padding, h, w) in cases {
         for (batch, bias) in [(1, false), (3, true)] {
-            let x =
-                Tensor::<4>::random([batch, cin, h, w], Distribution::Normal(0.0, 1.0), &device);
-            let weight = Tensor::<4>::random(
-                [cout, cin, kernel, kernel],
-                Distribution::Normal(0.0, 0.3),
-                &device,
-            );
-            let bias =
-                bias.then(|| Tensor::<1>::random([cout], Distribution::Normal(0.0, 1.0), &device));
+            let x = random([batch, cin, h, w], 1.0);
+            let weight = random([cout, cin, kernel, kernel], 0.3);
+            let bias = bias.then(|| {
+                Tensor::<1>::random([cout], Distribution::Normal(0.0, 1.0), &device).require_grad()
+            });
+            let case =
+                format!("{cin}->{cout} k{kernel} s{stride} p{padding} {h}x{w} batch {batch}");
             let expected = burn::tensor::module::conv2d(
                 x.clone(),
                 weight.clone(),
                 bias.clone(),
                 ConvOptions::new([stride, stride], [padding, padding], [1, 1], 1),
             );
-            let actual = cpu_kernels::conv2d(x, weight, bias, [stride, stride], [padding, padding]);
-            let case =
-                format!("{cin}->{cout} k{kernel} s{stride} p{padding} {h}x{w} batch {batch}");
+            let fused = |x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>| {
+                cpu_kernels::conv2d(x, weight, bias, [stride, stride], [padding, padding])
+            };
+            let inference = fused(
+                x.clone().inner(),
+                weight.clone().inner(),
+                bias.clone().map(Tensor::inner),
+            );
+            let actual = fused(x.clone(), weight.clone(), bias.clone());
             assert_eq!(actual.dims(), expected.dims(), "{case}");
-            let diff = max_abs_diff(float_values(actual), float_values(expected));
-            assert!(diff < 1e-4, "{case}: differs from Burn's conv2d by {diff}");
+            for (path, output) in [("inference", inference), ("autodiff", actual.clone())] {
+                let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
+                assert!(
+                    diff < 1e-4,
+                    "{case} ({path}): differs from Burn's conv2d by {diff}"
+                );
+            }
+
+            let output_grad =
+                Tensor::<4>::random(expected.dims(), Distribution::Normal(0.0, 1.0), &device);
+            let fused_grads = (actual * output_grad.clone()).sum().backward();
+            let burn_grads = (expected * output_grad).sum().backward();
+            for (name, input) in [("input", &x), ("weight", &weight)] {
+                assert_gradients_match(
+                    &format!("{case}: {name}"),
+                    input.grad(&fused_grads),
+                    input.grad(&burn_grads),
+                );
+            }
+            if let Some(bias) = bias {
+                assert_gradients_match(
+                    &format!("{case}: bias"),
+                    bias.grad(&fused_grads),
+                    bias.grad(&burn_grads),
+                );
+            }
         }
     }
+}
+
+/// Two gradients agree to 1e-4 of the reference's largest magnitude (and it is not zero).
+fn assert_gradients_match<const D: usize>(
+    name: &str,
+    fused: Option<Tensor<D>>,
+    reference: Option<Tensor<D>>,
+) {
+    let fused = float_values(fused.unwrap_or_else(|| panic!("{name}: no fused gradient")));
+    let reference =
+        float_values(reference.unwrap_or_else(|| panic!("{name}: no reference gradient")));
+    let scale = reference.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let diff = max_abs_diff(fused, reference);
+    assert!(
+        scale > 0.1 && diff < 1e-4 * scale,
+        "{name} gradients differ by {diff} (largest {scale})"
+    );
 }

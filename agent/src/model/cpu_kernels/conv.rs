@@ -42,12 +42,12 @@ impl Geometry {
     }
 }
 
-/// `input` `[batch, cin, h, w]`, `weight` `[cout, cin, kh, kw]`, optional `bias` `[cout]`, to
+/// `input` `[batch, cin, h, w]` convolved by `weight` `[cout, cin, kh, kw]`, to
 /// `[batch, cout, oh, ow]`, all row-major.
 ///
 /// Panics if a slice's length does not match `geometry`, or the kernel (padded input) is larger
 /// than the input (the caller checks the tensor shapes).
-pub fn conv2d(input: &[f32], weight: &[f32], bias: Option<&[f32]>, geometry: Geometry) -> Vec<f32> {
+pub fn conv2d(input: &[f32], weight: &[f32], geometry: Geometry) -> Vec<f32> {
     let Geometry {
         batch,
         channels_in,
@@ -75,11 +75,6 @@ pub fn conv2d(input: &[f32], weight: &[f32], bias: Option<&[f32]>, geometry: Geo
         } else {
             let patches = patch_matrix(image, geometry);
             multiply(weight, &patches, out, geometry, pixels, parallelism);
-        }
-        if let Some(bias) = bias {
-            for (plane, &b) in out.chunks_exact_mut(pixels).zip(bias) {
-                plane.iter_mut().for_each(|v| *v += b);
-            }
         }
     };
     let images = input.chunks_exact(image_len);
@@ -139,42 +134,236 @@ fn multiply(
     }
 }
 
-/// The image's patch matrix `[cin * kh * kw, out_h * out_w]`: row `(c, ky, kx)` holds input
-/// channel `c` at `(oy * sy + ky - py, ox * sx + kx - px)` for every output pixel, zero in the
-/// padding.
-fn patch_matrix(image: &[f32], geometry: Geometry) -> Vec<f32> {
+/// Calls `f(patch_offset, input_offset, len)` for every run of `len` patch-matrix entries that
+/// come from one input row: entry `patch_offset + i` of the patch matrix is input element
+/// `input_offset + i * stride_x` of the image. Entries in no run are zero padding.
+fn for_each_run(geometry: Geometry, mut f: impl FnMut(usize, usize, usize)) {
     let [height, width] = geometry.input;
     let [kh, kw] = geometry.kernel;
     let [sy, sx] = geometry.stride;
     let [py, px] = geometry.padding;
     let [out_h, out_w] = geometry.output();
-    let mut patches = vec![0f32; geometry.patch_len() * out_h * out_w];
-    for (row, patch_row) in patches.chunks_exact_mut(out_h * out_w).enumerate() {
+    for row in 0..geometry.patch_len() {
         let (c, ky, kx) = (row / (kh * kw), row / kw % kh, row % kw);
-        let plane = &image[c * height * width..][..height * width];
         // Output columns whose input column ox * sx + kx - px lies inside the image.
         let first = px.saturating_sub(kx).div_ceil(sx);
         let end = (width + px - kx).div_ceil(sx).min(out_w);
         if first >= end {
             continue;
         }
-        for (oy, out_row) in patch_row.chunks_exact_mut(out_w).enumerate() {
+        for oy in 0..out_h {
             let Some(iy) = (oy * sy + ky).checked_sub(py).filter(|&iy| iy < height) else {
                 continue;
             };
-            let input_row = &plane[iy * width..][..width];
-            let start = first * sx + kx - px;
-            if sx == 1 {
-                out_row[first..end].copy_from_slice(&input_row[start..start + end - first]);
-            } else {
-                for (out, &value) in out_row[first..end]
-                    .iter_mut()
-                    .zip(input_row[start..].iter().step_by(sx))
-                {
-                    *out = value;
-                }
-            }
+            f(
+                (row * out_h + oy) * out_w + first,
+                (c * height + iy) * width + first * sx + kx - px,
+                end - first,
+            );
         }
     }
+}
+
+/// The image's patch matrix `[cin * kh * kw, out_h * out_w]`: row `(c, ky, kx)` holds input
+/// channel `c` at `(oy * sy + ky - py, ox * sx + kx - px)` for every output pixel, zero in the
+/// padding.
+fn patch_matrix(image: &[f32], geometry: Geometry) -> Vec<f32> {
+    let [out_h, out_w] = geometry.output();
+    let sx = geometry.stride[1];
+    let mut patches = vec![0f32; geometry.patch_len() * out_h * out_w];
+    for_each_run(geometry, |patch, input, len| {
+        let out = &mut patches[patch..patch + len];
+        if sx == 1 {
+            out.copy_from_slice(&image[input..input + len]);
+        } else {
+            for (out, &value) in out.iter_mut().zip(image[input..].iter().step_by(sx)) {
+                *out = value;
+            }
+        }
+    });
     patches
+}
+
+/// The transpose of [`patch_matrix`]: adds every patch-matrix entry into the input element it
+/// was copied from.
+fn add_patch_matrix(patches: &[f32], image: &mut [f32], geometry: Geometry) {
+    let sx = geometry.stride[1];
+    for_each_run(geometry, |patch, input, len| {
+        for (target, &value) in image[input..]
+            .iter_mut()
+            .step_by(sx)
+            .zip(&patches[patch..patch + len])
+        {
+            *target += value;
+        }
+    });
+}
+
+/// Gradients of [`conv2d`] with respect to its input and weight.
+pub struct Gradients {
+    pub input: Vec<f32>,
+    pub weight: Vec<f32>,
+}
+
+/// The gradients of [`conv2d`]'s output with respect to `input` and `weight`, given the
+/// output's gradient `grad` (`[batch, cout, oh, ow]`); the bias gradient is `grad` summed over
+/// the batch and the pixels.
+///
+/// Per image, with `P` its patch matrix and `G` its output gradient (`[cout, pixels]`):
+/// the weight gradient adds `G x P^T`, and the input gradient is `W^T x G` folded back onto the
+/// image (the transpose of im2col). Images run in parallel, each thread summing its own weight
+/// gradient; a single image runs the products on all threads instead.
+pub fn conv2d_backward(
+    input: &[f32],
+    weight: &[f32],
+    grad: &[f32],
+    geometry: Geometry,
+) -> Gradients {
+    let Geometry {
+        batch,
+        channels_in,
+        channels_out,
+        input: [height, width],
+        ..
+    } = geometry;
+    let [out_h, out_w] = geometry.output();
+    let pixels = out_h * out_w;
+    let image_len = channels_in * height * width;
+    assert_eq!(input.len(), batch * image_len, "input length");
+    assert_eq!(
+        weight.len(),
+        channels_out * geometry.patch_len(),
+        "weight length"
+    );
+    assert_eq!(grad.len(), batch * channels_out * pixels, "gradient length");
+    let mut d_input = vec![0f32; input.len()];
+    let image_grads = |(image, grad, d_image): (&[f32], &[f32], &mut [f32]),
+                       d_weight: &mut [f32],
+                       parallelism| {
+        if geometry.is_pointwise() {
+            multiply_weight_grad(grad, image, d_weight, geometry, pixels, parallelism);
+            multiply_input_grad(weight, grad, d_image, geometry, pixels, parallelism);
+        } else {
+            let patches = patch_matrix(image, geometry);
+            multiply_weight_grad(grad, &patches, d_weight, geometry, pixels, parallelism);
+            let mut d_patches = vec![0f32; patches.len()];
+            multiply_input_grad(weight, grad, &mut d_patches, geometry, pixels, parallelism);
+            add_patch_matrix(&d_patches, d_image, geometry);
+        }
+    };
+    // One task per thread, each summing its images' weight gradients in order: the result
+    // does not depend on scheduling.
+    let threads = rayon::current_num_threads();
+    let per_task = batch.div_ceil(threads);
+    let parallelism = if batch == 1 {
+        Parallelism::Rayon(threads)
+    } else {
+        Parallelism::None
+    };
+    let partial_sums: Vec<Vec<f32>> = input
+        .par_chunks(per_task * image_len)
+        .zip(grad.par_chunks(per_task * channels_out * pixels))
+        .zip(d_input.par_chunks_mut(per_task * image_len))
+        .map(|((images, grads), d_images)| {
+            let mut d_weight = vec![0f32; weight.len()];
+            for ((image, grad), d_image) in images
+                .chunks_exact(image_len)
+                .zip(grads.chunks_exact(channels_out * pixels))
+                .zip(d_images.chunks_exact_mut(image_len))
+            {
+                image_grads((image, grad, d_image), &mut d_weight, parallelism);
+            }
+            d_weight
+        })
+        .collect();
+    let mut partial_sums = partial_sums.into_iter();
+    let mut d_weight = partial_sums
+        .next()
+        .unwrap_or_else(|| vec![0f32; weight.len()]);
+    for part in partial_sums {
+        d_weight.iter_mut().zip(&part).for_each(|(s, p)| *s += p);
+    }
+    Gradients {
+        input: d_input,
+        weight: d_weight,
+    }
+}
+
+/// `d_weight` `[cout, k]` += `grad` `[cout, pixels]` x `patches^T` (`patches` `[k, pixels]`).
+fn multiply_weight_grad(
+    grad: &[f32],
+    patches: &[f32],
+    d_weight: &mut [f32],
+    geometry: Geometry,
+    pixels: usize,
+    parallelism: Parallelism,
+) {
+    let k = geometry.patch_len();
+    debug_assert_eq!(patches.len(), k * pixels);
+    debug_assert_eq!(d_weight.len(), geometry.channels_out * k);
+    // SAFETY: `d_weight` holds cout x k (row stride k), `grad` cout x pixels (row stride
+    // `pixels`), and `patches^T` pixels x k is `patches` read with row stride 1 and column
+    // stride `pixels`; `d_weight` does not alias the inputs.
+    unsafe {
+        gemm::gemm(
+            geometry.channels_out,
+            k,
+            pixels,
+            d_weight.as_mut_ptr(),
+            1,
+            k as isize,
+            true,
+            grad.as_ptr(),
+            1,
+            pixels as isize,
+            patches.as_ptr(),
+            pixels as isize,
+            1,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            parallelism,
+        );
+    }
+}
+
+/// `d_patches` `[k, pixels]` = `weight^T` (`weight` `[cout, k]`) x `grad` `[cout, pixels]`.
+fn multiply_input_grad(
+    weight: &[f32],
+    grad: &[f32],
+    d_patches: &mut [f32],
+    geometry: Geometry,
+    pixels: usize,
+    parallelism: Parallelism,
+) {
+    let k = geometry.patch_len();
+    debug_assert_eq!(d_patches.len(), k * pixels);
+    // SAFETY: `d_patches` holds k x pixels (row stride `pixels`), `weight^T` k x cout is
+    // `weight` read with row stride 1 and column stride k, `grad` cout x pixels (row stride
+    // `pixels`); `d_patches` does not alias the inputs.
+    unsafe {
+        gemm::gemm(
+            k,
+            pixels,
+            geometry.channels_out,
+            d_patches.as_mut_ptr(),
+            1,
+            pixels as isize,
+            false,
+            weight.as_ptr(),
+            k as isize,
+            1,
+            grad.as_ptr(),
+            1,
+            pixels as isize,
+            0.0,
+            1.0,
+            false,
+            false,
+            false,
+            parallelism,
+        );
+    }
 }

@@ -1,9 +1,13 @@
-//! The kernels that also train, as a Burn backend extension: Flex runs the fused forward pass,
-//! and `Autodiff<Flex>` records a hand-written backward pass next to it.
+//! The fused kernels as a Burn backend extension: Flex runs the fused forward pass, and
+//! `Autodiff<Flex>` records a hand-written backward pass next to it.
 //!
-//! Autodiff on the tensor-op form keeps every gathered corner alive for the backward pass and
-//! replays the gather, the broadcast product and the sum as separate single-threaded steps.
-//! Here the backward pass is one parallel loop over the maps ([`deformable::aggregate_backward`]).
+//! - Deformable aggregation: autodiff on the tensor-op form keeps every gathered corner alive
+//!   for the backward pass and replays the gather, the broadcast product and the sum as
+//!   separate single-threaded steps. Here the backward pass is one parallel loop over the maps
+//!   ([`deformable::aggregate_backward`]).
+//! - Convolution: Flex's backward passes run a transposed convolution and a 3-D convolution
+//!   element by element; here both are matrix products over the im2col patches
+//!   ([`conv::conv2d_backward`]).
 
 use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -15,7 +19,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Flex, TensorMetadata, backend_extension};
 use burn::tensor::{DType, Shape, TensorData};
 
-use super::deformable;
+use super::{conv, deformable};
 
 #[backend_extension(Flex, Autodiff)]
 pub trait KernelOps: Backend {
@@ -26,6 +30,14 @@ pub trait KernelOps: Backend {
         weights: FloatTensor<Self>,
         height: usize,
         width: usize,
+    ) -> FloatTensor<Self>;
+
+    /// [`super::conv2d`] without the bias, on backend primitives.
+    fn conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        stride: [usize; 2],
+        padding: [usize; 2],
     ) -> FloatTensor<Self>;
 }
 
@@ -41,6 +53,27 @@ fn contiguous(tensor: &FlexTensor) -> FlexTensor {
 
 fn from_vec(data: Vec<f32>, shape: Shape) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(data, shape))
+}
+
+/// The convolution's geometry, read from its tensors' shapes.
+fn conv_geometry(
+    x: &FlexTensor,
+    weight: &FlexTensor,
+    stride: [usize; 2],
+    padding: [usize; 2],
+) -> conv::Geometry {
+    let [batch, channels_in, height, width] = x.shape().dims();
+    let [channels_out, weight_in, kh, kw] = weight.shape().dims();
+    assert_eq!(weight_in, channels_in, "weight input channels");
+    conv::Geometry {
+        batch,
+        channels_in,
+        channels_out,
+        input: [height, width],
+        kernel: [kh, kw],
+        stride,
+        padding,
+    }
 }
 
 /// The aggregation's sizes, read from its tensors' shapes.
@@ -83,6 +116,25 @@ impl KernelOps for Flex {
             shape,
         );
         from_vec(output, [shape.n, shape.queries, shape.channels].into())
+    }
+
+    fn conv2d(
+        x: FlexTensor,
+        weight: FlexTensor,
+        stride: [usize; 2],
+        padding: [usize; 2],
+    ) -> FlexTensor {
+        let geometry = conv_geometry(&x, &weight, stride, padding);
+        let output = conv::conv2d(
+            contiguous(&x).storage(),
+            contiguous(&weight).storage(),
+            geometry,
+        );
+        let [out_h, out_w] = geometry.output();
+        from_vec(
+            output,
+            [geometry.batch, geometry.channels_out, out_h, out_w].into(),
+        )
     }
 }
 
@@ -132,7 +184,75 @@ impl Backward<Flex, 3> for DeformableAggregateBackward {
     }
 }
 
+#[derive(Debug)]
+struct Conv2dBackward;
+
+impl Backward<Flex, 2> for Conv2dBackward {
+    /// The checkpointed input and weight, the stride and the padding.
+    type State = (NodeId, NodeId, [usize; 2], [usize; 2]);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 2>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [x_node, weight_node] = ops.parents;
+        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
+        let (x, weight, stride, padding) = ops.state;
+        let x: FlexTensor = checkpointer.retrieve_node_output(x);
+        let weight: FlexTensor = checkpointer.retrieve_node_output(weight);
+        let geometry = conv_geometry(&x, &weight, stride, padding);
+        let (x_shape, weight_shape) = (x.shape(), weight.shape());
+        let gradients = conv::conv2d_backward(
+            contiguous(&x).storage(),
+            contiguous(&weight).storage(),
+            grad.storage(),
+            geometry,
+        );
+        for (node, gradient, shape) in [
+            (x_node, gradients.input, x_shape),
+            (weight_node, gradients.weight, weight_shape),
+        ] {
+            if let Some(node) = node {
+                grads.register::<Flex>(node.id, from_vec(gradient, shape));
+            }
+        }
+    }
+}
+
 impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
+    fn conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        stride: [usize; 2],
+        padding: [usize; 2],
+    ) -> FloatTensor<Self> {
+        match Conv2dBackward
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (
+                    prep.checkpoint(&x),
+                    prep.checkpoint(&weight),
+                    stride,
+                    padding,
+                );
+                let output =
+                    Flex::conv2d(x.into_primitive(), weight.into_primitive(), stride, padding);
+                prep.finish(state, output)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(Flex::conv2d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                stride,
+                padding,
+            )),
+        }
+    }
+
     fn deformable_aggregate(
         values: FloatTensor<Self>,
         locations: FloatTensor<Self>,

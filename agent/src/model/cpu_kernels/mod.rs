@@ -103,7 +103,11 @@ pub fn conv2d_layer(layer: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         _ => None,
     };
     match padding {
-        Some(padding) if apply(&x.device()) && layer.groups == 1 && layer.dilation == [1, 1] => {
+        Some(padding)
+            if apply_differentiable(&x.device())
+                && layer.groups == 1
+                && layer.dilation == [1, 1] =>
+        {
             conv2d(
                 x,
                 layer.weight.val(),
@@ -118,6 +122,7 @@ pub fn conv2d_layer(layer: &Conv2d, x: Tensor<4>) -> Tensor<4> {
 
 /// Convolution of `x` `[N, Cin, H, W]` by `weight` `[Cout, Cin, kh, kw]` plus `bias` `[Cout]`,
 /// one group, no dilation, symmetric zero `padding` (`[rows, columns]`), as Burn's `conv2d`.
+/// Differentiable: with autodiff the backward pass is the fused one of [`extension`].
 pub fn conv2d(
     x: Tensor<4>,
     weight: Tensor<4>,
@@ -125,28 +130,17 @@ pub fn conv2d(
     stride: [usize; 2],
     padding: [usize; 2],
 ) -> Tensor<4> {
-    let [batch, channels_in, height, width] = x.dims();
-    let [channels_out, weight_in, kh, kw] = weight.dims();
-    assert_eq!(weight_in, channels_in, "weight input channels");
-    let device = x.device();
-    let geometry = conv::Geometry {
-        batch,
-        channels_in,
-        channels_out,
-        input: [height, width],
-        kernel: [kh, kw],
+    let output = Tensor::from_dispatch(<Dispatch as KernelOps>::conv2d(
+        x.into_dispatch(),
+        weight.into_dispatch(),
         stride,
         padding,
-    };
-    let [out_h, out_w] = geometry.output();
-    let output = conv::conv2d(
-        &floats(x),
-        &floats(weight),
-        bias.map(floats).as_deref(),
-        geometry,
-    );
-    Tensor::from_data(
-        TensorData::new(output, [batch, channels_out, out_h, out_w]),
-        &device,
-    )
+    ));
+    match bias {
+        Some(bias) => {
+            let [channels] = bias.dims();
+            output + bias.reshape([1, channels, 1, 1])
+        }
+        None => output,
+    }
 }
