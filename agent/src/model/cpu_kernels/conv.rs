@@ -201,13 +201,15 @@ fn add_patch_matrix(patches: &[f32], image: &mut [f32], geometry: Geometry) {
 
 /// Gradients of [`conv2d`] with respect to its input and weight.
 pub struct Gradients {
-    pub input: Vec<f32>,
+    /// `None` unless asked for.
+    pub input: Option<Vec<f32>>,
     pub weight: Vec<f32>,
 }
 
 /// The gradients of [`conv2d`]'s output with respect to `input` and `weight`, given the
 /// output's gradient `grad` (`[batch, cout, oh, ow]`); the bias gradient is `grad` summed over
-/// the batch and the pixels.
+/// the batch and the pixels. The input gradient is computed only when `input_grad` holds (an
+/// image fed to the first layer needs none).
 ///
 /// Per image, with `P` its patch matrix and `G` its output gradient (`[cout, pixels]`):
 /// the weight gradient adds `G x P^T`, and the input gradient is `W^T x G` folded back onto the
@@ -218,6 +220,7 @@ pub fn conv2d_backward(
     weight: &[f32],
     grad: &[f32],
     geometry: Geometry,
+    input_grad: bool,
 ) -> Gradients {
     let Geometry {
         batch,
@@ -236,19 +239,29 @@ pub fn conv2d_backward(
         "weight length"
     );
     assert_eq!(grad.len(), batch * channels_out * pixels, "gradient length");
-    let mut d_input = vec![0f32; input.len()];
-    let image_grads = |(image, grad, d_image): (&[f32], &[f32], &mut [f32]),
+    let mut d_input = input_grad.then(|| vec![0f32; input.len()]);
+    let mut d_images: Vec<Option<&mut [f32]>> = match &mut d_input {
+        Some(d_input) => d_input.chunks_exact_mut(image_len).map(Some).collect(),
+        None => (0..batch).map(|_| None).collect(),
+    };
+    let image_grads = |image: &[f32],
+                       grad: &[f32],
+                       d_image: &mut Option<&mut [f32]>,
                        d_weight: &mut [f32],
                        parallelism| {
         if geometry.is_pointwise() {
             multiply_weight_grad(grad, image, d_weight, geometry, pixels, parallelism);
-            multiply_input_grad(weight, grad, d_image, geometry, pixels, parallelism);
+            if let Some(d_image) = d_image {
+                multiply_input_grad(weight, grad, d_image, geometry, pixels, parallelism);
+            }
         } else {
             let patches = patch_matrix(image, geometry);
             multiply_weight_grad(grad, &patches, d_weight, geometry, pixels, parallelism);
-            let mut d_patches = vec![0f32; patches.len()];
-            multiply_input_grad(weight, grad, &mut d_patches, geometry, pixels, parallelism);
-            add_patch_matrix(&d_patches, d_image, geometry);
+            if let Some(d_image) = d_image {
+                let mut d_patches = vec![0f32; patches.len()];
+                multiply_input_grad(weight, grad, &mut d_patches, geometry, pixels, parallelism);
+                add_patch_matrix(&d_patches, d_image, geometry);
+            }
         }
     };
     // One task per thread, each summing its images' weight gradients in order: the result
@@ -263,15 +276,15 @@ pub fn conv2d_backward(
     let partial_sums: Vec<Vec<f32>> = input
         .par_chunks(per_task * image_len)
         .zip(grad.par_chunks(per_task * channels_out * pixels))
-        .zip(d_input.par_chunks_mut(per_task * image_len))
+        .zip(d_images.par_chunks_mut(per_task))
         .map(|((images, grads), d_images)| {
             let mut d_weight = vec![0f32; weight.len()];
             for ((image, grad), d_image) in images
                 .chunks_exact(image_len)
                 .zip(grads.chunks_exact(channels_out * pixels))
-                .zip(d_images.chunks_exact_mut(image_len))
+                .zip(d_images)
             {
-                image_grads((image, grad, d_image), &mut d_weight, parallelism);
+                image_grads(image, grad, d_image, &mut d_weight, parallelism);
             }
             d_weight
         })

@@ -209,14 +209,13 @@ impl Backward<Flex, 2> for Conv2dBackward {
             contiguous(&weight).storage(),
             grad.storage(),
             geometry,
+            x_node.is_some(),
         );
-        for (node, gradient, shape) in [
-            (x_node, gradients.input, x_shape),
-            (weight_node, gradients.weight, weight_shape),
-        ] {
-            if let Some(node) = node {
-                grads.register::<Flex>(node.id, from_vec(gradient, shape));
-            }
+        if let (Some(node), Some(gradient)) = (x_node, gradients.input) {
+            grads.register::<Flex>(node.id, from_vec(gradient, x_shape));
+        }
+        if let Some(node) = weight_node {
+            grads.register::<Flex>(node.id, from_vec(gradients.weight, weight_shape));
         }
     }
 }
