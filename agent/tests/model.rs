@@ -3,9 +3,9 @@
 
 mod common;
 
-use burn::module::Module;
-use burn::nn::PaddingConfig2d;
+use burn::module::{Module, Param};
 use burn::nn::pool::MaxPool2dConfig;
+use burn::nn::{LayerNormConfig, PaddingConfig2d};
 use burn::tensor::ops::{ConvOptions, GridSampleOptions};
 use burn::tensor::{Device, Distribution, Tensor};
 
@@ -397,6 +397,60 @@ fn fused_convolution_matches_burn() {
                     bias.grad(&burn_grads),
                 );
             }
+        }
+    }
+}
+
+/// The fused layer norm equals Burn's `LayerNorm` in inference and in training, where its
+/// gradients with respect to the input, gamma and beta match too.
+#[test]
+fn fused_layer_norm_matches_burn() {
+    let device = Device::flex().autodiff();
+    let epsilon = 1e-5;
+    for [rows, d] in [[150, 24], [7, 5]] {
+        let mut norm = LayerNormConfig::new(d).with_epsilon(epsilon).init(&device);
+        let parameter = |mean: f64| {
+            Param::from_tensor(
+                Tensor::<1>::random([d], Distribution::Normal(mean, 0.5), &device).require_grad(),
+            )
+        };
+        norm.gamma = parameter(1.0);
+        norm.beta = Some(parameter(0.0));
+        let (gamma, beta) = (norm.gamma.val(), norm.beta.as_ref().expect("beta").val());
+        let x =
+            Tensor::<2>::random([rows, d], Distribution::Normal(2.0, 3.0), &device).require_grad();
+        let case = format!("{rows}x{d}");
+
+        let expected = norm.forward(x.clone());
+        let inference = cpu_kernels::layer_norm(
+            x.clone().inner(),
+            gamma.clone().inner(),
+            beta.clone().inner(),
+            epsilon,
+        );
+        let fused = cpu_kernels::layer_norm(x.clone(), gamma.clone(), beta.clone(), epsilon);
+        for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
+            let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
+            assert!(
+                diff < 1e-4,
+                "{case} ({path}): differs from LayerNorm by {diff}"
+            );
+        }
+
+        let output_grad = Tensor::<2>::random([rows, d], Distribution::Normal(0.0, 1.0), &device);
+        let fused_grads = (fused * output_grad.clone()).sum().backward();
+        let burn_grads = (expected * output_grad).sum().backward();
+        assert_gradients_match(
+            &format!("{case}: input"),
+            x.grad(&fused_grads),
+            x.grad(&burn_grads),
+        );
+        for (name, parameter) in [("gamma", &gamma), ("beta", &beta)] {
+            assert_gradients_match(
+                &format!("{case}: {name}"),
+                parameter.grad(&fused_grads),
+                parameter.grad(&burn_grads),
+            );
         }
     }
 }

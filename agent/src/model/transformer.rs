@@ -4,11 +4,12 @@
 
 use burn::module::Module;
 use burn::nn::attention::{MhaInput, MultiHeadAttention, MultiHeadAttentionConfig};
-use burn::nn::{Initializer, LayerNorm, LayerNormConfig, Linear};
+use burn::nn::{Initializer, LayerNorm, Linear};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
 use super::init::xavier_linear;
+use super::norm::{layer_norm, layer_norm_config};
 
 #[derive(Module, Debug)]
 pub struct SelfAttentionLayer {
@@ -26,10 +27,10 @@ impl SelfAttentionLayer {
                 .with_dropout(0.0)
                 .with_initializer(Initializer::XavierUniform { gain: 1.0 })
                 .init(device),
-            norm_attention: LayerNormConfig::new(channels).init(device),
+            norm_attention: layer_norm_config(channels).init(device),
             ffn_in: xavier_linear(channels, ffn_dim, device),
             ffn_out: xavier_linear(ffn_dim, channels, device),
-            norm_ffn: LayerNormConfig::new(channels).init(device),
+            norm_ffn: layer_norm_config(channels).init(device),
         }
     }
 
@@ -43,9 +44,9 @@ impl SelfAttentionLayer {
             .attention
             .forward(MhaInput::new(query_key.clone(), query_key, x.clone()))
             .context;
-        let x = self.norm_attention.forward(x + attended);
+        let x = layer_norm(&self.norm_attention, x + attended);
         let ffn = self.ffn_out.forward(relu(self.ffn_in.forward(x.clone())));
-        self.norm_ffn.forward(x + ffn)
+        layer_norm(&self.norm_ffn, x + ffn)
     }
 }
 

@@ -12,7 +12,7 @@ pub use spatial::ImageFeatures;
 pub use temporal::{HISTORY_S, align_previous_bev};
 
 use burn::module::{Module, Param};
-use burn::nn::{LayerNorm, LayerNormConfig, Linear};
+use burn::nn::{LayerNorm, Linear};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Distribution, Tensor};
 
@@ -23,6 +23,7 @@ use crate::camera::MAX_CAMERAS;
 use crate::model::config::SsrConfig;
 use crate::model::float_tensor;
 use crate::model::init::xavier_linear;
+use crate::model::norm::{layer_norm, layer_norm_config};
 
 /// TSA -> LN -> SCA -> LN -> FFN -> LN.
 #[derive(Module, Debug)]
@@ -65,7 +66,7 @@ impl BevEncoder {
         let layers = (0..bev.layers)
             .map(|_| EncoderLayer {
                 temporal: TemporalSelfAttention::new(c, bev.heads, bev.temporal_points, device),
-                norm_temporal: LayerNormConfig::new(c).init(device),
+                norm_temporal: layer_norm_config(c).init(device),
                 spatial: SpatialCrossAttention::new(
                     c,
                     bev.heads,
@@ -73,10 +74,10 @@ impl BevEncoder {
                     bev.spatial_points,
                     device,
                 ),
-                norm_spatial: LayerNormConfig::new(c).init(device),
+                norm_spatial: layer_norm_config(c).init(device),
                 ffn_in: xavier_linear(c, bev.ffn_dim, device),
                 ffn_out: xavier_linear(bev.ffn_dim, c, device),
-                norm_ffn: LayerNormConfig::new(c).init(device),
+                norm_ffn: layer_norm_config(c).init(device),
             })
             .collect();
         Self {
@@ -94,7 +95,7 @@ impl BevEncoder {
             )),
             can_bus_in: xavier_linear(CAN_BUS_DIM, c / 2, device),
             can_bus_out: xavier_linear(c / 2, c, device),
-            can_bus_norm: LayerNormConfig::new(c).init(device),
+            can_bus_norm: layer_norm_config(c).init(device),
             layers,
             rows: bev.grid.rows,
             cols: bev.grid.cols,
@@ -156,11 +157,13 @@ impl BevEncoder {
             self.cols,
             geometry.previous_points.clone(),
         );
-        let can_bus = self
-            .can_bus_norm
-            .forward(relu(self.can_bus_out.forward(relu(
-                self.can_bus_in.forward(geometry.can_bus.clone()),
-            ))));
+        let can_bus = layer_norm(
+            &self.can_bus_norm,
+            relu(
+                self.can_bus_out
+                    .forward(relu(self.can_bus_in.forward(geometry.can_bus.clone()))),
+            ),
+        );
         let mut query = self.queries.val().unsqueeze_dim::<3>(0).repeat_dim(0, b)
             + can_bus.unsqueeze_dim::<3>(1);
         for layer in &self.layers {
@@ -173,7 +176,7 @@ impl BevEncoder {
                 self.rows,
                 self.cols,
             );
-            query = layer.norm_temporal.forward(query);
+            query = layer_norm(&layer.norm_temporal, query);
             query = layer.spatial.forward(
                 query,
                 pos.clone(),
@@ -181,11 +184,11 @@ impl BevEncoder {
                 geometry.camera_points.clone(),
                 geometry.camera_hits.clone(),
             );
-            query = layer.norm_spatial.forward(query);
+            query = layer_norm(&layer.norm_spatial, query);
             let ffn = layer
                 .ffn_out
                 .forward(relu(layer.ffn_in.forward(query.clone())));
-            query = layer.norm_ffn.forward(query + ffn);
+            query = layer_norm(&layer.norm_ffn, query + ffn);
         }
         query
     }

@@ -5,6 +5,8 @@
 //!   for the backward pass and replays the gather, the broadcast product and the sum as
 //!   separate single-threaded steps. Here the backward pass is one parallel loop over the maps
 //!   ([`deformable::aggregate_backward`]).
+//! - Layer norm: autodiff records it as its decomposition, a pass per step; here it is one
+//!   pass per row each way ([`layer_norm::backward`]).
 //! - Convolution: Flex's backward passes run a transposed convolution and a 3-D convolution
 //!   element by element; here both are matrix products over the im2col patches
 //!   ([`conv::conv2d_backward`]).
@@ -19,7 +21,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Flex, TensorMetadata, backend_extension};
 use burn::tensor::{DType, Shape, TensorData};
 
-use super::{conv, deformable};
+use super::{conv, deformable, layer_norm};
 
 #[backend_extension(Flex, Autodiff)]
 pub trait KernelOps: Backend {
@@ -30,6 +32,14 @@ pub trait KernelOps: Backend {
         weights: FloatTensor<Self>,
         height: usize,
         width: usize,
+    ) -> FloatTensor<Self>;
+
+    /// [`super::layer_norm`] on backend primitives.
+    fn layer_norm(
+        x: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
     ) -> FloatTensor<Self>;
 
     /// [`super::conv2d`] without the bias, on backend primitives.
@@ -118,6 +128,17 @@ impl KernelOps for Flex {
         from_vec(output, [shape.n, shape.queries, shape.channels].into())
     }
 
+    fn layer_norm(x: FlexTensor, gamma: FlexTensor, beta: FlexTensor, epsilon: f64) -> FlexTensor {
+        let shape = x.shape();
+        let output = layer_norm::forward(
+            contiguous(&x).storage(),
+            contiguous(&gamma).storage(),
+            contiguous(&beta).storage(),
+            epsilon as f32,
+        );
+        from_vec(output, shape)
+    }
+
     fn conv2d(
         x: FlexTensor,
         weight: FlexTensor,
@@ -185,6 +206,43 @@ impl Backward<Flex, 3> for DeformableAggregateBackward {
 }
 
 #[derive(Debug)]
+struct LayerNormBackward;
+
+impl Backward<Flex, 3> for LayerNormBackward {
+    /// The checkpointed input and gamma, and epsilon.
+    type State = (NodeId, NodeId, f64);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 3>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [x_node, gamma_node, beta_node] = ops.parents;
+        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
+        let (x, gamma, epsilon) = ops.state;
+        let x: FlexTensor = checkpointer.retrieve_node_output(x);
+        let gamma: FlexTensor = checkpointer.retrieve_node_output(gamma);
+        let (x_shape, gamma_shape) = (x.shape(), gamma.shape());
+        let gradients = layer_norm::backward(
+            contiguous(&x).storage(),
+            contiguous(&gamma).storage(),
+            grad.storage(),
+            epsilon as f32,
+        );
+        for (node, gradient, shape) in [
+            (x_node, gradients.input, x_shape),
+            (gamma_node, gradients.gamma, gamma_shape.clone()),
+            (beta_node, gradients.beta, gamma_shape),
+        ] {
+            if let Some(node) = node {
+                grads.register::<Flex>(node.id, from_vec(gradient, shape));
+            }
+        }
+    }
+}
+
+#[derive(Debug)]
 struct Conv2dBackward;
 
 impl Backward<Flex, 2> for Conv2dBackward {
@@ -221,6 +279,36 @@ impl Backward<Flex, 2> for Conv2dBackward {
 }
 
 impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
+    fn layer_norm(
+        x: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
+    ) -> FloatTensor<Self> {
+        match LayerNormBackward
+            .prepare::<C>([x.node(), gamma.node(), beta.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (prep.checkpoint(&x), prep.checkpoint(&gamma), epsilon);
+                let output = Flex::layer_norm(
+                    x.into_primitive(),
+                    gamma.into_primitive(),
+                    beta.into_primitive(),
+                    epsilon,
+                );
+                prep.finish(state, output)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(Flex::layer_norm(
+                x.into_primitive(),
+                gamma.into_primitive(),
+                beta.into_primitive(),
+                epsilon,
+            )),
+        }
+    }
+
     fn conv2d(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,

@@ -9,6 +9,7 @@
 mod conv;
 mod deformable;
 mod extension;
+mod layer_norm;
 mod max_pool;
 
 use burn::backend::Dispatch;
@@ -53,6 +54,23 @@ pub fn deformable_aggregate(
         weights.into_dispatch(),
         height,
         width,
+    ))
+}
+
+/// Layer norm over the last axis of `x`: normalised with `epsilon`, times `gamma` `[d]`, plus
+/// `beta` `[d]`, as Burn's `LayerNorm`. On Flex only (see [`apply_differentiable`]);
+/// differentiable: with autodiff the backward pass is the fused one of [`extension`].
+pub fn layer_norm<const D: usize>(
+    x: Tensor<D>,
+    gamma: Tensor<1>,
+    beta: Tensor<1>,
+    epsilon: f64,
+) -> Tensor<D> {
+    Tensor::from_dispatch(<Dispatch as KernelOps>::layer_norm(
+        x.into_dispatch(),
+        gamma.into_dispatch(),
+        beta.into_dispatch(),
+        epsilon,
     ))
 }
 

@@ -1,0 +1,107 @@
+//! Layer normalisation over the last axis, forward and backward, one pass per row.
+//!
+//! Flex normalises rows in one pass in inference, but autodiff has no layer-norm operation of
+//! its own: it records the decomposition (mean, centring, variance, square root, division,
+//! scale, shift), each step a separate pass over the whole tensor forward and several backward.
+//! For the BEV encoder's `[8, 1024, 64]` that is 6.5 ms per norm and training step; here it is
+//! two passes over the rows.
+
+use rayon::prelude::*;
+
+/// Rows per parallel task.
+const ROWS_PER_TASK: usize = 64;
+
+/// Mean and reciprocal standard deviation (biased variance, plus `epsilon`) of a row.
+#[inline(always)]
+fn statistics(row: &[f32], epsilon: f32) -> (f32, f32) {
+    let n = row.len() as f32;
+    let mean = row.iter().sum::<f32>() / n;
+    let variance = row.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / n;
+    (mean, 1.0 / (variance + epsilon).sqrt())
+}
+
+/// `x` `[rows, d]` normalised per row, times `gamma` `[d]`, plus `beta` `[d]`.
+pub fn forward(x: &[f32], gamma: &[f32], beta: &[f32], epsilon: f32) -> Vec<f32> {
+    let d = gamma.len();
+    assert_eq!(beta.len(), d, "beta length");
+    assert_eq!(x.len() % d, 0, "input length");
+    let mut output = vec![0f32; x.len()];
+    output
+        .par_chunks_mut(d * ROWS_PER_TASK)
+        .zip(x.par_chunks(d * ROWS_PER_TASK))
+        .for_each(|(out, x)| {
+            for (out, row) in out.chunks_exact_mut(d).zip(x.chunks_exact(d)) {
+                let (mean, rstd) = statistics(row, epsilon);
+                for (((o, v), g), b) in out.iter_mut().zip(row).zip(gamma).zip(beta) {
+                    *o = (v - mean) * rstd * g + b;
+                }
+            }
+        });
+    output
+}
+
+/// Gradients of [`forward`] with respect to its three inputs.
+pub struct Gradients {
+    pub input: Vec<f32>,
+    pub gamma: Vec<f32>,
+    pub beta: Vec<f32>,
+}
+
+/// The gradients of [`forward`]'s output with respect to `x`, `gamma` and `beta`, given the
+/// output's gradient `grad` (`[rows, d]`). With `x̂` the normalised row and `g = grad * gamma`:
+/// `dx = rstd * (g - mean(g) - x̂ * mean(g * x̂))`, `dgamma = Σ grad * x̂`, `dbeta = Σ grad`.
+///
+/// Rows run in parallel, one task per thread, each summing its own parameter gradients in
+/// order: the result does not depend on scheduling.
+pub fn backward(x: &[f32], gamma: &[f32], grad: &[f32], epsilon: f32) -> Gradients {
+    let d = gamma.len();
+    assert_eq!(x.len() % d, 0, "input length");
+    assert_eq!(grad.len(), x.len(), "gradient length");
+    let rows = x.len() / d;
+    let rows_per_task = rows.div_ceil(rayon::current_num_threads()).max(1);
+    let mut d_input = vec![0f32; x.len()];
+    let partial_sums: Vec<(Vec<f32>, Vec<f32>)> = d_input
+        .par_chunks_mut(d * rows_per_task)
+        .zip(x.par_chunks(d * rows_per_task))
+        .zip(grad.par_chunks(d * rows_per_task))
+        .map(|((d_x, x), grad)| {
+            let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
+            let mut normalised = vec![0f32; d];
+            for ((d_x, row), grad) in d_x
+                .chunks_exact_mut(d)
+                .zip(x.chunks_exact(d))
+                .zip(grad.chunks_exact(d))
+            {
+                let (mean, rstd) = statistics(row, epsilon);
+                let (mut sum_g, mut sum_g_normalised) = (0.0, 0.0);
+                for k in 0..d {
+                    normalised[k] = (row[k] - mean) * rstd;
+                    let g = grad[k] * gamma[k];
+                    sum_g += g;
+                    sum_g_normalised += g * normalised[k];
+                    d_gamma[k] += grad[k] * normalised[k];
+                    d_beta[k] += grad[k];
+                }
+                let (mean_g, mean_g_normalised) = (sum_g / d as f32, sum_g_normalised / d as f32);
+                for k in 0..d {
+                    d_x[k] =
+                        rstd * (grad[k] * gamma[k] - mean_g - normalised[k] * mean_g_normalised);
+                }
+            }
+            (d_gamma, d_beta)
+        })
+        .collect();
+    let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
+    for (gamma_part, beta_part) in partial_sums {
+        d_gamma
+            .iter_mut()
+            .zip(&gamma_part)
+            .for_each(|(s, p)| *s += p);
+        d_beta.iter_mut().zip(&beta_part).for_each(|(s, p)| *s += p);
+    }
+    Gradients {
+        input: d_input,
+        gamma: d_gamma,
+        beta: d_beta,
+    }
+}
