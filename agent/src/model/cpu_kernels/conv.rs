@@ -9,6 +9,8 @@
 //! shifted copy of one input row segment), and `gemm` writes `weight x patches` directly into
 //! the image's output planes. A 1x1 stride-1 convolution multiplies the input itself.
 
+use std::borrow::Cow;
+
 use gemm::Parallelism;
 use rayon::prelude::*;
 
@@ -69,13 +71,11 @@ pub fn conv2d(input: &[f32], weight: &[f32], geometry: Geometry) -> Vec<f32> {
     let pixels = out_h * out_w;
     let mut output = vec![0f32; batch * channels_out * pixels];
     let image_len = channels_in * height * width;
+    let weight = Matrix::new(weight, channels_out, geometry.patch_len());
     let convolve = |(image, out): (&[f32], &mut [f32]), parallelism| {
-        if geometry.is_pointwise() {
-            multiply(weight, image, out, geometry, pixels, parallelism);
-        } else {
-            let patches = patch_matrix(image, geometry);
-            multiply(weight, &patches, out, geometry, pixels, parallelism);
-        }
+        let patches = patches(image, geometry);
+        let patches = Matrix::new(&patches, geometry.patch_len(), pixels);
+        matmul(out, weight, patches, false, parallelism);
     };
     let images = input.chunks_exact(image_len);
     let outputs = output.chunks_exact_mut(channels_out * pixels);
@@ -94,43 +94,81 @@ pub fn conv2d(input: &[f32], weight: &[f32], geometry: Geometry) -> Vec<f32> {
     output
 }
 
-/// `out` `[cout, pixels]` = `weight` `[cout, patch_len]` x `patches` `[patch_len, pixels]`.
-fn multiply(
-    weight: &[f32],
-    patches: &[f32],
-    out: &mut [f32],
-    geometry: Geometry,
-    pixels: usize,
-    parallelism: Parallelism,
-) {
-    let k = geometry.patch_len();
-    debug_assert_eq!(patches.len(), k * pixels);
-    debug_assert_eq!(out.len(), geometry.channels_out * pixels);
-    // SAFETY: the three matrices lie inside their slices: `out` holds cout x pixels with row
-    // stride `pixels`, `weight` cout x k with row stride k, `patches` k x pixels with row stride
-    // `pixels` (lengths checked above); `out` does not alias the inputs.
+/// A row-major matrix view, read with the given strides (a transpose swaps them).
+#[derive(Clone, Copy)]
+struct Matrix<'a> {
+    data: &'a [f32],
+    rows: usize,
+    columns: usize,
+    row_stride: usize,
+    column_stride: usize,
+}
+
+impl<'a> Matrix<'a> {
+    /// `data` as `rows x columns`, row-major.
+    fn new(data: &'a [f32], rows: usize, columns: usize) -> Self {
+        assert_eq!(data.len(), rows * columns, "matrix length");
+        Self {
+            data,
+            rows,
+            columns,
+            row_stride: columns,
+            column_stride: 1,
+        }
+    }
+
+    fn transposed(self) -> Self {
+        Self {
+            rows: self.columns,
+            columns: self.rows,
+            row_stride: self.column_stride,
+            column_stride: self.row_stride,
+            ..self
+        }
+    }
+}
+
+/// `out` (`lhs.rows x rhs.columns`, row-major) = `lhs x rhs`, plus `out`'s old value when
+/// `accumulate`.
+fn matmul(out: &mut [f32], lhs: Matrix, rhs: Matrix, accumulate: bool, parallelism: Parallelism) {
+    let (m, n, k) = (lhs.rows, rhs.columns, lhs.columns);
+    assert_eq!(rhs.rows, k, "inner dimensions");
+    assert_eq!(out.len(), m * n, "output length");
+    // SAFETY: `Matrix::new` checked that each view's rows and columns, read with its strides,
+    // cover exactly its slice, and `out` holds m x n with row stride n; `out` is a unique
+    // borrow, so it does not alias the inputs.
     unsafe {
         gemm::gemm(
-            geometry.channels_out,
-            pixels,
+            m,
+            n,
             k,
             out.as_mut_ptr(),
             1,
-            pixels as isize,
-            false,
-            weight.as_ptr(),
-            1,
-            k as isize,
-            patches.as_ptr(),
-            1,
-            pixels as isize,
-            0.0,
+            n as isize,
+            accumulate,
+            lhs.data.as_ptr(),
+            lhs.column_stride as isize,
+            lhs.row_stride as isize,
+            rhs.data.as_ptr(),
+            rhs.column_stride as isize,
+            rhs.row_stride as isize,
+            if accumulate { 1.0 } else { 0.0 },
             1.0,
             false,
             false,
             false,
             parallelism,
         );
+    }
+}
+
+/// The image's patch matrix: the image itself for a pointwise convolution, else
+/// [`patch_matrix`].
+fn patches(image: &[f32], geometry: Geometry) -> Cow<'_, [f32]> {
+    if geometry.is_pointwise() {
+        Cow::Borrowed(image)
+    } else {
+        Cow::Owned(patch_matrix(image, geometry))
     }
 }
 
@@ -244,24 +282,37 @@ pub fn conv2d_backward(
         Some(d_input) => d_input.chunks_exact_mut(image_len).map(Some).collect(),
         None => (0..batch).map(|_| None).collect(),
     };
+    let weight_matrix = Matrix::new(weight, channels_out, geometry.patch_len());
     let image_grads = |image: &[f32],
                        grad: &[f32],
                        d_image: &mut Option<&mut [f32]>,
                        d_weight: &mut [f32],
                        parallelism| {
+        let patches = patches(image, geometry);
+        let patches = Matrix::new(&patches, geometry.patch_len(), pixels);
+        let grad = Matrix::new(grad, channels_out, pixels);
+        matmul(d_weight, grad, patches.transposed(), true, parallelism);
+        let Some(d_image) = d_image else {
+            return;
+        };
         if geometry.is_pointwise() {
-            multiply_weight_grad(grad, image, d_weight, geometry, pixels, parallelism);
-            if let Some(d_image) = d_image {
-                multiply_input_grad(weight, grad, d_image, geometry, pixels, parallelism);
-            }
+            matmul(
+                d_image,
+                weight_matrix.transposed(),
+                grad,
+                false,
+                parallelism,
+            );
         } else {
-            let patches = patch_matrix(image, geometry);
-            multiply_weight_grad(grad, &patches, d_weight, geometry, pixels, parallelism);
-            if let Some(d_image) = d_image {
-                let mut d_patches = vec![0f32; patches.len()];
-                multiply_input_grad(weight, grad, &mut d_patches, geometry, pixels, parallelism);
-                add_patch_matrix(&d_patches, d_image, geometry);
-            }
+            let mut d_patches = vec![0f32; patches.data.len()];
+            matmul(
+                &mut d_patches,
+                weight_matrix.transposed(),
+                grad,
+                false,
+                parallelism,
+            );
+            add_patch_matrix(&d_patches, d_image, geometry);
         }
     };
     // One task per thread, each summing its images' weight gradients in order: the result
@@ -299,84 +350,5 @@ pub fn conv2d_backward(
     Gradients {
         input: d_input,
         weight: d_weight,
-    }
-}
-
-/// `d_weight` `[cout, k]` += `grad` `[cout, pixels]` x `patches^T` (`patches` `[k, pixels]`).
-fn multiply_weight_grad(
-    grad: &[f32],
-    patches: &[f32],
-    d_weight: &mut [f32],
-    geometry: Geometry,
-    pixels: usize,
-    parallelism: Parallelism,
-) {
-    let k = geometry.patch_len();
-    debug_assert_eq!(patches.len(), k * pixels);
-    debug_assert_eq!(d_weight.len(), geometry.channels_out * k);
-    // SAFETY: `d_weight` holds cout x k (row stride k), `grad` cout x pixels (row stride
-    // `pixels`), and `patches^T` pixels x k is `patches` read with row stride 1 and column
-    // stride `pixels`; `d_weight` does not alias the inputs.
-    unsafe {
-        gemm::gemm(
-            geometry.channels_out,
-            k,
-            pixels,
-            d_weight.as_mut_ptr(),
-            1,
-            k as isize,
-            true,
-            grad.as_ptr(),
-            1,
-            pixels as isize,
-            patches.as_ptr(),
-            pixels as isize,
-            1,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
-            parallelism,
-        );
-    }
-}
-
-/// `d_patches` `[k, pixels]` = `weight^T` (`weight` `[cout, k]`) x `grad` `[cout, pixels]`.
-fn multiply_input_grad(
-    weight: &[f32],
-    grad: &[f32],
-    d_patches: &mut [f32],
-    geometry: Geometry,
-    pixels: usize,
-    parallelism: Parallelism,
-) {
-    let k = geometry.patch_len();
-    debug_assert_eq!(d_patches.len(), k * pixels);
-    // SAFETY: `d_patches` holds k x pixels (row stride `pixels`), `weight^T` k x cout is
-    // `weight` read with row stride 1 and column stride k, `grad` cout x pixels (row stride
-    // `pixels`); `d_patches` does not alias the inputs.
-    unsafe {
-        gemm::gemm(
-            k,
-            pixels,
-            geometry.channels_out,
-            d_patches.as_mut_ptr(),
-            1,
-            pixels as isize,
-            false,
-            weight.as_ptr(),
-            k as isize,
-            1,
-            grad.as_ptr(),
-            1,
-            pixels as isize,
-            0.0,
-            1.0,
-            false,
-            false,
-            false,
-            parallelism,
-        );
     }
 }

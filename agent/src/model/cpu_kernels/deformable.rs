@@ -31,6 +31,13 @@ impl Shape {
     fn total_points(&self) -> usize {
         self.n * self.queries * self.points
     }
+
+    /// Panics unless the three inputs' lengths match the shape.
+    fn check(&self, values: &[f32], locations: &[f32], weights: &[f32]) {
+        assert_eq!(values.len(), self.n * self.map_len(), "values length");
+        assert_eq!(locations.len(), 2 * self.total_points(), "locations length");
+        assert_eq!(weights.len(), self.total_points(), "weights length");
+    }
 }
 
 /// Queries per parallel task: enough corner rows (4 per point) to dwarf the scheduling.
@@ -41,13 +48,7 @@ const QUERIES_PER_TASK: usize = 64;
 ///
 /// Panics if a slice's length does not match `shape` (the caller checks the tensor shapes).
 pub fn aggregate(values: &[f32], locations: &[f32], weights: &[f32], shape: Shape) -> Vec<f32> {
-    assert_eq!(values.len(), shape.n * shape.map_len(), "values length");
-    assert_eq!(
-        locations.len(),
-        2 * shape.total_points(),
-        "locations length"
-    );
-    assert_eq!(weights.len(), shape.total_points(), "weights length");
+    shape.check(values, locations, weights);
     let channels = shape.channels;
     let inputs = Inputs {
         values,
@@ -220,13 +221,7 @@ pub fn aggregate_backward(
     grad: &[f32],
     shape: Shape,
 ) -> Gradients {
-    assert_eq!(values.len(), shape.n * shape.map_len(), "values length");
-    assert_eq!(
-        locations.len(),
-        2 * shape.total_points(),
-        "locations length"
-    );
-    assert_eq!(weights.len(), shape.total_points(), "weights length");
+    shape.check(values, locations, weights);
     assert_eq!(
         grad.len(),
         shape.n * shape.queries * shape.channels,

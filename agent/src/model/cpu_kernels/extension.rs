@@ -86,6 +86,18 @@ fn conv_geometry(
     }
 }
 
+/// Registers each gradient whose input is tracked (has a node).
+fn register<const N: usize>(
+    grads: &mut Gradients,
+    gradients: [(Option<NodeId>, Vec<f32>, Shape); N],
+) {
+    for (node, gradient, shape) in gradients {
+        if let Some(node) = node {
+            grads.register::<Flex>(node, from_vec(gradient, shape));
+        }
+    }
+}
+
 /// The aggregation's sizes, read from its tensors' shapes.
 fn aggregation_shape(
     values: &FlexTensor,
@@ -193,15 +205,18 @@ impl Backward<Flex, 3> for DeformableAggregateBackward {
             shape,
         );
         let [values_shape, locations_shape, weights_shape] = shapes;
-        for (node, gradient, shape) in [
-            (values_node, gradients.values, values_shape),
-            (locations_node, gradients.locations, locations_shape),
-            (weights_node, gradients.weights, weights_shape),
-        ] {
-            if let Some(node) = node {
-                grads.register::<Flex>(node.id, from_vec(gradient, shape));
-            }
-        }
+        register(
+            grads,
+            [
+                (values_node.map(|n| n.id), gradients.values, values_shape),
+                (
+                    locations_node.map(|n| n.id),
+                    gradients.locations,
+                    locations_shape,
+                ),
+                (weights_node.map(|n| n.id), gradients.weights, weights_shape),
+            ],
+        );
     }
 }
 
@@ -230,15 +245,18 @@ impl Backward<Flex, 3> for LayerNormBackward {
             grad.storage(),
             epsilon as f32,
         );
-        for (node, gradient, shape) in [
-            (x_node, gradients.input, x_shape),
-            (gamma_node, gradients.gamma, gamma_shape.clone()),
-            (beta_node, gradients.beta, gamma_shape),
-        ] {
-            if let Some(node) = node {
-                grads.register::<Flex>(node.id, from_vec(gradient, shape));
-            }
-        }
+        register(
+            grads,
+            [
+                (x_node.map(|n| n.id), gradients.input, x_shape),
+                (
+                    gamma_node.map(|n| n.id),
+                    gradients.gamma,
+                    gamma_shape.clone(),
+                ),
+                (beta_node.map(|n| n.id), gradients.beta, gamma_shape),
+            ],
+        );
     }
 }
 
@@ -278,6 +296,31 @@ impl Backward<Flex, 2> for Conv2dBackward {
     }
 }
 
+/// Runs `forward` on the inputs' Flex tensors; when an input is tracked, also records `step`,
+/// whose state `state` builds from the checkpoints of all inputs.
+fn record<S, C, const N: usize>(
+    step: S,
+    inputs: [FloatTensor<Autodiff<Flex, C>>; N],
+    state: impl FnOnce([NodeId; N]) -> S::State,
+    forward: impl FnOnce([FlexTensor; N]) -> FlexTensor,
+) -> FloatTensor<Autodiff<Flex, C>>
+where
+    S: Backward<Flex, N>,
+    C: CheckpointStrategy,
+{
+    let nodes = inputs.each_ref().map(|input| input.node());
+    match step.prepare::<C>(nodes).compute_bound().stateful() {
+        OpsKind::Tracked(mut prep) => {
+            let checkpoints = inputs.each_ref().map(|input| prep.checkpoint(input));
+            let output = forward(inputs.map(|input| input.into_primitive()));
+            prep.finish(state(checkpoints), output)
+        }
+        OpsKind::UnTracked(prep) => {
+            prep.finish(forward(inputs.map(|input| input.into_primitive())))
+        }
+    }
+}
+
 impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
     fn layer_norm(
         x: FloatTensor<Self>,
@@ -285,28 +328,12 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
         beta: FloatTensor<Self>,
         epsilon: f64,
     ) -> FloatTensor<Self> {
-        match LayerNormBackward
-            .prepare::<C>([x.node(), gamma.node(), beta.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&x), prep.checkpoint(&gamma), epsilon);
-                let output = Flex::layer_norm(
-                    x.into_primitive(),
-                    gamma.into_primitive(),
-                    beta.into_primitive(),
-                    epsilon,
-                );
-                prep.finish(state, output)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(Flex::layer_norm(
-                x.into_primitive(),
-                gamma.into_primitive(),
-                beta.into_primitive(),
-                epsilon,
-            )),
-        }
+        record::<_, C, 3>(
+            LayerNormBackward,
+            [x, gamma, beta],
+            |[x, gamma, _]| (x, gamma, epsilon),
+            |[x, gamma, beta]| Flex::layer_norm(x, gamma, beta, epsilon),
+        )
     }
 
     fn conv2d(
@@ -315,29 +342,12 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
         stride: [usize; 2],
         padding: [usize; 2],
     ) -> FloatTensor<Self> {
-        match Conv2dBackward
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&x),
-                    prep.checkpoint(&weight),
-                    stride,
-                    padding,
-                );
-                let output =
-                    Flex::conv2d(x.into_primitive(), weight.into_primitive(), stride, padding);
-                prep.finish(state, output)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(Flex::conv2d(
-                x.into_primitive(),
-                weight.into_primitive(),
-                stride,
-                padding,
-            )),
-        }
+        record::<_, C, 2>(
+            Conv2dBackward,
+            [x, weight],
+            |[x, weight]| (x, weight, stride, padding),
+            |[x, weight]| Flex::conv2d(x, weight, stride, padding),
+        )
     }
 
     fn deformable_aggregate(
@@ -347,34 +357,13 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
         height: usize,
         width: usize,
     ) -> FloatTensor<Self> {
-        match DeformableAggregateBackward
-            .prepare::<C>([values.node(), locations.node(), weights.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&values),
-                    prep.checkpoint(&locations),
-                    prep.checkpoint(&weights),
-                    [height, width],
-                );
-                let output = Flex::deformable_aggregate(
-                    values.into_primitive(),
-                    locations.into_primitive(),
-                    weights.into_primitive(),
-                    height,
-                    width,
-                );
-                prep.finish(state, output)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(Flex::deformable_aggregate(
-                values.into_primitive(),
-                locations.into_primitive(),
-                weights.into_primitive(),
-                height,
-                width,
-            )),
-        }
+        record::<_, C, 3>(
+            DeformableAggregateBackward,
+            [values, locations, weights],
+            |[values, locations, weights]| (values, locations, weights, [height, width]),
+            |[values, locations, weights]| {
+                Flex::deformable_aggregate(values, locations, weights, height, width)
+            },
+        )
     }
 }

@@ -1,10 +1,13 @@
-//! Fused CPU kernels for inference, where Burn's CPU backend (Flex) is slowest.
+//! Fused CPU kernels, where Burn's CPU backend (Flex) is slowest.
 //!
 //! Each kernel computes exactly what the tensor-op form it replaces computes, as one pass over
-//! the data in plain Rust (parallel through rayon, on the same global pool as Flex). They run
-//! only when [`apply`] holds: on the Flex device without autodiff. Training keeps the tensor-op
-//! forms, whose gradients Burn derives; a GPU keeps its data on the device. Tests check every
-//! kernel against its tensor-op form.
+//! the data in plain Rust (parallel through rayon, on the same global pool as Flex).
+//! Deformable aggregation, convolution and layer norm also train: [`extension`] gives them
+//! hand-written backward passes, and they run on Flex with or without autodiff
+//! ([`apply_differentiable`]). Max pool runs in inference only ([`apply`]); its training form
+//! keeps Burn's op and the argmax indices the backward pass needs. A GPU keeps its data on the
+//! device and Burn's tensor ops. Tests check every kernel, forward and backward, against its
+//! tensor-op form.
 
 mod conv;
 mod deformable;
