@@ -42,6 +42,27 @@ impl Geometry {
     fn is_pointwise(&self) -> bool {
         self.kernel == [1, 1] && self.stride == [1, 1] && self.padding == [0, 0]
     }
+
+    /// Floats in one input image.
+    fn image_len(&self) -> usize {
+        self.channels_in * self.input[0] * self.input[1]
+    }
+
+    /// Output pixels per channel.
+    fn pixels(&self) -> usize {
+        let [out_h, out_w] = self.output();
+        out_h * out_w
+    }
+
+    /// Panics unless the input and weight lengths match the geometry.
+    fn check(&self, input: &[f32], weight: &[f32]) {
+        assert_eq!(input.len(), self.batch * self.image_len(), "input length");
+        assert_eq!(
+            weight.len(),
+            self.channels_out * self.patch_len(),
+            "weight length"
+        );
+    }
 }
 
 /// `input` `[batch, cin, h, w]` convolved by `weight` `[cout, cin, kh, kw]`, to
@@ -50,27 +71,10 @@ impl Geometry {
 /// Panics if a slice's length does not match `geometry`, or the kernel (padded input) is larger
 /// than the input (the caller checks the tensor shapes).
 pub fn conv2d(input: &[f32], weight: &[f32], geometry: Geometry) -> Vec<f32> {
-    let Geometry {
-        batch,
-        channels_in,
-        channels_out,
-        input: [height, width],
-        ..
-    } = geometry;
-    assert_eq!(
-        input.len(),
-        batch * channels_in * height * width,
-        "input length"
-    );
-    assert_eq!(
-        weight.len(),
-        channels_out * geometry.patch_len(),
-        "weight length"
-    );
-    let [out_h, out_w] = geometry.output();
-    let pixels = out_h * out_w;
+    geometry.check(input, weight);
+    let (batch, channels_out) = (geometry.batch, geometry.channels_out);
+    let (pixels, image_len) = (geometry.pixels(), geometry.image_len());
     let mut output = vec![0f32; batch * channels_out * pixels];
-    let image_len = channels_in * height * width;
     let weight = Matrix::new(weight, channels_out, geometry.patch_len());
     let convolve = |(image, out): (&[f32], &mut [f32]), parallelism| {
         let patches = patches(image, geometry);
@@ -245,8 +249,7 @@ pub struct Gradients {
 }
 
 /// The gradients of [`conv2d`]'s output with respect to `input` and `weight`, given the
-/// output's gradient `grad` (`[batch, cout, oh, ow]`); the bias gradient is `grad` summed over
-/// the batch and the pixels. The input gradient is computed only when `input_grad` holds (an
+/// output's gradient `grad` (`[batch, cout, oh, ow]`). The input gradient is computed only when `input_grad` holds (an
 /// image fed to the first layer needs none).
 ///
 /// Per image, with `P` its patch matrix and `G` its output gradient (`[cout, pixels]`):
@@ -260,22 +263,9 @@ pub fn conv2d_backward(
     geometry: Geometry,
     input_grad: bool,
 ) -> Gradients {
-    let Geometry {
-        batch,
-        channels_in,
-        channels_out,
-        input: [height, width],
-        ..
-    } = geometry;
-    let [out_h, out_w] = geometry.output();
-    let pixels = out_h * out_w;
-    let image_len = channels_in * height * width;
-    assert_eq!(input.len(), batch * image_len, "input length");
-    assert_eq!(
-        weight.len(),
-        channels_out * geometry.patch_len(),
-        "weight length"
-    );
+    geometry.check(input, weight);
+    let (batch, channels_out) = (geometry.batch, geometry.channels_out);
+    let (pixels, image_len) = (geometry.pixels(), geometry.image_len());
     assert_eq!(grad.len(), batch * channels_out * pixels, "gradient length");
     let mut d_input = input_grad.then(|| vec![0f32; input.len()]);
     let mut d_images: Vec<Option<&mut [f32]>> = match &mut d_input {
