@@ -5,14 +5,15 @@ mod common;
 
 use burn::module::{Module, Param};
 use burn::nn::pool::MaxPool2dConfig;
-use burn::nn::{LayerNormConfig, PaddingConfig2d};
+use burn::nn::{BatchNormConfig, LayerNormConfig, PaddingConfig2d};
+use burn::tensor::activation::{gelu, sigmoid};
 use burn::tensor::ops::{ConvOptions, GridSampleOptions};
 use burn::tensor::{Device, Distribution, Tensor};
 
 use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::model::bev::align_previous_bev;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::cpu_kernels;
+use ssr_agent::model::cpu_kernels::{self, Activation};
 use ssr_agent::model::sampling::{
     bilinear_sample, deformable_aggregate, deformable_aggregate_by_tensor_ops,
 };
@@ -446,6 +447,108 @@ fn fused_layer_norm_matches_burn() {
             x.grad(&burn_grads),
         );
         for (name, parameter) in [("gamma", &gamma), ("beta", &beta)] {
+            assert_gradients_match(
+                &format!("{case}: {name}"),
+                parameter.grad(&fused_grads),
+                parameter.grad(&burn_grads),
+            );
+        }
+    }
+}
+
+#[test]
+fn fused_activations_match_burn() {
+    let device = Device::flex().autodiff();
+    // The large case spans several parallel chunks and a partial one; the transposed input is
+    // strided.
+    for (case, x) in [
+        (
+            "3x40000",
+            Tensor::<2>::random([3, 40_000], Distribution::Normal(0.0, 3.0), &device),
+        ),
+        (
+            "7x5 transposed",
+            Tensor::<2>::random([5, 7], Distribution::Normal(0.5, 4.0), &device).transpose(),
+        ),
+    ] {
+        let x = x.require_grad();
+        for activation in [Activation::Gelu, Activation::Sigmoid] {
+            let case = format!("{activation:?} {case}");
+            let expected = match activation {
+                Activation::Gelu => gelu(x.clone()),
+                Activation::Sigmoid => sigmoid(x.clone()),
+            };
+            let inference = cpu_kernels::activation(x.clone().inner(), activation);
+            let fused = cpu_kernels::activation(x.clone(), activation);
+            for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
+                let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
+                assert!(diff < 5e-6, "{case} ({path}): differs from Burn by {diff}");
+            }
+            let output_grad =
+                Tensor::<2>::random(x.dims(), Distribution::Normal(0.0, 1.0), &device);
+            let fused_grads = (fused * output_grad.clone()).sum().backward();
+            let burn_grads = (expected * output_grad).sum().backward();
+            assert_gradients_match(&case, x.grad(&fused_grads), x.grad(&burn_grads));
+        }
+    }
+}
+
+#[test]
+fn fused_batch_norm_matches_burn() {
+    let device = Device::flex().autodiff();
+    for shape in [[8, 5, 9, 11], [1, 3, 2, 3]] {
+        let case = format!("{shape:?}");
+        let channels = shape[1];
+        let parameter = |mean: f64| {
+            Param::from_tensor(
+                Tensor::<1>::random([channels], Distribution::Normal(mean, 0.5), &device)
+                    .require_grad(),
+            )
+        };
+        let (gamma, beta) = (parameter(1.0), parameter(0.0));
+        // Two layers with the same parameters and their own running statistics.
+        let layer = || {
+            let mut layer = BatchNormConfig::new(channels).init(&device);
+            layer.gamma = gamma.clone();
+            layer.beta = beta.clone();
+            layer
+        };
+        let (reference, fused_layer) = (layer(), layer());
+        let x = Tensor::<4>::random(shape, Distribution::Normal(2.0, 3.0), &device).require_grad();
+
+        let expected = reference.forward(x.clone());
+        let fused = cpu_kernels::batch_norm_layer(&fused_layer, x.clone());
+        let diff = max_abs_diff(float_values(fused.clone()), float_values(expected.clone()));
+        assert!(diff < 1e-4, "{case}: differs from BatchNorm by {diff}");
+        for (name, fused, expected) in [
+            (
+                "running mean",
+                &fused_layer.running_mean,
+                &reference.running_mean,
+            ),
+            (
+                "running variance",
+                &fused_layer.running_var,
+                &reference.running_var,
+            ),
+        ] {
+            let diff = max_abs_diff(
+                float_values(fused.value_sync()),
+                float_values(expected.value_sync()),
+            );
+            assert!(diff < 1e-5, "{case}: {name} differs by {diff}");
+        }
+
+        let output_grad = Tensor::<4>::random(shape, Distribution::Normal(0.0, 1.0), &device);
+        let fused_grads = (fused * output_grad.clone()).sum().backward();
+        let burn_grads = (expected * output_grad).sum().backward();
+        assert_gradients_match(
+            &format!("{case}: input"),
+            x.grad(&fused_grads),
+            x.grad(&burn_grads),
+        );
+        for (name, parameter) in [("gamma", &gamma), ("beta", &beta)] {
+            let parameter = parameter.val();
             assert_gradients_match(
                 &format!("{case}: {name}"),
                 parameter.grad(&fused_grads),

@@ -45,7 +45,7 @@ impl ConvBn {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        self.bn.forward(cpu_kernels::conv2d_layer(&self.conv, x))
+        cpu_kernels::batch_norm_layer(&self.bn, cpu_kernels::conv2d_layer(&self.conv, x))
     }
 }
 
@@ -84,7 +84,7 @@ impl Stem {
         } else {
             cpu_kernels::conv2d_layer(&self.conv, images)
         };
-        self.bn.forward(y)
+        cpu_kernels::batch_norm_layer(&self.bn, y)
     }
 
     /// The strided convolution computed on the space-to-depth rearrangement of the image.
@@ -115,7 +115,7 @@ impl Stem {
             .reshape([cout, c, taps, s, taps, s])
             .permute([0, 1, 3, 5, 2, 4])
             .reshape([cout, c * s * s, taps, taps]);
-        let y = if cpu_kernels::apply(&phases.device()) {
+        let y = if cpu_kernels::apply_differentiable(&phases.device()) {
             cpu_kernels::conv2d(phases, weight, None, [1, 1], [0, 0])
         } else {
             conv2d(

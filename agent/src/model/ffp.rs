@@ -13,10 +13,11 @@
 
 use burn::module::Module;
 use burn::nn::{GroupNorm, GroupNormConfig, Linear};
-use burn::tensor::activation::{gelu, relu, sigmoid};
+use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
+use super::cpu_kernels::{self, Activation};
 use super::init::{constant_linear, xavier_linear};
 use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
@@ -90,7 +91,8 @@ impl TokenFuser {
             .norm_slots
             .forward(self.expand.forward(tokens.swap_dims(1, 2)));
         let bev = single_group_norm(&self.norm_bev, bev);
-        let mix = sigmoid(self.mix_out.forward(gelu(self.mix_in.forward(bev))));
+        let hidden = cpu_kernels::activation(self.mix_in.forward(bev), Activation::Gelu);
+        let mix = cpu_kernels::activation(self.mix_out.forward(hidden), Activation::Sigmoid);
         mix.matmul(slots.swap_dims(1, 2))
     }
 }

@@ -9,10 +9,11 @@
 
 use burn::module::Module;
 use burn::nn::{GroupNorm, GroupNormConfig, Linear};
-use burn::tensor::activation::{gelu, relu, sigmoid, softmax};
+use burn::tensor::activation::{relu, sigmoid, softmax};
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
+use super::cpu_kernels::{self, Activation};
 use super::init::xavier_linear;
 use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
@@ -66,7 +67,8 @@ impl TokenLearner {
     /// `x` `[B, Q, D]` to tokens `[B, S, D]` and attention `[B, S, Q]` (each row sums to 1).
     pub fn forward(&self, x: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
         let normalised = single_group_norm(&self.norm, x.clone());
-        let logits = self.fc_out.forward(gelu(self.fc_in.forward(normalised)));
+        let hidden = cpu_kernels::activation(self.fc_in.forward(normalised), Activation::Gelu);
+        let logits = self.fc_out.forward(hidden);
         let attention = softmax(logits.swap_dims(1, 2), 2);
         (attention.clone().matmul(x), attention)
     }

@@ -10,6 +10,11 @@
 //! - Convolution: Flex's backward passes run a transposed convolution and a 3-D convolution
 //!   element by element; here both are matrix products over the im2col patches
 //!   ([`conv::conv2d_backward`]).
+//! - Batch norm in training: Flex takes the statistics through a transposed copy and
+//!   normalises in single-threaded passes; here both directions are two parallel passes
+//!   ([`batch_norm`]).
+//! - Activations: Flex maps GELU and sigmoid and their derivatives on one thread, GELU through
+//!   a scalar `erf`; here each is one parallel, vectorised pass ([`activation`]).
 
 use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -18,10 +23,11 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Autodiff, Backend, Flex, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, AutodiffBackend, Backend, Flex, TensorMetadata, backend_extension};
 use burn::tensor::{DType, Shape, TensorData};
 
-use super::{conv, deformable, layer_norm};
+use super::activation::{self, Activation};
+use super::{batch_norm, conv, deformable, layer_norm};
 
 #[backend_extension(Flex, Autodiff)]
 pub trait KernelOps: Backend {
@@ -49,6 +55,18 @@ pub trait KernelOps: Backend {
         stride: [usize; 2],
         padding: [usize; 2],
     ) -> FloatTensor<Self>;
+
+    /// [`super::activation`] on backend primitives.
+    fn activation(x: FloatTensor<Self>, activation: Activation) -> FloatTensor<Self>;
+
+    /// [`super::batch_norm_train`] on backend primitives: the output, then the batch mean and
+    /// biased variance per channel (not tracked).
+    fn batch_norm_train(
+        x: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>);
 }
 
 /// The data of a float32 tensor in row-major order, copied only when its layout is strided.
@@ -63,6 +81,22 @@ fn contiguous(tensor: &FlexTensor) -> FlexTensor {
 
 fn from_vec(data: Vec<f32>, shape: Shape) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(data, shape))
+}
+
+/// The length of a shape's last axis (the rows of a layer norm).
+fn last_dim(shape: &Shape) -> usize {
+    shape[shape.num_dims() - 1]
+}
+
+/// The batch norm's sizes, read from its input's shape.
+fn batch_norm_shape(x: &FlexTensor) -> batch_norm::Shape {
+    let shape = x.shape();
+    let (batch, channels) = (shape[0], shape[1]);
+    batch_norm::Shape {
+        batch,
+        channels,
+        plane: shape.num_elements() / (batch * channels).max(1),
+    }
 }
 
 /// The convolution's geometry, read from its tensors' shapes.
@@ -144,6 +178,7 @@ impl KernelOps for Flex {
         let shape = x.shape();
         let output = layer_norm::forward(
             contiguous(&x).storage(),
+            last_dim(&shape),
             contiguous(&gamma).storage(),
             contiguous(&beta).storage(),
             epsilon as f32,
@@ -168,6 +203,99 @@ impl KernelOps for Flex {
             output,
             [geometry.batch, geometry.channels_out, out_h, out_w].into(),
         )
+    }
+
+    fn activation(x: FlexTensor, activation: Activation) -> FlexTensor {
+        let shape = x.shape();
+        from_vec(
+            activation::forward(activation, contiguous(&x).storage()),
+            shape,
+        )
+    }
+
+    fn batch_norm_train(
+        x: FlexTensor,
+        gamma: FlexTensor,
+        beta: FlexTensor,
+        epsilon: f64,
+    ) -> (FlexTensor, FlexTensor, FlexTensor) {
+        let (shape, channels) = (x.shape(), gamma.shape());
+        let result = batch_norm::forward(
+            contiguous(&x).storage(),
+            batch_norm_shape(&x),
+            contiguous(&gamma).storage(),
+            contiguous(&beta).storage(),
+            epsilon as f32,
+        );
+        (
+            from_vec(result.output, shape),
+            from_vec(result.mean, channels.clone()),
+            from_vec(result.variance, channels),
+        )
+    }
+}
+
+#[derive(Debug)]
+struct BatchNormBackward;
+
+impl Backward<Flex, 3> for BatchNormBackward {
+    /// The checkpointed input and gamma, and epsilon.
+    type State = (NodeId, NodeId, f64);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 3>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [x_node, gamma_node, beta_node] = ops.parents;
+        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
+        let (x, gamma, epsilon) = ops.state;
+        let x: FlexTensor = checkpointer.retrieve_node_output(x);
+        let gamma: FlexTensor = checkpointer.retrieve_node_output(gamma);
+        let (x_shape, gamma_shape) = (x.shape(), gamma.shape());
+        let gradients = batch_norm::backward(
+            contiguous(&x).storage(),
+            batch_norm_shape(&x),
+            contiguous(&gamma).storage(),
+            grad.storage(),
+            epsilon as f32,
+        );
+        register(
+            grads,
+            [
+                (x_node.map(|n| n.id), gradients.input, x_shape),
+                (
+                    gamma_node.map(|n| n.id),
+                    gradients.gamma,
+                    gamma_shape.clone(),
+                ),
+                (beta_node.map(|n| n.id), gradients.beta, gamma_shape),
+            ],
+        );
+    }
+}
+
+#[derive(Debug)]
+struct ActivationBackward;
+
+impl Backward<Flex, 1> for ActivationBackward {
+    /// The checkpointed input and the activation.
+    type State = (NodeId, Activation);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 1>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [x_node] = ops.parents;
+        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
+        let (x, activation) = ops.state;
+        let x: FlexTensor = checkpointer.retrieve_node_output(x);
+        let shape = x.shape();
+        let gradient = activation::backward(activation, contiguous(&x).storage(), grad.storage());
+        register(grads, [(x_node.map(|n| n.id), gradient, shape)]);
     }
 }
 
@@ -241,6 +369,7 @@ impl Backward<Flex, 3> for LayerNormBackward {
         let (x_shape, gamma_shape) = (x.shape(), gamma.shape());
         let gradients = layer_norm::backward(
             contiguous(&x).storage(),
+            last_dim(&x_shape),
             contiguous(&gamma).storage(),
             grad.storage(),
             epsilon as f32,
@@ -365,5 +494,35 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
                 Flex::deformable_aggregate(values, locations, weights, height, width)
             },
         )
+    }
+
+    fn activation(x: FloatTensor<Self>, activation: Activation) -> FloatTensor<Self> {
+        record::<_, C, 1>(
+            ActivationBackward,
+            [x],
+            |[x]| (x, activation),
+            |[x]| Flex::activation(x, activation),
+        )
+    }
+
+    fn batch_norm_train(
+        x: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
+        let mut statistics = None;
+        let output = record::<_, C, 3>(
+            BatchNormBackward,
+            [x, gamma, beta],
+            |[x, gamma, _]| (x, gamma, epsilon),
+            |[x, gamma, beta]| {
+                let (output, mean, variance) = Flex::batch_norm_train(x, gamma, beta, epsilon);
+                statistics = Some((mean, variance));
+                output
+            },
+        );
+        let (mean, variance) = statistics.expect("`record` runs the forward pass");
+        (output, Self::from_inner(mean), Self::from_inner(variance))
     }
 }

@@ -1,15 +1,19 @@
-//! Layer normalisation over the last axis, forward and backward, one pass per row.
+//! Normalisation over the last axis, forward and backward, one pass per row.
 //!
 //! Flex normalises rows in one pass in inference, but autodiff has no layer-norm operation of
 //! its own: it records the decomposition (mean, centring, variance, square root, division,
 //! scale, shift), each step a separate pass over the whole tensor forward and several backward.
 //! For the BEV encoder's `[8, 1024, 64]` that is 6.5 ms per norm and training step; here it is
 //! two passes over the rows.
+//!
+//! The affine parameters may be shorter than a row and repeat along it: a row of `L x C`
+//! channels-last values with a `[C]` gamma is a one-group group norm
+//! ([`crate::model::norm::single_group_norm`]).
 
 use rayon::prelude::*;
 
-/// Rows per parallel task.
-const ROWS_PER_TASK: usize = 64;
+/// Values per parallel task in the forward pass (whole rows, at least one).
+const VALUES_PER_TASK: usize = 16 * 1024;
 
 /// Mean and reciprocal standard deviation (biased variance, plus `epsilon`) of a row.
 #[inline(always)]
@@ -20,24 +24,41 @@ fn statistics(row: &[f32], epsilon: f32) -> (f32, f32) {
     (mean, 1.0 / (variance + epsilon).sqrt())
 }
 
-/// `x` `[rows, d]` normalised per row, times `gamma` `[d]`, plus `beta` `[d]`.
-pub fn forward(x: &[f32], gamma: &[f32], beta: &[f32], epsilon: f32) -> Vec<f32> {
-    let d = gamma.len();
-    assert_eq!(beta.len(), d, "beta length");
-    assert_eq!(x.len() % d, 0, "input length");
+/// `x` `[rows, row_len]` normalised per row, times `gamma`, plus `beta`; the two have one
+/// length `d` that divides `row_len`, and value `k` of a row takes `gamma[k % d]`.
+///
+/// Panics if the lengths do not fit that shape.
+pub fn forward(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32], epsilon: f32) -> Vec<f32> {
+    let d = check_lengths(x, row_len, gamma, beta);
+    let rows_per_task = (VALUES_PER_TASK / row_len).max(1);
     let mut output = vec![0f32; x.len()];
     output
-        .par_chunks_mut(d * ROWS_PER_TASK)
-        .zip(x.par_chunks(d * ROWS_PER_TASK))
+        .par_chunks_mut(row_len * rows_per_task)
+        .zip(x.par_chunks(row_len * rows_per_task))
         .for_each(|(out, x)| {
-            for (out, row) in out.chunks_exact_mut(d).zip(x.chunks_exact(d)) {
+            for (out, row) in out.chunks_exact_mut(row_len).zip(x.chunks_exact(row_len)) {
                 let (mean, rstd) = statistics(row, epsilon);
-                for (((o, v), g), b) in out.iter_mut().zip(row).zip(gamma).zip(beta) {
-                    *o = (v - mean) * rstd * g + b;
+                for (out, row) in out.chunks_exact_mut(d).zip(row.chunks_exact(d)) {
+                    for (((o, v), g), b) in out.iter_mut().zip(row).zip(gamma).zip(beta) {
+                        *o = (v - mean) * rstd * g + b;
+                    }
                 }
             }
         });
     output
+}
+
+/// `d`, after checking that `gamma` and `beta` have length `d`, `d` divides `row_len`, and `x`
+/// is whole rows.
+fn check_lengths(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32]) -> usize {
+    let d = gamma.len();
+    assert_eq!(beta.len(), d, "beta length");
+    assert!(
+        d > 0 && row_len % d == 0,
+        "row length {row_len}, affine length {d}"
+    );
+    assert_eq!(x.len() % row_len, 0, "input length");
+    d
 }
 
 /// Gradients of [`forward`] with respect to its three inputs.
@@ -48,44 +69,57 @@ pub struct Gradients {
 }
 
 /// The gradients of [`forward`]'s output with respect to `x`, `gamma` and `beta`, given the
-/// output's gradient `grad` (`[rows, d]`). With `x̂` the normalised row and `g = grad * gamma`:
-/// `dx = rstd * (g - mean(g) - x̂ * mean(g * x̂))`, `dgamma = Σ grad * x̂`, `dbeta = Σ grad`.
+/// output's gradient `grad` (`[rows, row_len]`). With `x̂` the normalised row and
+/// `g = grad * gamma`: `dx = rstd * (g - mean(g) - x̂ * mean(g * x̂))`, `dgamma = Σ grad * x̂`,
+/// `dbeta = Σ grad` (summed over rows and over the repeats within a row).
 ///
 /// Rows run in parallel, one task per thread, each summing its own parameter gradients in
 /// order: the result does not depend on scheduling.
-pub fn backward(x: &[f32], gamma: &[f32], grad: &[f32], epsilon: f32) -> Gradients {
-    let d = gamma.len();
-    assert_eq!(x.len() % d, 0, "input length");
+pub fn backward(x: &[f32], row_len: usize, gamma: &[f32], grad: &[f32], epsilon: f32) -> Gradients {
+    let d = check_lengths(x, row_len, gamma, gamma);
     assert_eq!(grad.len(), x.len(), "gradient length");
-    let rows = x.len() / d;
+    let rows = x.len() / row_len;
     let rows_per_task = rows.div_ceil(rayon::current_num_threads()).max(1);
     let mut d_input = vec![0f32; x.len()];
     let partial_sums: Vec<(Vec<f32>, Vec<f32>)> = d_input
-        .par_chunks_mut(d * rows_per_task)
-        .zip(x.par_chunks(d * rows_per_task))
-        .zip(grad.par_chunks(d * rows_per_task))
+        .par_chunks_mut(row_len * rows_per_task)
+        .zip(x.par_chunks(row_len * rows_per_task))
+        .zip(grad.par_chunks(row_len * rows_per_task))
         .map(|((d_x, x), grad)| {
             let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
-            let mut normalised = vec![0f32; d];
+            let mut normalised = vec![0f32; row_len];
             for ((d_x, row), grad) in d_x
-                .chunks_exact_mut(d)
-                .zip(x.chunks_exact(d))
-                .zip(grad.chunks_exact(d))
+                .chunks_exact_mut(row_len)
+                .zip(x.chunks_exact(row_len))
+                .zip(grad.chunks_exact(row_len))
             {
                 let (mean, rstd) = statistics(row, epsilon);
                 let (mut sum_g, mut sum_g_normalised) = (0.0, 0.0);
-                for k in 0..d {
-                    normalised[k] = (row[k] - mean) * rstd;
-                    let g = grad[k] * gamma[k];
-                    sum_g += g;
-                    sum_g_normalised += g * normalised[k];
-                    d_gamma[k] += grad[k] * normalised[k];
-                    d_beta[k] += grad[k];
+                for ((normalised, row), grad) in normalised
+                    .chunks_exact_mut(d)
+                    .zip(row.chunks_exact(d))
+                    .zip(grad.chunks_exact(d))
+                {
+                    for k in 0..d {
+                        normalised[k] = (row[k] - mean) * rstd;
+                        let g = grad[k] * gamma[k];
+                        sum_g += g;
+                        sum_g_normalised += g * normalised[k];
+                        d_gamma[k] += grad[k] * normalised[k];
+                        d_beta[k] += grad[k];
+                    }
                 }
-                let (mean_g, mean_g_normalised) = (sum_g / d as f32, sum_g_normalised / d as f32);
-                for k in 0..d {
-                    d_x[k] =
-                        rstd * (grad[k] * gamma[k] - mean_g - normalised[k] * mean_g_normalised);
+                let n = row_len as f32;
+                let (mean_g, mean_g_normalised) = (sum_g / n, sum_g_normalised / n);
+                for ((d_x, normalised), grad) in d_x
+                    .chunks_exact_mut(d)
+                    .zip(normalised.chunks_exact(d))
+                    .zip(grad.chunks_exact(d))
+                {
+                    for k in 0..d {
+                        d_x[k] = rstd
+                            * (grad[k] * gamma[k] - mean_g - normalised[k] * mean_g_normalised);
+                    }
                 }
             }
             (d_gamma, d_beta)

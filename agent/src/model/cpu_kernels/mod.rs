@@ -2,13 +2,15 @@
 //!
 //! Each kernel computes exactly what the tensor-op form it replaces computes, as one pass over
 //! the data in plain Rust (parallel through rayon, on the same global pool as Flex).
-//! Deformable aggregation, convolution and layer norm also train: [`extension`] gives them
+//! Deformable aggregation, convolution, layer and batch norm and the activations also train: [`extension`] gives them
 //! hand-written backward passes, and they run on Flex with or without autodiff
 //! ([`apply_differentiable`]). Max pool runs in inference only ([`apply`]); its training form
 //! keeps Burn's op and the argmax indices the backward pass needs. A GPU keeps its data on the
 //! device and Burn's tensor ops. Tests check every kernel, forward and backward, against its
 //! tensor-op form.
 
+mod activation;
+mod batch_norm;
 mod conv;
 mod deformable;
 mod extension;
@@ -16,11 +18,13 @@ mod layer_norm;
 mod max_pool;
 
 use burn::backend::Dispatch;
-use burn::nn::PaddingConfig2d;
+use burn::module::RunningState;
 use burn::nn::conv::Conv2d;
 use burn::nn::pool::MaxPool2d;
+use burn::nn::{BatchNorm, PaddingConfig2d};
 use burn::tensor::{Device, Tensor, TensorData};
 
+pub use activation::Activation;
 use extension::KernelOps;
 
 /// Whether the fused kernels serve this device: Flex, in inference.
@@ -60,9 +64,11 @@ pub fn deformable_aggregate(
     ))
 }
 
-/// Layer norm over the last axis of `x`: normalised with `epsilon`, times `gamma` `[d]`, plus
-/// `beta` `[d]`, as Burn's `LayerNorm`. On Flex only (see [`apply_differentiable`]);
-/// differentiable: with autodiff the backward pass is the fused one of [`extension`].
+/// Layer norm over the last axis of `x`: normalised with `epsilon`, times `gamma`, plus `beta`,
+/// as Burn's `LayerNorm` when the two have the last axis's length `[d]`. Shorter ones repeat
+/// along the axis (its length must be a multiple of theirs). On Flex only (see
+/// [`apply_differentiable`]); differentiable: with autodiff the backward pass is the fused one
+/// of [`extension`].
 pub fn layer_norm<const D: usize>(
     x: Tensor<D>,
     gamma: Tensor<1>,
@@ -75,6 +81,69 @@ pub fn layer_norm<const D: usize>(
         beta.into_dispatch(),
         epsilon,
     ))
+}
+
+/// `activation` applied to every element of `x`: the fused kernel where it applies (Flex, in
+/// inference and training; differentiable), else Burn's op.
+pub fn activation<const D: usize>(x: Tensor<D>, activation: Activation) -> Tensor<D> {
+    if !apply_differentiable(&x.device()) {
+        return match activation {
+            Activation::Gelu => burn::tensor::activation::gelu(x),
+            Activation::Sigmoid => burn::tensor::activation::sigmoid(x),
+        };
+    }
+    Tensor::from_dispatch(<Dispatch as KernelOps>::activation(
+        x.into_dispatch(),
+        activation,
+    ))
+}
+
+/// `norm.forward(x)`: in training (autodiff, training flag on) on Flex, the batch statistics
+/// come from the fused kernel ([`batch_norm_train`]) and update the running ones as Burn's
+/// `BatchNorm` does; otherwise Burn's layer runs.
+pub fn batch_norm_layer(norm: &BatchNorm, x: Tensor<4>) -> Tensor<4> {
+    let device = x.device();
+    if !(device.is_autodiff() && norm.training.is_enabled() && apply_differentiable(&device)) {
+        return norm.forward(x);
+    }
+    let (output, mean, variance) =
+        batch_norm_train(x, norm.gamma.val(), norm.beta.val(), norm.epsilon);
+    let momentum = norm.momentum;
+    let update = |running: &RunningState<Tensor<1>>, batch: Tensor<1>| {
+        let updated = running
+            .value_sync()
+            .to_device(&device)
+            .mul_scalar(1.0 - momentum)
+            .add(batch.mul_scalar(momentum));
+        running.update(updated.detach());
+    };
+    update(&norm.running_mean, mean);
+    update(&norm.running_var, variance);
+    output
+}
+
+/// Batch norm of `x` `[N, C, ...]` by its own statistics per channel (`epsilon` added to the
+/// variance), times `gamma` `[C]`, plus `beta` `[C]`: the output, the batch mean and the biased
+/// variance (neither tracked). As Burn's `batch_norm_train`, on Flex only (see
+/// [`apply_differentiable`]); differentiable: with autodiff the backward pass is the fused one
+/// of [`extension`].
+pub fn batch_norm_train<const D: usize>(
+    x: Tensor<D>,
+    gamma: Tensor<1>,
+    beta: Tensor<1>,
+    epsilon: f64,
+) -> (Tensor<D>, Tensor<1>, Tensor<1>) {
+    let (output, mean, variance) = <Dispatch as KernelOps>::batch_norm_train(
+        x.into_dispatch(),
+        gamma.into_dispatch(),
+        beta.into_dispatch(),
+        epsilon,
+    );
+    (
+        Tensor::from_dispatch(output),
+        Tensor::from_dispatch(mean),
+        Tensor::from_dispatch(variance),
+    )
 }
 
 /// `layer.forward(x)`, through [`max_pool2d`] where the kernels apply and the layer is a plain
