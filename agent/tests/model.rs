@@ -5,7 +5,7 @@ mod common;
 
 use burn::module::{Module, Param};
 use burn::nn::pool::MaxPool2dConfig;
-use burn::nn::{BatchNormConfig, LayerNormConfig, PaddingConfig2d};
+use burn::nn::{BatchNormConfig, LayerNormConfig, LinearConfig, PaddingConfig2d};
 use burn::tensor::activation::{gelu, sigmoid};
 use burn::tensor::ops::{ConvOptions, GridSampleOptions};
 use burn::tensor::{Device, Distribution, Tensor};
@@ -555,6 +555,69 @@ fn fused_batch_norm_matches_burn() {
                 parameter.grad(&burn_grads),
             );
         }
+    }
+}
+
+#[test]
+fn fused_linear_matches_burn() {
+    let device = Device::flex().autodiff();
+    // The first case is large enough to run on all threads; the last input is strided.
+    for (rows, inputs, outputs, transposed) in
+        [(2400, 24, 40, false), (5, 7, 3, false), (6, 4, 5, true)]
+    {
+        let case = format!(
+            "{rows}x{inputs} to {outputs}{}",
+            if transposed { " (transposed)" } else { "" }
+        );
+        let layer = LinearConfig::new(inputs, outputs).init(&device);
+        let x = if transposed {
+            Tensor::<3>::random(
+                [2, inputs, rows / 2],
+                Distribution::Normal(0.5, 2.0),
+                &device,
+            )
+            .swap_dims(1, 2)
+        } else {
+            Tensor::<3>::random(
+                [2, rows / 2, inputs],
+                Distribution::Normal(0.5, 2.0),
+                &device,
+            )
+        }
+        .require_grad();
+
+        let expected = layer.forward(x.clone());
+        let inference = cpu_kernels::linear(&layer.valid(), x.clone().inner());
+        let fused = cpu_kernels::linear(&layer, x.clone());
+        for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
+            let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
+            assert!(
+                diff < 1e-4,
+                "{case} ({path}): differs from Linear by {diff}"
+            );
+        }
+
+        let output_grad =
+            Tensor::<3>::random(expected.dims(), Distribution::Normal(0.0, 1.0), &device);
+        let fused_grads = (fused * output_grad.clone()).sum().backward();
+        let burn_grads = (expected * output_grad).sum().backward();
+        assert_gradients_match(
+            &format!("{case}: input"),
+            x.grad(&fused_grads),
+            x.grad(&burn_grads),
+        );
+        let weight = layer.weight.val();
+        assert_gradients_match(
+            &format!("{case}: weight"),
+            weight.grad(&fused_grads),
+            weight.grad(&burn_grads),
+        );
+        let bias = layer.bias.as_ref().expect("bias").val();
+        assert_gradients_match(
+            &format!("{case}: bias"),
+            bias.grad(&fused_grads),
+            bias.grad(&burn_grads),
+        );
     }
 }
 

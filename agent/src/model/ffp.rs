@@ -89,10 +89,14 @@ impl TokenFuser {
         let tokens = single_group_norm(&self.norm_tokens, tokens);
         let slots = self
             .norm_slots
-            .forward(self.expand.forward(tokens.swap_dims(1, 2)));
+            .forward(cpu_kernels::linear(&self.expand, tokens.swap_dims(1, 2)));
         let bev = single_group_norm(&self.norm_bev, bev);
-        let hidden = cpu_kernels::activation(self.mix_in.forward(bev), Activation::Gelu);
-        let mix = cpu_kernels::activation(self.mix_out.forward(hidden), Activation::Sigmoid);
+        let hidden =
+            cpu_kernels::activation(cpu_kernels::linear(&self.mix_in, bev), Activation::Gelu);
+        let mix = cpu_kernels::activation(
+            cpu_kernels::linear(&self.mix_out, hidden),
+            Activation::Sigmoid,
+        );
         mix.matmul(slots.swap_dims(1, 2))
     }
 }

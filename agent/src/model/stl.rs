@@ -41,7 +41,10 @@ impl NavigationGate {
     /// `command` one-hot `[B, 6]`, `target_point` `[B, 2]` (ego frame, m) to a gate `[B, C]` in (0, 1).
     pub fn forward(&self, command: Tensor<2>, target_point: Tensor<2>) -> Tensor<2> {
         let navigation = Tensor::cat(vec![command, target_point.div_scalar(TARGET_SCALE)], 1);
-        sigmoid(self.fc_out.forward(relu(self.fc_in.forward(navigation))))
+        sigmoid(cpu_kernels::linear(
+            &self.fc_out,
+            relu(cpu_kernels::linear(&self.fc_in, navigation)),
+        ))
     }
 }
 
@@ -67,8 +70,11 @@ impl TokenLearner {
     /// `x` `[B, Q, D]` to tokens `[B, S, D]` and attention `[B, S, Q]` (each row sums to 1).
     pub fn forward(&self, x: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
         let normalised = single_group_norm(&self.norm, x.clone());
-        let hidden = cpu_kernels::activation(self.fc_in.forward(normalised), Activation::Gelu);
-        let logits = self.fc_out.forward(hidden);
+        let hidden = cpu_kernels::activation(
+            cpu_kernels::linear(&self.fc_in, normalised),
+            Activation::Gelu,
+        );
+        let logits = cpu_kernels::linear(&self.fc_out, hidden);
         let attention = softmax(logits.swap_dims(1, 2), 2);
         (attention.clone().matmul(x), attention)
     }

@@ -8,6 +8,7 @@ use burn::nn::{Initializer, LayerNorm, Linear};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
+use super::cpu_kernels;
 use super::init::xavier_linear;
 use super::norm::{layer_norm, layer_norm_config};
 
@@ -45,7 +46,10 @@ impl SelfAttentionLayer {
             .forward(MhaInput::new(query_key.clone(), query_key, x.clone()))
             .context;
         let x = layer_norm(&self.norm_attention, x + attended);
-        let ffn = self.ffn_out.forward(relu(self.ffn_in.forward(x.clone())));
+        let ffn = cpu_kernels::linear(
+            &self.ffn_out,
+            relu(cpu_kernels::linear(&self.ffn_in, x.clone())),
+        );
         layer_norm(&self.norm_ffn, x + ffn)
     }
 }

@@ -21,6 +21,7 @@ use temporal::TemporalSelfAttention;
 
 use crate::camera::MAX_CAMERAS;
 use crate::model::config::SsrConfig;
+use crate::model::cpu_kernels;
 use crate::model::float_tensor;
 use crate::model::init::xavier_linear;
 use crate::model::norm::{layer_norm, layer_norm_config};
@@ -185,9 +186,10 @@ impl BevEncoder {
                 geometry.camera_hits.clone(),
             );
             query = layer_norm(&layer.norm_spatial, query);
-            let ffn = layer
-                .ffn_out
-                .forward(relu(layer.ffn_in.forward(query.clone())));
+            let ffn = cpu_kernels::linear(
+                &layer.ffn_out,
+                relu(cpu_kernels::linear(&layer.ffn_in, query.clone())),
+            );
             query = layer_norm(&layer.norm_ffn, query + ffn);
         }
         query

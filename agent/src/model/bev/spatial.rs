@@ -9,6 +9,7 @@ use burn::nn::Linear;
 use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
 
+use crate::model::cpu_kernels;
 use crate::model::init::{constant_linear, deformable_offsets, xavier_linear};
 use crate::model::sampling::deformable_aggregate;
 
@@ -77,9 +78,7 @@ impl SpatialCrossAttention {
             &device,
         )
         .reshape([1, 1, 1, 1, 1, 1, 2]);
-        let offsets = self
-            .offsets
-            .forward(with_pos.clone())
+        let offsets = cpu_kernels::linear(&self.offsets, with_pos.clone())
             .reshape([b, q, heads, anchors, per_anchor, 2])
             .permute([0, 2, 1, 3, 4, 5])
             .unsqueeze_dim::<7>(1)
@@ -88,9 +87,7 @@ impl SpatialCrossAttention {
         let locations = (reference + offsets).reshape([b * cams * heads, q, points, 2]);
 
         let weights = softmax(
-            self.weights
-                .forward(with_pos)
-                .reshape([b, q, heads, points]),
+            cpu_kernels::linear(&self.weights, with_pos).reshape([b, q, heads, points]),
             3,
         )
         .permute([0, 2, 1, 3])
@@ -99,9 +96,7 @@ impl SpatialCrossAttention {
         .reshape([b * cams * heads, q, points]);
 
         let hw = features.height * features.width;
-        let values = self
-            .value_proj
-            .forward(features.values.clone())
+        let values = cpu_kernels::linear(&self.value_proj, features.values.clone())
             .reshape([b * cams, hw, heads, head_dim])
             .swap_dims(1, 2)
             .reshape([b * cams * heads, hw, head_dim]);
@@ -113,6 +108,6 @@ impl SpatialCrossAttention {
         let hits = camera_hits.unsqueeze_dim::<4>(3);
         let count = hits.clone().sum_dim(1).clamp_min(1.0).reshape([b, q, 1]);
         let mean = (sampled * hits).sum_dim(1).reshape([b, q, c]) / count;
-        query + self.output_proj.forward(mean)
+        query + cpu_kernels::linear(&self.output_proj, mean)
     }
 }

@@ -12,6 +12,7 @@ use burn::nn::Linear;
 use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
 
+use crate::model::cpu_kernels;
 use crate::model::init::{constant_linear, deformable_offsets, xavier_linear};
 use crate::model::sampling::{bilinear_sample, deformable_aggregate};
 
@@ -87,9 +88,7 @@ impl TemporalSelfAttention {
 
         let scale = Tensor::<1>::from_floats([1.0 / cols as f32, 1.0 / rows as f32], &device)
             .reshape([1, 1, 1, 1, 1, 2]);
-        let offsets = self
-            .offsets
-            .forward(context.clone())
+        let offsets = cpu_kernels::linear(&self.offsets, context.clone())
             .reshape([b, q, SLOTS, heads, points, 2])
             .permute([0, 2, 3, 1, 4, 5])
             * scale;
@@ -100,26 +99,25 @@ impl TemporalSelfAttention {
             2,
         ]);
         let weights = softmax(
-            self.weights
-                .forward(context)
-                .reshape([b, q, SLOTS, heads, points]),
+            cpu_kernels::linear(&self.weights, context).reshape([b, q, SLOTS, heads, points]),
             4,
         )
         .permute([0, 2, 3, 1, 4])
         .reshape([b * SLOTS * heads, q, points]);
 
-        let values = self
-            .value_proj
-            .forward(Tensor::stack::<4>(vec![previous, query.clone()], 1))
-            .reshape([b * SLOTS, q, heads, head_dim])
-            .swap_dims(1, 2)
-            .reshape([b * SLOTS * heads, q, head_dim]);
+        let values = cpu_kernels::linear(
+            &self.value_proj,
+            Tensor::stack::<4>(vec![previous, query.clone()], 1),
+        )
+        .reshape([b * SLOTS, q, heads, head_dim])
+        .swap_dims(1, 2)
+        .reshape([b * SLOTS * heads, q, head_dim]);
         let sampled = deformable_aggregate(values, rows, cols, locations, weights)
             .reshape([b, SLOTS, heads, q, head_dim])
             .mean_dim(1)
             .reshape([b, heads, q, head_dim])
             .swap_dims(1, 2)
             .reshape([b, q, c]);
-        query + self.output_proj.forward(sampled)
+        query + cpu_kernels::linear(&self.output_proj, sampled)
     }
 }

@@ -14,6 +14,8 @@ use std::borrow::Cow;
 use gemm::Parallelism;
 use rayon::prelude::*;
 
+use super::matrix::{Matrix, add_into, matmul};
+
 /// A convolution's geometry: one group, no dilation, symmetric zero padding.
 #[derive(Debug, Clone, Copy)]
 pub struct Geometry {
@@ -96,74 +98,6 @@ pub fn conv2d(input: &[f32], weight: &[f32], geometry: Geometry) -> Vec<f32> {
             .for_each(|pair| convolve(pair, Parallelism::None));
     }
     output
-}
-
-/// A row-major matrix view, read with the given strides (a transpose swaps them).
-#[derive(Clone, Copy)]
-struct Matrix<'a> {
-    data: &'a [f32],
-    rows: usize,
-    columns: usize,
-    row_stride: usize,
-    column_stride: usize,
-}
-
-impl<'a> Matrix<'a> {
-    /// `data` as `rows x columns`, row-major.
-    fn new(data: &'a [f32], rows: usize, columns: usize) -> Self {
-        assert_eq!(data.len(), rows * columns, "matrix length");
-        Self {
-            data,
-            rows,
-            columns,
-            row_stride: columns,
-            column_stride: 1,
-        }
-    }
-
-    fn transposed(self) -> Self {
-        Self {
-            rows: self.columns,
-            columns: self.rows,
-            row_stride: self.column_stride,
-            column_stride: self.row_stride,
-            ..self
-        }
-    }
-}
-
-/// `out` (`lhs.rows x rhs.columns`, row-major) = `lhs x rhs`, plus `out`'s old value when
-/// `accumulate`.
-fn matmul(out: &mut [f32], lhs: Matrix, rhs: Matrix, accumulate: bool, parallelism: Parallelism) {
-    let (m, n, k) = (lhs.rows, rhs.columns, lhs.columns);
-    assert_eq!(rhs.rows, k, "inner dimensions");
-    assert_eq!(out.len(), m * n, "output length");
-    // SAFETY: `Matrix::new` checked that each view's rows and columns, read with its strides,
-    // cover exactly its slice, and `out` holds m x n with row stride n; `out` is a unique
-    // borrow, so it does not alias the inputs.
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            out.as_mut_ptr(),
-            1,
-            n as isize,
-            accumulate,
-            lhs.data.as_ptr(),
-            lhs.column_stride as isize,
-            lhs.row_stride as isize,
-            rhs.data.as_ptr(),
-            rhs.column_stride as isize,
-            rhs.row_stride as isize,
-            if accumulate { 1.0 } else { 0.0 },
-            1.0,
-            false,
-            false,
-            false,
-            parallelism,
-        );
-    }
 }
 
 /// The image's patch matrix: the image itself for a pointwise convolution, else
@@ -335,7 +269,7 @@ pub fn conv2d_backward(
         .next()
         .unwrap_or_else(|| vec![0f32; weight.len()]);
     for part in partial_sums {
-        d_weight.iter_mut().zip(&part).for_each(|(s, p)| *s += p);
+        add_into(&mut d_weight, &part);
     }
     Gradients {
         input: d_input,

@@ -13,6 +13,8 @@
 //! - Batch norm in training: Flex takes the statistics through a transposed copy and
 //!   normalises in single-threaded passes; here both directions are two parallel passes
 //!   ([`batch_norm`]).
+//! - Linear layers: Flex's backward pass copies transposes and mostly runs on one thread;
+//!   here every product reads strided views and the large ones use all threads ([`linear`]).
 //! - Activations: Flex maps GELU and sigmoid and their derivatives on one thread, GELU through
 //!   a scalar `erf`; here each is one parallel, vectorised pass ([`activation`]).
 
@@ -27,7 +29,7 @@ use burn::backend::{Autodiff, AutodiffBackend, Backend, Flex, TensorMetadata, ba
 use burn::tensor::{DType, Shape, TensorData};
 
 use super::activation::{self, Activation};
-use super::{batch_norm, conv, deformable, layer_norm};
+use super::{batch_norm, conv, deformable, layer_norm, linear};
 
 #[backend_extension(Flex, Autodiff)]
 pub trait KernelOps: Backend {
@@ -54,6 +56,13 @@ pub trait KernelOps: Backend {
         weight: FloatTensor<Self>,
         stride: [usize; 2],
         padding: [usize; 2],
+    ) -> FloatTensor<Self>;
+
+    /// [`super::linear`] on backend primitives.
+    fn linear(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
     ) -> FloatTensor<Self>;
 
     /// [`super::activation`] on backend primitives.
@@ -86,6 +95,14 @@ fn from_vec(data: Vec<f32>, shape: Shape) -> FlexTensor {
 /// The length of a shape's last axis (the rows of a layer norm).
 fn last_dim(shape: &Shape) -> usize {
     shape[shape.num_dims() - 1]
+}
+
+/// The shape of a linear layer's output: the input's, with the weight's output width last.
+fn linear_output_shape(x: &FlexTensor, weight: &FlexTensor) -> Shape {
+    let mut shape = x.shape();
+    let last = shape.num_dims() - 1;
+    shape[last] = weight.shape()[1];
+    shape
 }
 
 /// The batch norm's sizes, read from its input's shape.
@@ -205,6 +222,15 @@ impl KernelOps for Flex {
         )
     }
 
+    fn linear(x: FlexTensor, weight: FlexTensor, bias: FlexTensor) -> FlexTensor {
+        let output = linear::forward(
+            contiguous(&x).storage(),
+            contiguous(&weight).storage(),
+            contiguous(&bias).storage(),
+        );
+        from_vec(output, linear_output_shape(&x, &weight))
+    }
+
     fn activation(x: FlexTensor, activation: Activation) -> FlexTensor {
         let shape = x.shape();
         from_vec(
@@ -232,6 +258,46 @@ impl KernelOps for Flex {
             from_vec(result.mean, channels.clone()),
             from_vec(result.variance, channels),
         )
+    }
+}
+
+#[derive(Debug)]
+struct LinearBackward;
+
+impl Backward<Flex, 3> for LinearBackward {
+    /// The checkpointed input and weight.
+    type State = (NodeId, NodeId);
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 3>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [x_node, weight_node, bias_node] = ops.parents;
+        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
+        let (x, weight) = ops.state;
+        let x: FlexTensor = checkpointer.retrieve_node_output(x);
+        let weight: FlexTensor = checkpointer.retrieve_node_output(weight);
+        let (x_shape, weight_shape) = (x.shape(), weight.shape());
+        let outputs = weight_shape[1];
+        let gradients = linear::backward(
+            contiguous(&x).storage(),
+            contiguous(&weight).storage(),
+            grad.storage(),
+            outputs,
+            x_node.is_some(),
+        );
+        if let (Some(node), Some(gradient)) = (x_node, gradients.input) {
+            grads.register::<Flex>(node.id, from_vec(gradient, x_shape));
+        }
+        register(
+            grads,
+            [
+                (weight_node.map(|n| n.id), gradients.weight, weight_shape),
+                (bias_node.map(|n| n.id), gradients.bias, [outputs].into()),
+            ],
+        );
     }
 }
 
@@ -493,6 +559,19 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
             |[values, locations, weights]| {
                 Flex::deformable_aggregate(values, locations, weights, height, width)
             },
+        )
+    }
+
+    fn linear(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+    ) -> FloatTensor<Self> {
+        record::<_, C, 3>(
+            LinearBackward,
+            [x, weight, bias],
+            |[x, weight, _]| (x, weight),
+            |[x, weight, bias]| Flex::linear(x, weight, bias),
         )
     }
 

@@ -12,6 +12,8 @@
 
 use rayon::prelude::*;
 
+use super::matrix::add_into;
+
 /// Values per parallel task in the forward pass (whole rows, at least one).
 const VALUES_PER_TASK: usize = 16 * 1024;
 
@@ -127,11 +129,8 @@ pub fn backward(x: &[f32], row_len: usize, gamma: &[f32], grad: &[f32], epsilon:
         .collect();
     let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
     for (gamma_part, beta_part) in partial_sums {
-        d_gamma
-            .iter_mut()
-            .zip(&gamma_part)
-            .for_each(|(s, p)| *s += p);
-        d_beta.iter_mut().zip(&beta_part).for_each(|(s, p)| *s += p);
+        add_into(&mut d_gamma, &gamma_part);
+        add_into(&mut d_beta, &beta_part);
     }
     Gradients {
         input: d_input,

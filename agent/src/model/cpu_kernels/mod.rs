@@ -15,13 +15,15 @@ mod conv;
 mod deformable;
 mod extension;
 mod layer_norm;
+mod linear;
+mod matrix;
 mod max_pool;
 
 use burn::backend::Dispatch;
 use burn::module::RunningState;
 use burn::nn::conv::Conv2d;
 use burn::nn::pool::MaxPool2d;
-use burn::nn::{BatchNorm, PaddingConfig2d};
+use burn::nn::{BatchNorm, Linear, PaddingConfig2d};
 use burn::tensor::{Device, Tensor, TensorData};
 
 pub use activation::Activation;
@@ -81,6 +83,21 @@ pub fn layer_norm<const D: usize>(
         beta.into_dispatch(),
         epsilon,
     ))
+}
+
+/// `layer.forward(x)`: on the fused kernel where it applies (Flex, in inference and training;
+/// differentiable) and the layer has a bias, else Burn's.
+pub fn linear<const D: usize>(layer: &Linear, x: Tensor<D>) -> Tensor<D> {
+    match &layer.bias {
+        Some(bias) if apply_differentiable(&x.device()) => {
+            Tensor::from_dispatch(<Dispatch as KernelOps>::linear(
+                x.into_dispatch(),
+                layer.weight.val().into_dispatch(),
+                bias.val().into_dispatch(),
+            ))
+        }
+        _ => layer.forward(x),
+    }
 }
 
 /// `activation` applied to every element of `x`: the fused kernel where it applies (Flex, in
