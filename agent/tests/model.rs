@@ -6,7 +6,7 @@ mod common;
 use burn::module::{Module, Param};
 use burn::nn::pool::MaxPool2dConfig;
 use burn::nn::{BatchNormConfig, LayerNormConfig, LinearConfig, PaddingConfig2d};
-use burn::tensor::activation::{gelu, sigmoid};
+use burn::tensor::activation::{gelu, relu, sigmoid, softmax};
 use burn::tensor::ops::{ConvOptions, GridSampleOptions};
 use burn::tensor::{Device, Distribution, Tensor};
 
@@ -472,11 +472,12 @@ fn fused_activations_match_burn() {
         ),
     ] {
         let x = x.require_grad();
-        for activation in [Activation::Gelu, Activation::Sigmoid] {
+        for activation in [Activation::Gelu, Activation::Sigmoid, Activation::Relu] {
             let case = format!("{activation:?} {case}");
             let expected = match activation {
                 Activation::Gelu => gelu(x.clone()),
                 Activation::Sigmoid => sigmoid(x.clone()),
+                Activation::Relu => relu(x.clone()),
             };
             let inference = cpu_kernels::activation(x.clone().inner(), activation);
             let fused = cpu_kernels::activation(x.clone(), activation);
@@ -618,6 +619,45 @@ fn fused_linear_matches_burn() {
             bias.grad(&fused_grads),
             bias.grad(&burn_grads),
         );
+    }
+}
+
+#[test]
+fn fused_softmax_matches_burn() {
+    let device = Device::flex().autodiff();
+    // Rows of 8 across several parallel tasks, long rows of a transposed (strided) input, and
+    // an axis other than the last (Burn's op).
+    let cases = [
+        (
+            "4000x8",
+            Tensor::<3>::random([2, 2000, 8], Distribution::Normal(0.0, 3.0), &device),
+            2,
+        ),
+        (
+            "transposed",
+            Tensor::<3>::random([2, 300, 5], Distribution::Normal(1.0, 2.0), &device)
+                .swap_dims(1, 2),
+            2,
+        ),
+        (
+            "middle axis",
+            Tensor::<3>::random([2, 7, 5], Distribution::Normal(0.0, 2.0), &device),
+            1,
+        ),
+    ];
+    for (case, x, dim) in cases {
+        let x = x.require_grad();
+        let expected = softmax(x.clone(), dim);
+        let inference = cpu_kernels::softmax(x.clone().inner(), dim);
+        let fused = cpu_kernels::softmax(x.clone(), dim);
+        for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
+            let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
+            assert!(diff < 1e-6, "{case} ({path}): differs from Burn by {diff}");
+        }
+        let output_grad = Tensor::<3>::random(x.dims(), Distribution::Normal(0.0, 1.0), &device);
+        let fused_grads = (fused * output_grad.clone()).sum().backward();
+        let burn_grads = (expected * output_grad).sum().backward();
+        assert_gradients_match(case, x.grad(&fused_grads), x.grad(&burn_grads));
     }
 }
 

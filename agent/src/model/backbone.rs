@@ -8,13 +8,12 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::pool::{MaxPool2d, MaxPool2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
-use burn::tensor::activation::relu;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
-use super::cpu_kernels;
+use super::cpu_kernels::{self, Activation};
 
 /// ImageNet mean and standard deviation of RGB in [0, 1].
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
@@ -153,8 +152,11 @@ impl BasicBlock {
             Some(projection) => projection.forward(x.clone()),
             None => x.clone(),
         };
-        let y = self.second.forward(relu(self.first.forward(x)));
-        relu(y + residual)
+        let y = self.second.forward(cpu_kernels::activation(
+            self.first.forward(x),
+            Activation::Relu,
+        ));
+        cpu_kernels::activation(y + residual, Activation::Relu)
     }
 }
 
@@ -201,7 +203,8 @@ impl Backbone {
 
     /// `[N, 3, H, W]` normalised images to `[N, C, h, w]` features.
     pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
-        let mut x = cpu_kernels::max_pool2d_layer(&self.pool, relu(self.stem.forward(images)));
+        let stem = cpu_kernels::activation(self.stem.forward(images), Activation::Relu);
+        let mut x = cpu_kernels::max_pool2d_layer(&self.pool, stem);
         for block in &self.blocks {
             x = block.forward(x);
         }

@@ -9,7 +9,7 @@
 
 use burn::module::Module;
 use burn::nn::{GroupNorm, GroupNormConfig, Linear};
-use burn::tensor::activation::{relu, sigmoid, softmax};
+use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
@@ -75,7 +75,7 @@ impl TokenLearner {
             Activation::Gelu,
         );
         let logits = cpu_kernels::linear(&self.fc_out, hidden);
-        let attention = softmax(logits.swap_dims(1, 2), 2);
+        let attention = cpu_kernels::softmax(logits.swap_dims(1, 2), 2);
         (attention.clone().matmul(x), attention)
     }
 }

@@ -21,7 +21,7 @@ use temporal::TemporalSelfAttention;
 
 use crate::camera::MAX_CAMERAS;
 use crate::model::config::SsrConfig;
-use crate::model::cpu_kernels;
+use crate::model::cpu_kernels::{self, Activation};
 use crate::model::float_tensor;
 use crate::model::init::xavier_linear;
 use crate::model::norm::{layer_norm, layer_norm_config};
@@ -188,7 +188,10 @@ impl BevEncoder {
             query = layer_norm(&layer.norm_spatial, query);
             let ffn = cpu_kernels::linear(
                 &layer.ffn_out,
-                relu(cpu_kernels::linear(&layer.ffn_in, query.clone())),
+                cpu_kernels::activation(
+                    cpu_kernels::linear(&layer.ffn_in, query.clone()),
+                    Activation::Relu,
+                ),
             );
             query = layer_norm(&layer.norm_ffn, query + ffn);
         }

@@ -6,7 +6,6 @@
 
 use burn::module::Module;
 use burn::nn::Linear;
-use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
 
 use crate::model::cpu_kernels;
@@ -86,7 +85,7 @@ impl SpatialCrossAttention {
         let reference = camera_points.reshape([b, cams, 1, q, anchors, 1, 2]);
         let locations = (reference + offsets).reshape([b * cams * heads, q, points, 2]);
 
-        let weights = softmax(
+        let weights = cpu_kernels::softmax(
             cpu_kernels::linear(&self.weights, with_pos).reshape([b, q, heads, points]),
             3,
         )

@@ -9,7 +9,6 @@
 
 use burn::module::Module;
 use burn::nn::Linear;
-use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor};
 
 use crate::model::cpu_kernels;
@@ -98,7 +97,7 @@ impl TemporalSelfAttention {
             points,
             2,
         ]);
-        let weights = softmax(
+        let weights = cpu_kernels::softmax(
             cpu_kernels::linear(&self.weights, context).reshape([b, q, SLOTS, heads, points]),
             4,
         )

@@ -1,4 +1,5 @@
-//! GELU and sigmoid, element-wise, forward and backward: one parallel, vectorised pass each.
+//! GELU, sigmoid and ReLU, element-wise, forward and backward: one parallel, vectorised pass
+//! each.
 //!
 //! Flex applies an activation on one thread, GELU through libm's scalar `erf`, and autodiff
 //! adds a second single-threaded pass for the derivative. Here `exp` and `erf` are branch-free
@@ -18,12 +19,14 @@ pub enum Activation {
     Gelu,
     /// `1 / (1 + e^-x)`.
     Sigmoid,
+    /// `max(x, 0)` (derivative 0 at 0).
+    Relu,
 }
 
 /// `e^x`, clamped to the normal float32 range: `x = n ln 2 + r` with `|r| <= ln 2 / 2`,
 /// `e^r` by Cephes' polynomial, `2^n` written into the exponent bits.
 #[inline(always)]
-fn exp(x: f32) -> f32 {
+pub(super) fn exp(x: f32) -> f32 {
     // Adding 1.5 * 2^23 rounds to an integer, which lands in the low mantissa bits.
     const SHIFT: f32 = 12_582_912.0;
     let x = x.clamp(-87.0, 88.0);
@@ -70,19 +73,28 @@ impl Activation {
         match self {
             Self::Gelu => x * normal_cdf_pdf(x).0,
             Self::Sigmoid => sigmoid(x),
+            Self::Relu => x.max(0.0),
         }
     }
 
+    /// The gradient with respect to `x`, given the output's gradient `grad`.
     #[inline(always)]
-    fn derivative(self, x: f32) -> f32 {
+    fn gradient(self, x: f32, grad: f32) -> f32 {
         match self {
             Self::Gelu => {
                 let (cdf, pdf) = normal_cdf_pdf(x);
-                cdf + x * pdf
+                grad * (cdf + x * pdf)
             }
             Self::Sigmoid => {
                 let s = sigmoid(x);
-                s * (1.0 - s)
+                grad * s * (1.0 - s)
+            }
+            Self::Relu => {
+                if x > 0.0 {
+                    grad
+                } else {
+                    0.0
+                }
             }
         }
     }
@@ -128,6 +140,7 @@ pub fn forward(activation: Activation, x: &[f32]) -> Vec<f32> {
     match activation {
         Activation::Gelu => map(&mut output, x, x, |x, _| Activation::Gelu.value(x)),
         Activation::Sigmoid => map(&mut output, x, x, |x, _| Activation::Sigmoid.value(x)),
+        Activation::Relu => map(&mut output, x, x, |x, _| Activation::Relu.value(x)),
     }
     output
 }
@@ -139,10 +152,9 @@ pub fn backward(activation: Activation, x: &[f32], grad: &[f32]) -> Vec<f32> {
     assert_eq!(grad.len(), x.len(), "gradient length");
     let mut d_x = vec![0f32; x.len()];
     match activation {
-        Activation::Gelu => map(&mut d_x, x, grad, |x, g| g * Activation::Gelu.derivative(x)),
-        Activation::Sigmoid => map(&mut d_x, x, grad, |x, g| {
-            g * Activation::Sigmoid.derivative(x)
-        }),
+        Activation::Gelu => map(&mut d_x, x, grad, |x, g| Activation::Gelu.gradient(x, g)),
+        Activation::Sigmoid => map(&mut d_x, x, grad, |x, g| Activation::Sigmoid.gradient(x, g)),
+        Activation::Relu => map(&mut d_x, x, grad, |x, g| Activation::Relu.gradient(x, g)),
     }
     d_x
 }

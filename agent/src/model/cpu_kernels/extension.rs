@@ -15,8 +15,9 @@
 //!   ([`batch_norm`]).
 //! - Linear layers: Flex's backward pass copies transposes and mostly runs on one thread;
 //!   here every product reads strided views and the large ones use all threads ([`linear`]).
-//! - Activations: Flex maps GELU and sigmoid and their derivatives on one thread, GELU through
-//!   a scalar `erf`; here each is one parallel, vectorised pass ([`activation`]).
+//! - Activations and softmax: Flex maps them and their derivatives on one thread (softmax as
+//!   five passes, GELU through a scalar `erf`); here each is one parallel, vectorised pass
+//!   ([`activation`], [`softmax`]).
 
 use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -29,7 +30,7 @@ use burn::backend::{Autodiff, AutodiffBackend, Backend, Flex, TensorMetadata, ba
 use burn::tensor::{DType, Shape, TensorData};
 
 use super::activation::{self, Activation};
-use super::{batch_norm, conv, deformable, layer_norm, linear};
+use super::{batch_norm, conv, deformable, layer_norm, linear, softmax};
 
 #[backend_extension(Flex, Autodiff)]
 pub trait KernelOps: Backend {
@@ -67,6 +68,9 @@ pub trait KernelOps: Backend {
 
     /// [`super::activation`] on backend primitives.
     fn activation(x: FloatTensor<Self>, activation: Activation) -> FloatTensor<Self>;
+
+    /// [`super::softmax`] over the last axis, on backend primitives.
+    fn softmax(x: FloatTensor<Self>) -> FloatTensor<Self>;
 
     /// [`super::batch_norm_train`] on backend primitives: the output, then the batch mean and
     /// biased variance per channel (not tracked).
@@ -239,6 +243,14 @@ impl KernelOps for Flex {
         )
     }
 
+    fn softmax(x: FlexTensor) -> FlexTensor {
+        let shape = x.shape();
+        from_vec(
+            softmax::forward(contiguous(&x).storage(), last_dim(&shape)),
+            shape,
+        )
+    }
+
     fn batch_norm_train(
         x: FlexTensor,
         gamma: FlexTensor,
@@ -298,6 +310,29 @@ impl Backward<Flex, 3> for LinearBackward {
                 (bias_node.map(|n| n.id), gradients.bias, [outputs].into()),
             ],
         );
+    }
+}
+
+#[derive(Debug)]
+struct SoftmaxBackward;
+
+impl Backward<Flex, 1> for SoftmaxBackward {
+    /// The checkpointed input.
+    type State = NodeId;
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 1>,
+        grads: &mut Gradients,
+        checkpointer: &mut Checkpointer,
+    ) {
+        let [x_node] = ops.parents;
+        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
+        let x: FlexTensor = checkpointer.retrieve_node_output(ops.state);
+        let shape = x.shape();
+        let gradient =
+            softmax::backward(contiguous(&x).storage(), grad.storage(), last_dim(&shape));
+        register(grads, [(x_node.map(|n| n.id), gradient, shape)]);
     }
 }
 
@@ -582,6 +617,10 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
             |[x]| (x, activation),
             |[x]| Flex::activation(x, activation),
         )
+    }
+
+    fn softmax(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        record::<_, C, 1>(SoftmaxBackward, [x], |[x]| x, |[x]| Flex::softmax(x))
     }
 
     fn batch_norm_train(

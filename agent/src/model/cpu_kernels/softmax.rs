@@ -1,0 +1,79 @@
+//! Softmax over the last axis, forward and backward, one pass per row.
+//!
+//! Burn composes softmax from a maximum, a subtraction, an exponential, a sum and a division,
+//! each a single-threaded pass over the tensor on Flex and each recorded for the backward pass.
+//! Here rows run in parallel, with the vectorised `exp` of [`super::activation`].
+
+use rayon::prelude::*;
+
+use super::activation::exp;
+
+/// Values per parallel task (whole rows, at least one).
+const VALUES_PER_TASK: usize = 16 * 1024;
+
+/// Writes the softmax of `row` into `out`.
+#[inline(always)]
+fn softmax_row(out: &mut [f32], row: &[f32]) {
+    let max = row.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+    let mut sum = 0.0;
+    for (o, &v) in out.iter_mut().zip(row) {
+        *o = exp(v - max);
+        sum += *o;
+    }
+    let scale = 1.0 / sum;
+    out.iter_mut().for_each(|o| *o *= scale);
+}
+
+/// Runs `f(out_row, x_row, grad_row)` over the rows of length `d`, in parallel.
+fn for_each_row(
+    out: &mut [f32],
+    x: &[f32],
+    grad: &[f32],
+    d: usize,
+    f: impl Fn(&mut [f32], &[f32], &[f32]) + Sync,
+) {
+    assert!(
+        d > 0 && x.len() % d == 0,
+        "input length {} in rows of {d}",
+        x.len()
+    );
+    assert_eq!(grad.len(), x.len(), "gradient length");
+    let task = d * (VALUES_PER_TASK / d).max(1);
+    out.par_chunks_mut(task)
+        .zip(x.par_chunks(task).zip(grad.par_chunks(task)))
+        .for_each(|(out, (x, grad))| {
+            for ((out, x), grad) in out
+                .chunks_exact_mut(d)
+                .zip(x.chunks_exact(d))
+                .zip(grad.chunks_exact(d))
+            {
+                f(out, x, grad);
+            }
+        });
+}
+
+/// The softmax of every row of `d` values of `x`.
+///
+/// Panics unless `x` is whole rows.
+pub fn forward(x: &[f32], d: usize) -> Vec<f32> {
+    let mut output = vec![0f32; x.len()];
+    // The gradient slot is unused: zip it against `x` itself.
+    for_each_row(&mut output, x, x, d, |out, row, _| softmax_row(out, row));
+    output
+}
+
+/// The gradient with respect to `x` of [`forward`], given the output's gradient `grad`: per
+/// row, with `y` the softmax (recomputed), `dx = y * (grad - Σ grad * y)`.
+///
+/// Panics unless `x` is whole rows and `grad` matches it.
+pub fn backward(x: &[f32], grad: &[f32], d: usize) -> Vec<f32> {
+    let mut d_x = vec![0f32; x.len()];
+    for_each_row(&mut d_x, x, grad, d, |d_x, row, grad| {
+        softmax_row(d_x, row);
+        let dot: f32 = d_x.iter().zip(grad).map(|(y, g)| y * g).sum();
+        for (d, g) in d_x.iter_mut().zip(grad) {
+            *d *= g - dot;
+        }
+    });
+    d_x
+}
