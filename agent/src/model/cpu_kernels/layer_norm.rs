@@ -56,7 +56,7 @@ fn check_lengths(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32]) -> usiz
     let d = gamma.len();
     assert_eq!(beta.len(), d, "beta length");
     assert!(
-        d > 0 && row_len % d == 0,
+        d > 0 && row_len.is_multiple_of(d),
         "row length {row_len}, affine length {d}"
     );
     assert_eq!(x.len() % row_len, 0, "input length");

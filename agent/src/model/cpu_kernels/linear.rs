@@ -26,9 +26,9 @@ struct Sizes {
 impl Sizes {
     /// Reads the sizes from the slices, panicking unless they fit together.
     fn new(x: &[f32], weight: &[f32], outputs: usize) -> Self {
-        assert!(outputs > 0 && weight.len() % outputs == 0, "weight length");
+        assert!(outputs > 0 && weight.len().is_multiple_of(outputs), "weight length");
         let inputs = weight.len() / outputs;
-        assert!(inputs > 0 && x.len() % inputs == 0, "input length");
+        assert!(inputs > 0 && x.len().is_multiple_of(inputs), "input length");
         Self {
             rows: x.len() / inputs,
             inputs,

@@ -33,7 +33,7 @@ fn for_each_row(
     f: impl Fn(&mut [f32], &[f32], &[f32]) + Sync,
 ) {
     assert!(
-        d > 0 && x.len() % d == 0,
+        d > 0 && x.len().is_multiple_of(d),
         "input length {} in rows of {d}",
         x.len()
     );
