@@ -8,7 +8,7 @@ use burn::nn::pool::MaxPool2dConfig;
 use burn::nn::{BatchNormConfig, LayerNormConfig, LinearConfig, PaddingConfig2d};
 use burn::tensor::activation::{gelu, relu, sigmoid, softmax};
 use burn::tensor::ops::{ConvOptions, GridSampleOptions};
-use burn::tensor::{Device, Distribution, Tensor};
+use burn::tensor::{Device, Distribution, Gradients, Tensor};
 
 use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::model::bev::align_previous_bev;
@@ -372,18 +372,9 @@ fn fused_convolution_matches_burn() {
             );
             let actual = fused(x.clone(), weight.clone(), bias.clone());
             assert_eq!(actual.dims(), expected.dims(), "{case}");
-            for (path, output) in [("inference", inference), ("autodiff", actual.clone())] {
-                let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
-                assert!(
-                    diff < 1e-4,
-                    "{case} ({path}): differs from Burn's conv2d by {diff}"
-                );
-            }
+            assert_outputs_match(&case, inference, &actual, &expected, 1e-4);
 
-            let output_grad =
-                Tensor::<4>::random(expected.dims(), Distribution::Normal(0.0, 1.0), &device);
-            let fused_grads = (actual * output_grad.clone()).sum().backward();
-            let burn_grads = (expected * output_grad).sum().backward();
+            let (fused_grads, burn_grads) = backward_both(actual, expected);
             for (name, input) in [("input", &x), ("weight", &weight)] {
                 assert_gradients_match(
                     &format!("{case}: {name}"),
@@ -430,17 +421,9 @@ fn fused_layer_norm_matches_burn() {
             epsilon,
         );
         let fused = cpu_kernels::layer_norm(x.clone(), gamma.clone(), beta.clone(), epsilon);
-        for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
-            let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
-            assert!(
-                diff < 1e-4,
-                "{case} ({path}): differs from LayerNorm by {diff}"
-            );
-        }
+        assert_outputs_match(&case, inference, &fused, &expected, 1e-4);
 
-        let output_grad = Tensor::<2>::random([rows, d], Distribution::Normal(0.0, 1.0), &device);
-        let fused_grads = (fused * output_grad.clone()).sum().backward();
-        let burn_grads = (expected * output_grad).sum().backward();
+        let (fused_grads, burn_grads) = backward_both(fused, expected);
         assert_gradients_match(
             &format!("{case}: input"),
             x.grad(&fused_grads),
@@ -456,6 +439,8 @@ fn fused_layer_norm_matches_burn() {
     }
 }
 
+/// The fused GELU, sigmoid and ReLU equal Burn's in inference and in training, where their
+/// input gradients match too.
 #[test]
 fn fused_activations_match_burn() {
     let device = Device::flex().autodiff();
@@ -481,19 +466,15 @@ fn fused_activations_match_burn() {
             };
             let inference = cpu_kernels::activation(x.clone().inner(), activation);
             let fused = cpu_kernels::activation(x.clone(), activation);
-            for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
-                let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
-                assert!(diff < 5e-6, "{case} ({path}): differs from Burn by {diff}");
-            }
-            let output_grad =
-                Tensor::<2>::random(x.dims(), Distribution::Normal(0.0, 1.0), &device);
-            let fused_grads = (fused * output_grad.clone()).sum().backward();
-            let burn_grads = (expected * output_grad).sum().backward();
+            assert_outputs_match(&case, inference, &fused, &expected, 5e-6);
+            let (fused_grads, burn_grads) = backward_both(fused, expected);
             assert_gradients_match(&case, x.grad(&fused_grads), x.grad(&burn_grads));
         }
     }
 }
 
+/// The fused batch norm in training equals Burn's `BatchNorm`: the output, the updated running
+/// statistics, and the gradients with respect to the input, gamma and beta.
 #[test]
 fn fused_batch_norm_matches_burn() {
     let device = Device::flex().autodiff();
@@ -540,9 +521,7 @@ fn fused_batch_norm_matches_burn() {
             assert!(diff < 1e-5, "{case}: {name} differs by {diff}");
         }
 
-        let output_grad = Tensor::<4>::random(shape, Distribution::Normal(0.0, 1.0), &device);
-        let fused_grads = (fused * output_grad.clone()).sum().backward();
-        let burn_grads = (expected * output_grad).sum().backward();
+        let (fused_grads, burn_grads) = backward_both(fused, expected);
         assert_gradients_match(
             &format!("{case}: input"),
             x.grad(&fused_grads),
@@ -559,6 +538,8 @@ fn fused_batch_norm_matches_burn() {
     }
 }
 
+/// The fused linear layer equals Burn's `Linear` in inference and in training, where its
+/// gradients with respect to the input, weight and bias match too.
 #[test]
 fn fused_linear_matches_burn() {
     let device = Device::flex().autodiff();
@@ -590,18 +571,9 @@ fn fused_linear_matches_burn() {
         let expected = layer.forward(x.clone());
         let inference = cpu_kernels::linear(&layer.valid(), x.clone().inner());
         let fused = cpu_kernels::linear(&layer, x.clone());
-        for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
-            let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
-            assert!(
-                diff < 1e-4,
-                "{case} ({path}): differs from Linear by {diff}"
-            );
-        }
+        assert_outputs_match(&case, inference, &fused, &expected, 1e-4);
 
-        let output_grad =
-            Tensor::<3>::random(expected.dims(), Distribution::Normal(0.0, 1.0), &device);
-        let fused_grads = (fused * output_grad.clone()).sum().backward();
-        let burn_grads = (expected * output_grad).sum().backward();
+        let (fused_grads, burn_grads) = backward_both(fused, expected);
         assert_gradients_match(
             &format!("{case}: input"),
             x.grad(&fused_grads),
@@ -622,6 +594,8 @@ fn fused_linear_matches_burn() {
     }
 }
 
+/// The fused softmax equals Burn's in inference and in training, where its input gradient
+/// matches too; other axes than the last fall back to Burn's op.
 #[test]
 fn fused_softmax_matches_burn() {
     let device = Device::flex().autodiff();
@@ -650,15 +624,42 @@ fn fused_softmax_matches_burn() {
         let expected = softmax(x.clone(), dim);
         let inference = cpu_kernels::softmax(x.clone().inner(), dim);
         let fused = cpu_kernels::softmax(x.clone(), dim);
-        for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
-            let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
-            assert!(diff < 1e-6, "{case} ({path}): differs from Burn by {diff}");
-        }
-        let output_grad = Tensor::<3>::random(x.dims(), Distribution::Normal(0.0, 1.0), &device);
-        let fused_grads = (fused * output_grad.clone()).sum().backward();
-        let burn_grads = (expected * output_grad).sum().backward();
+        assert_outputs_match(&case, inference, &fused, &expected, 1e-6);
+        let (fused_grads, burn_grads) = backward_both(fused, expected);
         assert_gradients_match(case, x.grad(&fused_grads), x.grad(&burn_grads));
     }
+}
+
+/// The fused kernel's output in inference and with autodiff each equal the reference's to
+/// `tolerance`.
+fn assert_outputs_match<const D: usize>(
+    case: &str,
+    inference: Tensor<D>,
+    fused: &Tensor<D>,
+    expected: &Tensor<D>,
+    tolerance: f32,
+) {
+    for (path, output) in [("inference", inference), ("autodiff", fused.clone())] {
+        let diff = max_abs_diff(float_values(output), float_values(expected.clone()));
+        assert!(
+            diff < tolerance,
+            "{case} ({path}): differs from Burn by {diff}"
+        );
+    }
+}
+
+/// The gradients each graph gives its inputs for one shared random output gradient `g` (of
+/// `Σ output * g`): the fused kernel's first, the reference's second.
+fn backward_both<const D: usize>(fused: Tensor<D>, reference: Tensor<D>) -> (Gradients, Gradients) {
+    let output_grad = Tensor::<D>::random(
+        reference.dims(),
+        Distribution::Normal(0.0, 1.0),
+        &reference.device(),
+    );
+    (
+        (fused * output_grad.clone()).sum().backward(),
+        (reference * output_grad).sum().backward(),
+    )
 }
 
 /// Two gradients agree to 1e-4 of the reference's largest magnitude (and it is not zero).

@@ -337,47 +337,6 @@ impl Backward<Flex, 1> for SoftmaxBackward {
 }
 
 #[derive(Debug)]
-struct BatchNormBackward;
-
-impl Backward<Flex, 3> for BatchNormBackward {
-    /// The checkpointed input and gamma, and epsilon.
-    type State = (NodeId, NodeId, f64);
-
-    fn backward(
-        self,
-        ops: Ops<Self::State, 3>,
-        grads: &mut Gradients,
-        checkpointer: &mut Checkpointer,
-    ) {
-        let [x_node, gamma_node, beta_node] = ops.parents;
-        let grad = contiguous(&grads.consume::<Flex>(&ops.node));
-        let (x, gamma, epsilon) = ops.state;
-        let x: FlexTensor = checkpointer.retrieve_node_output(x);
-        let gamma: FlexTensor = checkpointer.retrieve_node_output(gamma);
-        let (x_shape, gamma_shape) = (x.shape(), gamma.shape());
-        let gradients = batch_norm::backward(
-            contiguous(&x).storage(),
-            batch_norm_shape(&x),
-            contiguous(&gamma).storage(),
-            grad.storage(),
-            epsilon as f32,
-        );
-        register(
-            grads,
-            [
-                (x_node.map(|n| n.id), gradients.input, x_shape),
-                (
-                    gamma_node.map(|n| n.id),
-                    gradients.gamma,
-                    gamma_shape.clone(),
-                ),
-                (beta_node.map(|n| n.id), gradients.beta, gamma_shape),
-            ],
-        );
-    }
-}
-
-#[derive(Debug)]
 struct ActivationBackward;
 
 impl Backward<Flex, 1> for ActivationBackward {
@@ -449,12 +408,19 @@ impl Backward<Flex, 3> for DeformableAggregateBackward {
     }
 }
 
-#[derive(Debug)]
-struct LayerNormBackward;
+/// The normalisation a [`NormBackward`] step differentiates.
+#[derive(Debug, Clone, Copy)]
+enum Norm {
+    Layer,
+    Batch,
+}
 
-impl Backward<Flex, 3> for LayerNormBackward {
-    /// The checkpointed input and gamma, and epsilon.
-    type State = (NodeId, NodeId, f64);
+#[derive(Debug)]
+struct NormBackward;
+
+impl Backward<Flex, 3> for NormBackward {
+    /// The checkpointed input and gamma, epsilon, and which norm.
+    type State = (NodeId, NodeId, f64, Norm);
 
     fn backward(
         self,
@@ -464,27 +430,41 @@ impl Backward<Flex, 3> for LayerNormBackward {
     ) {
         let [x_node, gamma_node, beta_node] = ops.parents;
         let grad = contiguous(&grads.consume::<Flex>(&ops.node));
-        let (x, gamma, epsilon) = ops.state;
+        let (x, gamma, epsilon, norm) = ops.state;
         let x: FlexTensor = checkpointer.retrieve_node_output(x);
         let gamma: FlexTensor = checkpointer.retrieve_node_output(gamma);
         let (x_shape, gamma_shape) = (x.shape(), gamma.shape());
-        let gradients = layer_norm::backward(
-            contiguous(&x).storage(),
-            last_dim(&x_shape),
-            contiguous(&gamma).storage(),
-            grad.storage(),
-            epsilon as f32,
-        );
+        let (x, gamma, epsilon) = (contiguous(&x), contiguous(&gamma), epsilon as f32);
+        let (input, gamma_grad, beta_grad) = match norm {
+            Norm::Layer => {
+                let row_len = last_dim(&x_shape);
+                let g = layer_norm::backward(
+                    x.storage(),
+                    row_len,
+                    gamma.storage(),
+                    grad.storage(),
+                    epsilon,
+                );
+                (g.input, g.gamma, g.beta)
+            }
+            Norm::Batch => {
+                let shape = batch_norm_shape(&x);
+                let g = batch_norm::backward(
+                    x.storage(),
+                    shape,
+                    gamma.storage(),
+                    grad.storage(),
+                    epsilon,
+                );
+                (g.input, g.gamma, g.beta)
+            }
+        };
         register(
             grads,
             [
-                (x_node.map(|n| n.id), gradients.input, x_shape),
-                (
-                    gamma_node.map(|n| n.id),
-                    gradients.gamma,
-                    gamma_shape.clone(),
-                ),
-                (beta_node.map(|n| n.id), gradients.beta, gamma_shape),
+                (x_node.map(|n| n.id), input, x_shape),
+                (gamma_node.map(|n| n.id), gamma_grad, gamma_shape.clone()),
+                (beta_node.map(|n| n.id), beta_grad, gamma_shape),
             ],
         );
     }
@@ -559,9 +539,9 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
         epsilon: f64,
     ) -> FloatTensor<Self> {
         record::<_, C, 3>(
-            LayerNormBackward,
+            NormBackward,
             [x, gamma, beta],
-            |[x, gamma, _]| (x, gamma, epsilon),
+            |[x, gamma, _]| (x, gamma, epsilon, Norm::Layer),
             |[x, gamma, beta]| Flex::layer_norm(x, gamma, beta, epsilon),
         )
     }
@@ -631,9 +611,9 @@ impl<C: CheckpointStrategy> KernelOps for Autodiff<Flex, C> {
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
         let mut statistics = None;
         let output = record::<_, C, 3>(
-            BatchNormBackward,
+            NormBackward,
             [x, gamma, beta],
-            |[x, gamma, _]| (x, gamma, epsilon),
+            |[x, gamma, _]| (x, gamma, epsilon, Norm::Batch),
             |[x, gamma, beta]| {
                 let (output, mean, variance) = Flex::batch_norm_train(x, gamma, beta, epsilon);
                 statistics = Some((mean, variance));

@@ -26,7 +26,10 @@ struct Sizes {
 impl Sizes {
     /// Reads the sizes from the slices, panicking unless they fit together.
     fn new(x: &[f32], weight: &[f32], outputs: usize) -> Self {
-        assert!(outputs > 0 && weight.len().is_multiple_of(outputs), "weight length");
+        assert!(
+            outputs > 0 && weight.len().is_multiple_of(outputs),
+            "weight length"
+        );
         let inputs = weight.len() / outputs;
         assert!(inputs > 0 && x.len().is_multiple_of(inputs), "input length");
         Self {
