@@ -5,7 +5,7 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
@@ -18,6 +18,17 @@ use ssr_agent::train::augment::Photometric;
 use ssr_agent::train::config::{Schedule, TrainConfig};
 use ssr_agent::train::data::{SampleDraw, TrainingData, action_of};
 use ssr_agent::train::run::{MetricsLine, StepMetrics, TrainError, TrainOptions, train};
+
+/// Held by every test that seeds the device or draws initial weights. `train` seeds the
+/// device's random generator, which is global to the process, and then initialises the model
+/// from it; a test running beside it in this binary that draws weights in between would change
+/// that model (a resumed run then no longer redraws the same loss curve).
+fn device_rng() -> MutexGuard<'static, ()> {
+    static DEVICE_RNG: Mutex<()> = Mutex::new(());
+    DEVICE_RNG
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("ssr-train-test-{}-{name}", std::process::id()));
@@ -78,6 +89,7 @@ fn train_error(config: TrainConfig, data: &Path, out: &Path) -> TrainError {
 
 #[test]
 fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
+    let _rng = device_rng();
     let data = fixture("falls");
     let out = scratch("falls-run");
     let config = config(16);
@@ -121,6 +133,7 @@ fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
 
 #[test]
 fn resuming_redraws_the_same_loss_curve() {
+    let _rng = device_rng();
     let data = fixture("resume");
     // History dropout draws per sample too; a resumed run must redraw them.
     let config = TrainConfig {
@@ -171,6 +184,7 @@ fn resuming_redraws_the_same_loss_curve() {
 
 #[test]
 fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
+    let _rng = device_rng();
     let data = fixture("init");
     let config = config(8);
     let first = scratch("init-first");
@@ -215,6 +229,7 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
 
 #[test]
 fn a_dropped_history_trains_the_first_frame_path() {
+    let _rng = device_rng();
     let data = fixture("dropout");
     let config = config(1);
     let set = open(&data, &config);
@@ -303,6 +318,7 @@ fn edit(path: &Path, from: &str, to: &str) {
 
 #[test]
 fn bad_datasets_and_run_folders_are_named() {
+    let _rng = device_rng();
     let config = config(2);
     let error = open_error(&scratch("missing"), &config.model);
     assert!(error.contains("manifest.json"), "{error}");
