@@ -624,7 +624,7 @@ fn fused_softmax_matches_burn() {
         let expected = softmax(x.clone(), dim);
         let inference = cpu_kernels::softmax(x.clone().inner(), dim);
         let fused = cpu_kernels::softmax(x.clone(), dim);
-        assert_outputs_match(&case, inference, &fused, &expected, 1e-6);
+        assert_outputs_match(case, inference, &fused, &expected, 1e-6);
         let (fused_grads, burn_grads) = backward_both(fused, expected);
         assert_gradients_match(case, x.grad(&fused_grads), x.grad(&burn_grads));
     }

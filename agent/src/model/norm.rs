@@ -83,8 +83,13 @@ mod tests {
                 .require_grad();
             let expected = norm.forward(x.clone().swap_dims(1, 2)).swap_dims(1, 2);
             let fused = single_group_norm(&norm, x.clone());
+            // Float32 rounding grows with the outputs' magnitude (up to about 10 here).
+            let scale: f32 = expected.clone().abs().max().into_scalar();
             let error = max_diff(fused.clone(), expected.clone());
-            assert!(error < 1e-5, "{b}x{l}x{c}: max difference {error}");
+            assert!(
+                error < 1e-5 * scale.max(1.0),
+                "{b}x{l}x{c}: max difference {error} (largest {scale})"
+            );
 
             let output_grad =
                 Tensor::<3>::random([b, l, c], Distribution::Normal(0.0, 1.0), &device);

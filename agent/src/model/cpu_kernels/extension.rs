@@ -96,7 +96,7 @@ fn from_vec(data: Vec<f32>, shape: Shape) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(data, shape))
 }
 
-/// The length of a shape's last axis (the rows of a layer norm).
+/// The length of a shape's last axis (the rows of a layer norm or a softmax).
 fn last_dim(shape: &Shape) -> usize {
     shape[shape.num_dims() - 1]
 }

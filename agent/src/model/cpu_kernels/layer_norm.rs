@@ -31,7 +31,8 @@ fn statistics(row: &[f32], epsilon: f32) -> (f32, f32) {
 ///
 /// Panics if the lengths do not fit that shape.
 pub fn forward(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32], epsilon: f32) -> Vec<f32> {
-    let d = check_lengths(x, row_len, gamma, beta);
+    let d = affine_len(x, row_len, gamma);
+    assert_eq!(beta.len(), d, "beta length");
     let rows_per_task = (VALUES_PER_TASK / row_len).max(1);
     let mut output = vec![0f32; x.len()];
     output
@@ -50,11 +51,9 @@ pub fn forward(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32], epsilon: 
     output
 }
 
-/// `d`, after checking that `gamma` and `beta` have length `d`, `d` divides `row_len`, and `x`
-/// is whole rows.
-fn check_lengths(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32]) -> usize {
+/// `gamma`'s length `d`, after checking that it divides `row_len` and that `x` is whole rows.
+fn affine_len(x: &[f32], row_len: usize, gamma: &[f32]) -> usize {
     let d = gamma.len();
-    assert_eq!(beta.len(), d, "beta length");
     assert!(
         d > 0 && row_len.is_multiple_of(d),
         "row length {row_len}, affine length {d}"
@@ -78,7 +77,7 @@ pub struct Gradients {
 /// Rows run in parallel, one task per thread, each summing its own parameter gradients in
 /// order: the result does not depend on scheduling.
 pub fn backward(x: &[f32], row_len: usize, gamma: &[f32], grad: &[f32], epsilon: f32) -> Gradients {
-    let d = check_lengths(x, row_len, gamma, gamma);
+    let d = affine_len(x, row_len, gamma);
     assert_eq!(grad.len(), x.len(), "gradient length");
     let rows = x.len() / row_len;
     let rows_per_task = rows.div_ceil(rayon::current_num_threads()).max(1);
