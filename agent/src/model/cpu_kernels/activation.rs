@@ -7,7 +7,7 @@
 //! Accuracy: `exp` within 2 ulp, `erf` within 3e-7 (Abramowitz and Stegun 7.1.26), so GELU
 //! and sigmoid differ from Flex's by a few float32 roundings.
 
-use rayon::prelude::*;
+use super::output::filled_in_chunks;
 
 /// Elements per parallel task.
 const CHUNK: usize = 16 * 1024;
@@ -100,24 +100,19 @@ impl Activation {
     }
 }
 
-/// `out[i] = f(x[i], grad[i])` over matching chunks, in parallel; AVX2 where the CPU has it
-/// (the build targets baseline x86-64).
-fn map(out: &mut [f32], x: &[f32], grad: &[f32], f: impl Fn(f32, f32) -> f32 + Sync + Copy) {
-    let chunk = |(out, (x, grad)): (&mut [f32], (&[f32], &[f32]))| {
+/// `f(x[i], grad[i])` for every `i`, over chunks in parallel; AVX2 where the CPU has it (the
+/// build targets baseline x86-64).
+fn map(x: &[f32], grad: &[f32], f: impl Fn(f32, f32) -> f32 + Sync + Copy) -> Vec<f32> {
+    filled_in_chunks(x.len(), CHUNK, |k, out| {
+        let range = k * CHUNK..k * CHUNK + out.len();
+        let (x, grad) = (&x[range.clone()], &grad[range]);
         #[cfg(target_arch = "x86_64")]
         if is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, the only feature the function is compiled for.
             return unsafe { map_chunk_avx2(out, x, grad, f) };
         }
         map_chunk(out, x, grad, f)
-    };
-    if out.len() <= CHUNK {
-        chunk((out, (x, grad)));
-    } else {
-        out.par_chunks_mut(CHUNK)
-            .zip(x.par_chunks(CHUNK).zip(grad.par_chunks(CHUNK)))
-            .for_each(chunk);
-    }
+    })
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -135,14 +130,12 @@ fn map_chunk(out: &mut [f32], x: &[f32], grad: &[f32], f: impl Fn(f32, f32) -> f
 
 /// `activation` applied to every element of `x`.
 pub fn forward(activation: Activation, x: &[f32]) -> Vec<f32> {
-    let mut output = vec![0f32; x.len()];
     // The gradient slot is unused: zip it against `x` itself.
     match activation {
-        Activation::Gelu => map(&mut output, x, x, |x, _| Activation::Gelu.value(x)),
-        Activation::Sigmoid => map(&mut output, x, x, |x, _| Activation::Sigmoid.value(x)),
-        Activation::Relu => map(&mut output, x, x, |x, _| Activation::Relu.value(x)),
+        Activation::Gelu => map(x, x, |x, _| Activation::Gelu.value(x)),
+        Activation::Sigmoid => map(x, x, |x, _| Activation::Sigmoid.value(x)),
+        Activation::Relu => map(x, x, |x, _| Activation::Relu.value(x)),
     }
-    output
 }
 
 /// The gradient with respect to `x` of [`forward`], given the output's gradient `grad`.
@@ -150,13 +143,11 @@ pub fn forward(activation: Activation, x: &[f32]) -> Vec<f32> {
 /// Panics if `grad` and `x` differ in length.
 pub fn backward(activation: Activation, x: &[f32], grad: &[f32]) -> Vec<f32> {
     assert_eq!(grad.len(), x.len(), "gradient length");
-    let mut d_x = vec![0f32; x.len()];
     match activation {
-        Activation::Gelu => map(&mut d_x, x, grad, |x, g| Activation::Gelu.gradient(x, g)),
-        Activation::Sigmoid => map(&mut d_x, x, grad, |x, g| Activation::Sigmoid.gradient(x, g)),
-        Activation::Relu => map(&mut d_x, x, grad, |x, g| Activation::Relu.gradient(x, g)),
+        Activation::Gelu => map(x, grad, |x, g| Activation::Gelu.gradient(x, g)),
+        Activation::Sigmoid => map(x, grad, |x, g| Activation::Sigmoid.gradient(x, g)),
+        Activation::Relu => map(x, grad, |x, g| Activation::Relu.gradient(x, g)),
     }
-    d_x
 }
 
 #[cfg(test)]

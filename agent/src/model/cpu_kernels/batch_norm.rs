@@ -7,6 +7,8 @@
 
 use rayon::prelude::*;
 
+use super::output::filled_in_chunks;
+
 /// An activation `[batch, channels, plane]` (the plane: every axis after the channels).
 #[derive(Debug, Clone, Copy)]
 pub struct Shape {
@@ -60,19 +62,19 @@ fn statistics(x: &[f32], shape: Shape) -> (Vec<f32>, Vec<f32>) {
         .unzip()
 }
 
-/// Fills every plane of `out` with `f(channel, plane_out, plane_x, plane_grad)`, planes in
-/// parallel.
-fn for_each_plane(
-    out: &mut [f32],
+/// A new vector of `x`'s length, written plane by plane by `f(channel, plane_out, plane_x,
+/// plane_grad)`, planes in parallel.
+fn map_planes(
     x: &[f32],
     grad: &[f32],
     shape: Shape,
     f: impl Fn(usize, &mut [f32], &[f32], &[f32]) + Sync,
-) {
-    out.par_chunks_mut(shape.plane)
-        .zip(x.par_chunks(shape.plane).zip(grad.par_chunks(shape.plane)))
-        .enumerate()
-        .for_each(|(index, (out, (x, grad)))| f(index % shape.channels, out, x, grad));
+) -> Vec<f32> {
+    let plane = shape.plane;
+    filled_in_chunks(x.len(), plane, |index, out| {
+        let range = index * plane..(index + 1) * plane;
+        f(index % shape.channels, out, &x[range.clone()], &grad[range])
+    })
 }
 
 /// The output of [`forward`].
@@ -97,9 +99,8 @@ pub fn forward(x: &[f32], shape: Shape, gamma: &[f32], beta: &[f32], epsilon: f3
             (scale, beta[c] - mean[c] * scale)
         })
         .unzip();
-    let mut output = vec![0f32; x.len()];
     // The gradient slot is unused: zip it against `x` itself.
-    for_each_plane(&mut output, x, x, shape, |c, out, x, _| {
+    let output = map_planes(x, x, shape, |c, out, x, _| {
         for (o, v) in out.iter_mut().zip(x) {
             *o = v * scale[c] + shift[c];
         }
@@ -149,8 +150,7 @@ pub fn backward(x: &[f32], shape: Shape, gamma: &[f32], grad: &[f32], epsilon: f
         })
         .unzip();
     let count = shape.count() as f32;
-    let mut d_input = vec![0f32; x.len()];
-    for_each_plane(&mut d_input, x, grad, shape, |c, d_x, x, grad| {
+    let d_input = map_planes(x, grad, shape, |c, d_x, x, grad| {
         let (mean_grad, mean_grad_normalised) = (d_beta[c] / count, d_gamma[c] / count);
         let scale = gamma[c] * rstd[c];
         for ((d, v), g) in d_x.iter_mut().zip(x).zip(grad) {

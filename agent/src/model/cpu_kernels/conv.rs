@@ -15,6 +15,7 @@ use gemm::Parallelism;
 use rayon::prelude::*;
 
 use super::matrix::{Matrix, add_into, matmul};
+use super::output::{filled_in_chunks, zeros};
 
 /// A convolution's geometry: one group, no dilation, symmetric zero padding.
 #[derive(Debug, Clone, Copy)]
@@ -76,28 +77,27 @@ pub fn conv2d(input: &[f32], weight: &[f32], geometry: Geometry) -> Vec<f32> {
     geometry.check(input, weight);
     let (batch, channels_out) = (geometry.batch, geometry.channels_out);
     let (pixels, image_len) = (geometry.pixels(), geometry.image_len());
-    let mut output = vec![0f32; batch * channels_out * pixels];
     let weight = Matrix::new(weight, channels_out, geometry.patch_len());
-    let convolve = |(image, out): (&[f32], &mut [f32]), parallelism| {
+    let convolve = |image: &[f32], out: &mut [f32], parallelism| {
         let patches = patches(image, geometry);
         let patches = Matrix::new(&patches, geometry.patch_len(), pixels);
         matmul(out, weight, patches, false, parallelism);
     };
-    let images = input.chunks_exact(image_len);
-    let outputs = output.chunks_exact_mut(channels_out * pixels);
+    let output_len = channels_out * pixels;
     if batch == 1 {
         // One image: the matrix product itself runs on all threads.
-        let threads = rayon::current_num_threads();
-        images
-            .zip(outputs)
-            .for_each(|pair| convolve(pair, Parallelism::Rayon(threads)));
+        let mut output = zeros(output_len);
+        convolve(
+            input,
+            &mut output,
+            Parallelism::Rayon(rayon::current_num_threads()),
+        );
+        output
     } else {
-        input
-            .par_chunks_exact(image_len)
-            .zip(output.par_chunks_exact_mut(channels_out * pixels))
-            .for_each(|pair| convolve(pair, Parallelism::None));
+        filled_in_chunks(batch * output_len, output_len, |k, out| {
+            convolve(&input[k * image_len..][..image_len], out, Parallelism::None)
+        })
     }
-    output
 }
 
 /// The image's patch matrix: the image itself for a pointwise convolution, else
@@ -201,7 +201,7 @@ pub fn conv2d_backward(
     let (batch, channels_out) = (geometry.batch, geometry.channels_out);
     let (pixels, image_len) = (geometry.pixels(), geometry.image_len());
     assert_eq!(grad.len(), batch * channels_out * pixels, "gradient length");
-    let mut d_input = input_grad.then(|| vec![0f32; input.len()]);
+    let mut d_input = input_grad.then(|| zeros(input.len()));
     let mut d_images: Vec<Option<&mut [f32]>> = match &mut d_input {
         Some(d_input) => d_input.chunks_exact_mut(image_len).map(Some).collect(),
         None => (0..batch).map(|_| None).collect(),

@@ -9,6 +9,8 @@
 
 use rayon::prelude::*;
 
+use super::output::{filled_in_chunks, zeros};
+
 /// Shapes of one aggregation: `values` `[n, height * width, channels]`, `locations`
 /// `[n, queries, points, 2]` (normalised (x, y)), `weights` `[n, queries, points]`.
 #[derive(Debug, Clone, Copy)]
@@ -56,12 +58,11 @@ pub fn aggregate(values: &[f32], locations: &[f32], weights: &[f32], shape: Shap
         weights,
         shape,
     };
-    let mut output = vec![0f32; shape.n * shape.queries * channels];
-    output
-        .par_chunks_mut(channels * QUERIES_PER_TASK)
-        .enumerate()
-        .for_each(|(task, out)| accumulate(out, task * QUERIES_PER_TASK, &inputs));
-    output
+    filled_in_chunks(
+        shape.n * shape.queries * channels,
+        channels * QUERIES_PER_TASK,
+        |task, out| accumulate(out, task * QUERIES_PER_TASK, &inputs),
+    )
 }
 
 struct Inputs<'a> {
@@ -228,9 +229,9 @@ pub fn aggregate_backward(
         "gradient length"
     );
     let mut gradients = Gradients {
-        values: vec![0.0; values.len()],
-        locations: vec![0.0; locations.len()],
-        weights: vec![0.0; weights.len()],
+        values: zeros(values.len()),
+        locations: zeros(locations.len()),
+        weights: zeros(weights.len()),
     };
     let map_points = shape.queries * shape.points;
     gradients

@@ -10,9 +10,8 @@
 //! channels-last values with a `[C]` gamma is a one-group group norm
 //! ([`crate::model::norm::single_group_norm`]).
 
-use rayon::prelude::*;
-
 use super::matrix::add_into;
+use super::output::{filled_in_chunks, filled_in_chunks_with};
 
 /// Values per parallel task in the forward pass (whole rows, at least one).
 const VALUES_PER_TASK: usize = 16 * 1024;
@@ -33,22 +32,18 @@ fn statistics(row: &[f32], epsilon: f32) -> (f32, f32) {
 pub fn forward(x: &[f32], row_len: usize, gamma: &[f32], beta: &[f32], epsilon: f32) -> Vec<f32> {
     let d = affine_len(x, row_len, gamma);
     assert_eq!(beta.len(), d, "beta length");
-    let rows_per_task = (VALUES_PER_TASK / row_len).max(1);
-    let mut output = vec![0f32; x.len()];
-    output
-        .par_chunks_mut(row_len * rows_per_task)
-        .zip(x.par_chunks(row_len * rows_per_task))
-        .for_each(|(out, x)| {
-            for (out, row) in out.chunks_exact_mut(row_len).zip(x.chunks_exact(row_len)) {
-                let (mean, rstd) = statistics(row, epsilon);
-                for (out, row) in out.chunks_exact_mut(d).zip(row.chunks_exact(d)) {
-                    for (((o, v), g), b) in out.iter_mut().zip(row).zip(gamma).zip(beta) {
-                        *o = (v - mean) * rstd * g + b;
-                    }
+    let task = row_len * (VALUES_PER_TASK / row_len).max(1);
+    filled_in_chunks(x.len(), task, |k, out| {
+        let x = &x[k * task..k * task + out.len()];
+        for (out, row) in out.chunks_exact_mut(row_len).zip(x.chunks_exact(row_len)) {
+            let (mean, rstd) = statistics(row, epsilon);
+            for (out, row) in out.chunks_exact_mut(d).zip(row.chunks_exact(d)) {
+                for (((o, v), g), b) in out.iter_mut().zip(row).zip(gamma).zip(beta) {
+                    *o = (v - mean) * rstd * g + b;
                 }
             }
-        });
-    output
+        }
+    })
 }
 
 /// `gamma`'s length `d`, after checking that it divides `row_len` and that `x` is whole rows.
@@ -80,52 +75,48 @@ pub fn backward(x: &[f32], row_len: usize, gamma: &[f32], grad: &[f32], epsilon:
     let d = affine_len(x, row_len, gamma);
     assert_eq!(grad.len(), x.len(), "gradient length");
     let rows = x.len() / row_len;
-    let rows_per_task = rows.div_ceil(rayon::current_num_threads()).max(1);
-    let mut d_input = vec![0f32; x.len()];
-    let partial_sums: Vec<(Vec<f32>, Vec<f32>)> = d_input
-        .par_chunks_mut(row_len * rows_per_task)
-        .zip(x.par_chunks(row_len * rows_per_task))
-        .zip(grad.par_chunks(row_len * rows_per_task))
-        .map(|((d_x, x), grad)| {
-            let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
-            let mut normalised = vec![0f32; row_len];
-            for ((d_x, row), grad) in d_x
-                .chunks_exact_mut(row_len)
-                .zip(x.chunks_exact(row_len))
-                .zip(grad.chunks_exact(row_len))
+    let task = row_len * rows.div_ceil(rayon::current_num_threads()).max(1);
+    let (d_input, partial_sums) = filled_in_chunks_with(x.len(), task, |k, d_x| {
+        let range = k * task..k * task + d_x.len();
+        let (x, grad) = (&x[range.clone()], &grad[range]);
+        let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
+        let mut normalised = vec![0f32; row_len];
+        for ((d_x, row), grad) in d_x
+            .chunks_exact_mut(row_len)
+            .zip(x.chunks_exact(row_len))
+            .zip(grad.chunks_exact(row_len))
+        {
+            let (mean, rstd) = statistics(row, epsilon);
+            let (mut sum_g, mut sum_g_normalised) = (0.0, 0.0);
+            for ((normalised, row), grad) in normalised
+                .chunks_exact_mut(d)
+                .zip(row.chunks_exact(d))
+                .zip(grad.chunks_exact(d))
             {
-                let (mean, rstd) = statistics(row, epsilon);
-                let (mut sum_g, mut sum_g_normalised) = (0.0, 0.0);
-                for ((normalised, row), grad) in normalised
-                    .chunks_exact_mut(d)
-                    .zip(row.chunks_exact(d))
-                    .zip(grad.chunks_exact(d))
-                {
-                    for k in 0..d {
-                        normalised[k] = (row[k] - mean) * rstd;
-                        let g = grad[k] * gamma[k];
-                        sum_g += g;
-                        sum_g_normalised += g * normalised[k];
-                        d_gamma[k] += grad[k] * normalised[k];
-                        d_beta[k] += grad[k];
-                    }
-                }
-                let n = row_len as f32;
-                let (mean_g, mean_g_normalised) = (sum_g / n, sum_g_normalised / n);
-                for ((d_x, normalised), grad) in d_x
-                    .chunks_exact_mut(d)
-                    .zip(normalised.chunks_exact(d))
-                    .zip(grad.chunks_exact(d))
-                {
-                    for k in 0..d {
-                        d_x[k] = rstd
-                            * (grad[k] * gamma[k] - mean_g - normalised[k] * mean_g_normalised);
-                    }
+                for k in 0..d {
+                    normalised[k] = (row[k] - mean) * rstd;
+                    let g = grad[k] * gamma[k];
+                    sum_g += g;
+                    sum_g_normalised += g * normalised[k];
+                    d_gamma[k] += grad[k] * normalised[k];
+                    d_beta[k] += grad[k];
                 }
             }
-            (d_gamma, d_beta)
-        })
-        .collect();
+            let n = row_len as f32;
+            let (mean_g, mean_g_normalised) = (sum_g / n, sum_g_normalised / n);
+            for ((d_x, normalised), grad) in d_x
+                .chunks_exact_mut(d)
+                .zip(normalised.chunks_exact(d))
+                .zip(grad.chunks_exact(d))
+            {
+                for k in 0..d {
+                    d_x[k] =
+                        rstd * (grad[k] * gamma[k] - mean_g - normalised[k] * mean_g_normalised);
+                }
+            }
+        }
+        (d_gamma, d_beta)
+    });
     let (mut d_gamma, mut d_beta) = (vec![0f32; d], vec![0f32; d]);
     for (gamma_part, beta_part) in partial_sums {
         add_into(&mut d_gamma, &gamma_part);

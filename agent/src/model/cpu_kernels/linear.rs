@@ -11,9 +11,13 @@ use gemm::Parallelism;
 use rayon::prelude::*;
 
 use super::matrix::{Matrix, add_into, matmul};
+use super::output::{filled_in_chunks, zeros};
 
 /// Products of at least this many multiply-adds run on all threads.
 const PARALLEL_WORK: usize = 1 << 20;
+
+/// Output values per parallel task when the bias is copied into every row (whole rows).
+const BIAS_VALUES_PER_TASK: usize = 16 * 1024;
 
 /// A layer's sizes: `rows` inputs of `inputs` values to `outputs` values.
 #[derive(Debug, Clone, Copy)]
@@ -54,7 +58,12 @@ impl Sizes {
 /// Panics if the lengths do not fit those shapes.
 pub fn forward(x: &[f32], weight: &[f32], bias: &[f32]) -> Vec<f32> {
     let sizes = Sizes::new(x, weight, bias.len());
-    let mut output: Vec<f32> = bias.repeat(sizes.rows);
+    let outputs = sizes.outputs;
+    let task = outputs * (BIAS_VALUES_PER_TASK / outputs).max(1);
+    let mut output = filled_in_chunks(sizes.rows * outputs, task, |_, out| {
+        out.chunks_exact_mut(outputs)
+            .for_each(|row| row.copy_from_slice(bias))
+    });
     matmul(
         &mut output,
         Matrix::new(x, sizes.rows, sizes.inputs),
@@ -97,7 +106,7 @@ pub fn backward(
     assert_eq!(grad.len(), rows * outputs, "gradient length");
     let grad_matrix = Matrix::new(grad, rows, outputs);
     let input = input_grad.then(|| {
-        let mut d_x = vec![0f32; x.len()];
+        let mut d_x = zeros(x.len());
         matmul(
             &mut d_x,
             grad_matrix,

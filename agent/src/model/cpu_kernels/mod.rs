@@ -19,6 +19,7 @@ mod layer_norm;
 mod linear;
 mod matrix;
 mod max_pool;
+mod output;
 mod softmax;
 
 use burn::backend::Dispatch;

@@ -4,9 +4,8 @@
 //! each a single-threaded pass over the tensor on Flex and each recorded for the backward pass.
 //! Here rows run in parallel, with the vectorised `exp` of [`super::activation`].
 
-use rayon::prelude::*;
-
 use super::activation::exp;
+use super::output::filled_in_chunks;
 
 /// Values per parallel task (whole rows, at least one).
 const VALUES_PER_TASK: usize = 16 * 1024;
@@ -24,14 +23,14 @@ fn softmax_row(out: &mut [f32], row: &[f32]) {
     out.iter_mut().for_each(|o| *o *= scale);
 }
 
-/// Runs `f(out_row, x_row, grad_row)` over the rows of length `d`, in parallel.
-fn for_each_row(
-    out: &mut [f32],
+/// A new vector of `x`'s length, written row by row (rows of length `d`) by
+/// `f(out_row, x_row, grad_row)`, in parallel.
+fn map_rows(
     x: &[f32],
     grad: &[f32],
     d: usize,
     f: impl Fn(&mut [f32], &[f32], &[f32]) + Sync,
-) {
+) -> Vec<f32> {
     assert!(
         d > 0 && x.len().is_multiple_of(d),
         "input length {} in rows of {d}",
@@ -39,27 +38,24 @@ fn for_each_row(
     );
     assert_eq!(grad.len(), x.len(), "gradient length");
     let task = d * (VALUES_PER_TASK / d).max(1);
-    out.par_chunks_mut(task)
-        .zip(x.par_chunks(task).zip(grad.par_chunks(task)))
-        .for_each(|(out, (x, grad))| {
-            for ((out, x), grad) in out
-                .chunks_exact_mut(d)
-                .zip(x.chunks_exact(d))
-                .zip(grad.chunks_exact(d))
-            {
-                f(out, x, grad);
-            }
-        });
+    filled_in_chunks(x.len(), task, |k, out| {
+        let range = k * task..k * task + out.len();
+        for ((out, x), grad) in out
+            .chunks_exact_mut(d)
+            .zip(x[range.clone()].chunks_exact(d))
+            .zip(grad[range].chunks_exact(d))
+        {
+            f(out, x, grad);
+        }
+    })
 }
 
 /// The softmax of every row of `d` values of `x`.
 ///
 /// Panics unless `x` is whole rows.
 pub fn forward(x: &[f32], d: usize) -> Vec<f32> {
-    let mut output = vec![0f32; x.len()];
     // The gradient slot is unused: zip it against `x` itself.
-    for_each_row(&mut output, x, x, d, |out, row, _| softmax_row(out, row));
-    output
+    map_rows(x, x, d, |out, row, _| softmax_row(out, row))
 }
 
 /// The gradient with respect to `x` of [`forward`], given the output's gradient `grad`: per
@@ -67,13 +63,11 @@ pub fn forward(x: &[f32], d: usize) -> Vec<f32> {
 ///
 /// Panics unless `x` is whole rows and `grad` matches it.
 pub fn backward(x: &[f32], grad: &[f32], d: usize) -> Vec<f32> {
-    let mut d_x = vec![0f32; x.len()];
-    for_each_row(&mut d_x, x, grad, d, |d_x, row, grad| {
+    map_rows(x, grad, d, |d_x, row, grad| {
         softmax_row(d_x, row);
         let dot: f32 = d_x.iter().zip(grad).map(|(y, g)| y * g).sum();
         for (d, g) in d_x.iter_mut().zip(grad) {
             *d *= g - dot;
         }
-    });
-    d_x
+    })
 }
