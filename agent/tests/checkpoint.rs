@@ -10,18 +10,13 @@ use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::checkpoint::{CheckpointError, inspect, load, save};
 use ssr_agent::model::{SsrModel, float_values};
 
-fn scratch(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("ssr-agent-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 #[test]
 fn save_then_load_gives_identical_outputs() {
     let device = Device::flex();
     let config = tiny_config();
     let model = SsrModel::new(&config, &device);
-    let path = scratch("roundtrip.safetensors");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("roundtrip.safetensors");
     save(&model, &config, &[("note", "unit test".into())], &path).unwrap();
     let (loaded, info) = load(&path, &device).unwrap();
     assert_eq!(info.config, config);
@@ -47,6 +42,8 @@ fn bad_checkpoints_are_clear_errors() {
     let device = Device::flex();
     let config = tiny_config();
     let model = SsrModel::new(&config, &device);
+    let dir = tempfile::tempdir().unwrap();
+    let scratch = |name: &str| dir.path().join(name);
     let good = scratch("good.safetensors");
     save(&model, &config, &[], &good).unwrap();
     let bytes = std::fs::read(&good).unwrap();

@@ -28,7 +28,8 @@ fn config_prints_presets_that_parse_back() {
 
 #[test]
 fn inspect_reports_bad_files() {
-    let path = std::env::temp_dir().join(format!("ssr-cli-{}.safetensors", std::process::id()));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.safetensors");
     std::fs::write(&path, [1u8, 0, 0]).unwrap();
     let (ok, _, stderr) = ssr_agent(&["inspect", path.to_str().unwrap()]);
     assert!(!ok && stderr.contains("not a safetensors file"), "{stderr}");
@@ -36,7 +37,8 @@ fn inspect_reports_bad_files() {
 
 #[test]
 fn bench_runs_a_small_config_and_prints_json() {
-    let path = std::env::temp_dir().join(format!("ssr-cli-tiny-{}.json", std::process::id()));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tiny.json");
     std::fs::write(
         &path,
         serde_json::to_string(&common::tiny_config()).unwrap(),
@@ -88,7 +90,8 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
         assert!(!out.status.success());
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
-    let file = std::env::temp_dir().join(format!("ssr-cli-serve-{}.toml", std::process::id()));
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("serve.toml");
     std::fs::write(&file, "max_batch = 0\n").unwrap();
     let file = file.to_str().unwrap();
 
@@ -125,8 +128,8 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
 
 #[test]
 fn train_runs_ablations_from_flags_and_names_bad_data() {
-    let dir = std::env::temp_dir().join(format!("ssr-cli-train-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let data = dir.join("data");
     std::fs::create_dir_all(&data).unwrap();
     common::fixture::write_fixture_dataset(&data);

@@ -59,14 +59,14 @@ fn a_lease_holds_the_state_until_finished_or_dropped() {
     assert!(table.is_empty());
 }
 
-fn write_temp(name: &str, text: &str) -> std::path::PathBuf {
-    let path = std::env::temp_dir().join(format!("ssr-serve-{}-{name}", std::process::id()));
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
 #[test]
 fn config_files_override_defaults_and_bad_values_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let write_temp = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
     let path = write_temp(
         "ok.toml",
         "max_batch = 4\nidle_timeout_s = 5.0\nlog_format = \"json\"\nbackend = \"wgpu\"\n",

@@ -30,17 +30,27 @@ fn device_rng() -> MutexGuard<'static, ()> {
         .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("ssr-train-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+/// One test's scratch space: a fresh temporary folder, removed when the test ends.
+struct Scratch(tempfile::TempDir);
 
-fn fixture(name: &str) -> PathBuf {
-    let root = scratch(name);
-    write_fixture_dataset(&root);
-    root
+impl Scratch {
+    fn new() -> Self {
+        Self(tempfile::tempdir().expect("a temporary folder"))
+    }
+
+    /// A new empty folder `name` inside.
+    fn dir(&self, name: &str) -> PathBuf {
+        let dir = self.0.path().join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// A new folder `name` holding the fixture dataset.
+    fn fixture(&self, name: &str) -> PathBuf {
+        let root = self.dir(name);
+        write_fixture_dataset(&root);
+        root
+    }
 }
 
 fn config(steps: u64) -> TrainConfig {
@@ -90,8 +100,9 @@ fn train_error(config: TrainConfig, data: &Path, out: &Path) -> TrainError {
 #[test]
 fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
     let _rng = device_rng();
-    let data = fixture("falls");
-    let out = scratch("falls-run");
+    let tmp = Scratch::new();
+    let data = tmp.fixture("falls");
+    let out = tmp.dir("falls-run");
     let config = config(16);
     let summary = train(config.clone(), options(&data, &out), open(&data, &config)).unwrap();
     assert_eq!(summary.steps_done, 16);
@@ -134,13 +145,14 @@ fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
 #[test]
 fn resuming_redraws_the_same_loss_curve() {
     let _rng = device_rng();
-    let data = fixture("resume");
+    let tmp = Scratch::new();
+    let data = tmp.fixture("resume");
     // History dropout draws per sample too; a resumed run must redraw them.
     let config = TrainConfig {
         history_dropout: 0.5,
         ..config(6)
     };
-    let straight = scratch("resume-straight");
+    let straight = tmp.dir("resume-straight");
     train(
         config.clone(),
         options(&data, &straight),
@@ -148,7 +160,7 @@ fn resuming_redraws_the_same_loss_curve() {
     )
     .unwrap();
 
-    let split = scratch("resume-split");
+    let split = tmp.dir("resume-split");
     let first = TrainOptions {
         stop_at: Some(3),
         ..options(&data, &split)
@@ -185,9 +197,10 @@ fn resuming_redraws_the_same_loss_curve() {
 #[test]
 fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
     let _rng = device_rng();
-    let data = fixture("init");
+    let tmp = Scratch::new();
+    let data = tmp.fixture("init");
     let config = config(8);
-    let first = scratch("init-first");
+    let first = tmp.dir("init-first");
     let trained = train(config.clone(), options(&data, &first), open(&data, &config))
         .unwrap()
         .checkpoint;
@@ -199,7 +212,7 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
             init,
             ..config.clone()
         };
-        let out = scratch(name);
+        let out = tmp.dir(name);
         let stop = TrainOptions {
             stop_at: Some(1),
             ..options(&data, &out)
@@ -214,7 +227,7 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
     let mut other = config.clone();
     other.model.tokens.num_tokens += 1;
     other.init = Some(trained);
-    let error = train_error(other, &data, &scratch("init-other"));
+    let error = train_error(other, &data, &tmp.dir("init-other"));
     assert!(
         matches!(error, TrainError::Config(_)) && error.to_string().contains("tokens.num_tokens"),
         "{error}"
@@ -223,14 +236,15 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
         init: Some(first.join("no-such.safetensors")),
         ..config.clone()
     };
-    let error = train_error(missing, &data, &scratch("init-missing"));
+    let error = train_error(missing, &data, &tmp.dir("init-missing"));
     assert!(error.to_string().contains("no-such.safetensors"), "{error}");
 }
 
 #[test]
 fn a_dropped_history_trains_the_first_frame_path() {
     let _rng = device_rng();
-    let data = fixture("dropout");
+    let tmp = Scratch::new();
+    let data = tmp.fixture("dropout");
     let config = config(1);
     let set = open(&data, &config);
     let with_history: Vec<_> = set
@@ -283,7 +297,8 @@ fn a_dropped_history_trains_the_first_frame_path() {
 
 #[test]
 fn routes_split_whole_and_samples_need_a_future() {
-    let data = fixture("split");
+    let tmp = Scratch::new();
+    let data = tmp.fixture("split");
     let config = config(1);
     let set = TrainingData::open(&data, &config.model, 0.5, |_, _| {}).unwrap();
     assert_eq!(set.train_routes + set.validation_routes, FIXTURE_ROUTES);
@@ -319,11 +334,12 @@ fn edit(path: &Path, from: &str, to: &str) {
 #[test]
 fn bad_datasets_and_run_folders_are_named() {
     let _rng = device_rng();
+    let tmp = Scratch::new();
     let config = config(2);
-    let error = open_error(&scratch("missing"), &config.model);
+    let error = open_error(&tmp.dir("missing"), &config.model);
     assert!(error.contains("manifest.json"), "{error}");
 
-    let broken = fixture("broken-line");
+    let broken = tmp.fixture("broken-line");
     edit(
         &broken.join("episodes/fixture__fixture__2__r0/measurements.jsonl"),
         "{\"index\":3",
@@ -337,11 +353,11 @@ fn bad_datasets_and_run_folders_are_named() {
 
     let mut far = config.clone();
     far.model.head.pred_len = 8;
-    let error = open_error(&fixture("far"), &far.model);
+    let error = open_error(&tmp.fixture("far"), &far.model);
     assert!(error.contains("plans 8"), "{error}");
 
     // At 0.5 Hz there is no frame 0.5 s back to be the history.
-    let slow = fixture("slow");
+    let slow = tmp.fixture("slow");
     edit(
         &slow.join("manifest.json"),
         "\"rate_hz\": 2.0",
@@ -354,13 +370,13 @@ fn bad_datasets_and_run_folders_are_named() {
     );
 
     // A missing image stops training with its path; what was written so far stays.
-    let holes = fixture("holes");
+    let holes = tmp.fixture("holes");
     for route in 0..FIXTURE_ROUTES {
         let _ = std::fs::remove_file(holes.join(format!(
             "episodes/fixture__fixture__{route}__r0/cam0/000004.png"
         )));
     }
-    let out = scratch("holes-run");
+    let out = tmp.dir("holes-run");
     let mut long = config.clone();
     long.steps = 40;
     let error = train_error(long, &holes, &out);
@@ -370,7 +386,7 @@ fn bad_datasets_and_run_folders_are_named() {
     );
     assert!(out.join("train_config.json").exists());
 
-    let empty = scratch("no-resume");
+    let empty = tmp.dir("no-resume");
     let resume = TrainOptions {
         resume: true,
         ..options(&holes, &empty)
@@ -385,7 +401,7 @@ fn bad_datasets_and_run_folders_are_named() {
 
     let mut bad = config.clone();
     bad.batch_size = 0;
-    let error = train_error(bad, &holes, &scratch("bad-config"));
+    let error = train_error(bad, &holes, &tmp.dir("bad-config"));
     assert!(error.to_string().contains("batch_size"), "{error}");
 }
 

@@ -11,8 +11,8 @@ fn sim_bridge(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn eval_writes_leaderboard_results_and_a_summary() {
-    let dir = std::env::temp_dir().join(format!("sim-bridge-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = dir.join("results.json");
     let pictures = dir.join("pictures");
     let run = sim_bridge(&[
@@ -45,8 +45,8 @@ fn eval_writes_leaderboard_results_and_a_summary() {
 
 #[test]
 fn eval_jobs_run_routes_at_once_with_the_same_results() {
-    let dir = std::env::temp_dir().join(format!("sim-bridge-cli-jobs-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let records = |jobs: &str| {
         let out = dir.join(format!("jobs{jobs}.json"));
         let run = sim_bridge(&[
@@ -91,7 +91,8 @@ fn eval_jobs_run_routes_at_once_with_the_same_results() {
 
 #[test]
 fn eval_resume_keeps_scored_runs_and_refuses_another_plan() {
-    let dir = scratch("eval-resume");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = dir.join("results.json");
     let eval = |repetitions: &str, seed: &str, resume: bool| {
         let mut args = vec![
@@ -187,16 +188,10 @@ fn listings_and_help_explain() {
     assert!(String::from_utf8_lossy(&towns.stdout).contains("ssr_town05"));
 }
 
-fn scratch(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("sim-bridge-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 #[test]
 fn render_writes_camera_frames_and_an_animation() {
-    let dir = scratch("render");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let run = sim_bridge(&[
         "render",
         "--routes",
@@ -241,7 +236,8 @@ fn render_writes_camera_frames_and_an_animation() {
 
 #[test]
 fn malformed_rigs_are_refused_with_the_problem_named() {
-    let dir = scratch("bad-rig");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let cases = [
         (
             r#"[{"id":"front","x":0,"y":0,"z":2,"roll":0,"pitch":0,"yaw":0,"width":320,"height":96,"fov":200}]"#,
@@ -302,7 +298,8 @@ fn dataset_files(root: &std::path::Path) -> std::collections::BTreeMap<String, V
 
 #[test]
 fn a_killed_collection_resumes_without_losing_or_duplicating_frames() {
-    let dir = scratch("resume");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let (killed, clean) = (dir.join("killed"), dir.join("clean"));
     let args = |out: &std::path::Path| {
         vec![

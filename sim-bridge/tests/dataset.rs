@@ -1,7 +1,7 @@
 //! Expert datasets: a collection read back frame by frame, futures consistent with the poses,
 //! frames identical to what a driving agent is shown, and clear errors for broken files.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use sim_bridge::agent::{Agent, AgentError, CameraFrame, Control, Observation, RouteContext};
 use sim_bridge::camera::Rig;
@@ -16,12 +16,6 @@ use sim_bridge::route::xml;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::towngen::bundled;
 use sim_bridge::world::{World, WorldConfig};
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sim-bridge-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
 
 fn small_town() -> (Map, RouteSet) {
     let set = RouteSet::find("train-small").expect("bundled set");
@@ -70,7 +64,8 @@ fn config(out: &Path, noise: f64) -> CollectConfig {
 
 #[test]
 fn a_collection_reads_back_with_consistent_futures() {
-    let out = scratch("dataset-roundtrip");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("dataset");
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 3);
     let summary = collect(&config(&out, 0.5), &tasks, |_| {}).unwrap();
@@ -147,7 +142,8 @@ impl Agent for Watcher {
 
 #[test]
 fn the_dataset_stores_exactly_the_frames_an_agent_is_shown() {
-    let out = scratch("dataset-same-frames");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("dataset");
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 1);
     collect(&config(&out, 0.0), &tasks, |_| {}).unwrap();
@@ -181,7 +177,8 @@ fn the_dataset_stores_exactly_the_frames_an_agent_is_shown() {
 
 #[test]
 fn broken_datasets_give_errors_that_name_the_file_and_problem() {
-    let out = scratch("dataset-broken");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("dataset");
     let missing = Dataset::open(&out).unwrap_err();
     assert!(matches!(missing, DatasetError::Io { .. }));
     assert!(missing.to_string().contains("manifest.json"), "{missing}");

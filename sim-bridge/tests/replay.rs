@@ -36,15 +36,10 @@ fn tick(index: usize, actors: Vec<v1::ActorBox>) -> v1::LogTick {
     }
 }
 
-fn temp(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("ssr-replay-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join("run.ssrlog")
-}
-
 #[test]
 fn logs_round_trip_and_cut_logs_keep_their_whole_ticks() {
-    let path = temp("round");
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("run.ssrlog");
     let mut writer = LogWriter::create(&path, header()).unwrap();
     for i in 0..5 {
         writer.tick(tick(i, Vec::new())).unwrap();

@@ -15,13 +15,6 @@ use tonic::transport::Channel;
 
 type Client = AgentServiceClient<Channel>;
 
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("ssrdrive-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 /// The rig the server expects (tcp-small for cpu-default).
 async fn expected_rig(client: &mut Client) -> v1::Rig {
     let info = client
@@ -100,7 +93,8 @@ fn eval_command(agent: &str, flags: &[&str], out: &std::path::Path) -> Command {
 #[test]
 fn eval_scores_a_route_through_the_server() {
     let server = Server::start(&[]);
-    let dir = temp_dir("eval");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = dir.join("results.json");
     let agent = format!("grpc://{}", server.address);
     let run = eval_command(&agent, &["--limit", "1", "--timeout", "2"], &out)
@@ -121,7 +115,8 @@ fn eval_scores_a_route_through_the_server() {
 
 #[test]
 fn local_agent_starts_its_own_server() {
-    let dir = temp_dir("local");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = dir.join("results.json");
     let run = eval_command("local", &["--limit", "1", "--timeout", "1"], &out)
         .env("SSR_AGENT_BIN", binary("ssr-agent"))
@@ -158,7 +153,8 @@ fn local_agent_starts_its_own_server() {
 #[test]
 fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
     let server = Server::start(&[]);
-    let dir = temp_dir("crash");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = dir.join("results.json");
     let agent = format!("grpc://{}", server.address);
     let flags = ["--limit", "2", "--timeout", "600", "--call-timeout", "2"];
@@ -559,7 +555,8 @@ fn health_reflection_and_metrics_answer_and_sigterm_drains() {
 #[test]
 fn load_reports_every_step_and_the_server_memory() {
     let server = Server::start(&[]);
-    let dir = temp_dir("load");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = dir.join("load.json");
     let run = Command::new(binary("sim-bridge"))
         .args(["load", "--agent", &format!("grpc://{}", server.address)])
@@ -607,7 +604,8 @@ fn load_reports_every_step_and_the_server_memory() {
 #[test]
 fn a_recorded_run_replays_without_drift() {
     let server = Server::start(&[]);
-    let dir = temp_dir("replay");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let logs = dir.join("logs");
     let agent = format!("grpc://{}", server.address);
     let flags = [
