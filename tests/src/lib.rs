@@ -139,6 +139,19 @@ impl Server {
             .unwrap_or(0.0)
     }
 
+    /// Polls `metric(sample)` until it equals `value` or `within` has passed; the last value
+    /// read. For effects the server applies after the call that causes them has returned.
+    pub fn metric_settling_at(&self, sample: &str, value: f64, within: Duration) -> f64 {
+        let deadline = Instant::now() + within;
+        loop {
+            let now = self.metric(sample);
+            if now == value || Instant::now() >= deadline {
+                return now;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
     /// Sends SIGTERM and waits for the exit status.
     pub fn terminate(mut self) -> std::process::ExitStatus {
         let status = Command::new("kill")

@@ -454,8 +454,8 @@ fn drive_streams_one_episode_per_stream() {
         assert_eq!(status.code(), Code::InvalidArgument);
     });
     // The stream's episode was closed when the stream ended.
-    std::thread::sleep(Duration::from_millis(200));
-    assert_eq!(server.metric("ssr_active_episodes"), 0.0);
+    let active = server.metric_settling_at("ssr_active_episodes", 0.0, Duration::from_secs(10));
+    assert_eq!(active, 0.0);
 }
 
 #[test]
