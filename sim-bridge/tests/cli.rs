@@ -40,7 +40,6 @@ fn eval_writes_leaderboard_results_and_a_summary() {
     assert_eq!(json["_checkpoint"]["records"].as_array().unwrap().len(), 2);
     assert!(json["_checkpoint"]["global_record"]["scores"]["score_composed"].is_number());
     assert_eq!(std::fs::read_dir(&pictures).unwrap().count(), 2);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -86,7 +85,6 @@ fn eval_jobs_run_routes_at_once_with_the_same_results() {
         .map(|r| r["meta"]["repetition"].as_u64())
         .collect();
     assert_eq!(repetitions, [0, 0, 0, 1, 1, 1].map(Some));
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -156,7 +154,6 @@ fn eval_resume_keeps_scored_runs_and_refuses_another_plan() {
     // A broken file is named.
     std::fs::write(&out, "{ not json").unwrap();
     refused(eval("2", "0", true), ["resuming from", "malformed"]);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -210,7 +207,7 @@ fn render_writes_camera_frames_and_an_animation() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let route = std::fs::read_dir(&dir)
+    let route = std::fs::read_dir(dir)
         .unwrap()
         .next()
         .unwrap()
@@ -231,7 +228,6 @@ fn render_writes_camera_frames_and_an_animation() {
         animation.windows(4).any(|w| w == b"acTL"),
         "run.png is not an animated PNG"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -271,7 +267,6 @@ fn malformed_rigs_are_refused_with_the_problem_named() {
     let run = sim_bridge(&["bench", "render", "--rig", "no-such-rig"]);
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(stderr.contains("tcp-small"), "presets are listed: {stderr}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Every file of every episode folder under `root`, with its bytes.
@@ -370,5 +365,4 @@ fn a_killed_collection_resumes_without_losing_or_duplicating_frames() {
         (m["episodes"].clone(), m["frames"].clone())
     };
     assert_eq!(manifest(&killed), manifest(&clean));
-    let _ = std::fs::remove_dir_all(&dir);
 }

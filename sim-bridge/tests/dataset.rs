@@ -112,7 +112,6 @@ fn a_collection_reads_back_with_consistent_futures() {
     }
     assert_eq!(total, m.frames);
     assert!(noisy > 0, "noise at 0.5 per second must show up");
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The expert with a camera, keeping every frame it is shown at 2 Hz.
@@ -172,7 +171,6 @@ fn the_dataset_stores_exactly_the_frames_an_agent_is_shown() {
         let stored = &data.images(name, record).unwrap()[0];
         assert_eq!(stored.rgb, shown.rgb, "frame {}", record.index);
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
@@ -240,5 +238,4 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     std::fs::write(&manifest, text.replace("\"version\": 1", "\"version\": 99")).unwrap();
     let err = Dataset::open(&out).unwrap_err().to_string();
     assert!(err.contains("version 99"), "{err}");
-    let _ = std::fs::remove_dir_all(&out);
 }
