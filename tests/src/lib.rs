@@ -139,14 +139,20 @@ impl Server {
             .unwrap_or(0.0)
     }
 
-    /// Polls `metric(sample)` until it equals `value` or `within` has passed; the last value
-    /// read. For effects the server applies after the call that causes them has returned.
-    pub fn metric_settling_at(&self, sample: &str, value: f64, within: Duration) -> f64 {
+    /// Polls `metric(sample)` every 50 ms until `reached(value)` or `within` has passed; the
+    /// last value read. For what happens on the server after the call that caused it returned,
+    /// or in another process's requests.
+    pub fn metric_once(
+        &self,
+        sample: &str,
+        reached: impl Fn(f64) -> bool,
+        within: Duration,
+    ) -> f64 {
         let deadline = Instant::now() + within;
         loop {
-            let now = self.metric(sample);
-            if now == value || Instant::now() >= deadline {
-                return now;
+            let value = self.metric(sample);
+            if reached(value) || Instant::now() >= deadline {
+                return value;
             }
             std::thread::sleep(Duration::from_millis(50));
         }
