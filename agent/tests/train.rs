@@ -47,6 +47,9 @@ impl ModuleVisitor for MissingGradients<'_> {
 #[test]
 fn one_step_lowers_the_loss_and_reaches_every_module() {
     let device = Device::flex().autodiff();
+    // Fixed initial weights. Drawn afresh, tiny's 8-wide can-bus layer was dead for the shared
+    // ego motion of this batch (every ReLU negative, so no gradient behind it) in 1 run of 100.
+    device.seed(7);
     let config = tiny_config();
     let mut model = SsrModel::new(&config, &device);
     let batch = 2;
