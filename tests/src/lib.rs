@@ -142,7 +142,7 @@ impl Server {
     /// Polls `metric(sample)` every 50 ms until `reached(value)` or `within` has passed; the
     /// last value read. For what happens on the server after the call that caused it returned,
     /// or in another process's requests.
-    pub fn metric_once(
+    pub fn wait_for_metric(
         &self,
         sample: &str,
         reached: impl Fn(f64) -> bool,

@@ -166,7 +166,7 @@ fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
     // Lost once the first route is under way: its first steps were answered, and it is too
     // early for it to have ended by itself (a fixed wait let it deviate and end first).
     let steps = r#"ssr_requests_total{method="Step",code="OK"}"#;
-    let answered = server.metric_once(steps, |n| n >= 3.0, Duration::from_secs(60));
+    let answered = server.wait_for_metric(steps, |n| n >= 3.0, Duration::from_secs(60));
     assert!(answered >= 3.0, "the route never started: {answered} steps");
     drop(server);
     let run = eval.wait_with_output().unwrap();
@@ -458,7 +458,8 @@ fn drive_streams_one_episode_per_stream() {
         assert_eq!(status.code(), Code::InvalidArgument);
     });
     // The stream's episode was closed when the stream ended.
-    let active = server.metric_once("ssr_active_episodes", |n| n == 0.0, Duration::from_secs(10));
+    let active =
+        server.wait_for_metric("ssr_active_episodes", |n| n == 0.0, Duration::from_secs(10));
     assert_eq!(active, 0.0);
 }
 
