@@ -251,7 +251,6 @@ fn fused_aggregation_matches_tensor_ops() {
         Tensor::<4>::random([n, q, p, 2], Distribution::Uniform(-0.5, 1.5), &device).require_grad();
     let weights =
         Tensor::<3>::random([n, q, p], Distribution::Uniform(-1.0, 1.0), &device).require_grad();
-    let output_grad = Tensor::<3>::random([n, q, hw_c], Distribution::Normal(0.0, 1.0), &device);
 
     let inference = deformable_aggregate(
         values.clone().inner(),
@@ -278,16 +277,10 @@ fn fused_aggregation_matches_tensor_ops() {
         );
     }
 
-    let fused_grads = (fused * output_grad.clone()).sum().backward();
-    let reference_grads = (reference * output_grad).sum().backward();
-    for (name, input) in [("values", &values), ("weights", &weights)] {
-        assert_gradients_match(name, input.grad(&fused_grads), input.grad(&reference_grads));
-    }
-    assert_gradients_match(
-        "locations",
-        locations.grad(&fused_grads),
-        locations.grad(&reference_grads),
-    );
+    let grads = backward_both(fused, reference);
+    grads.assert_match("values", &values);
+    grads.assert_match("weights", &weights);
+    grads.assert_match("locations", &locations);
 }
 
 /// The fused max pool equals Burn's for the stem's window and others, on even and odd sizes,
@@ -374,20 +367,11 @@ fn fused_convolution_matches_burn() {
             assert_eq!(actual.dims(), expected.dims(), "{case}");
             assert_outputs_match(&case, inference, &actual, &expected, 1e-4);
 
-            let (fused_grads, burn_grads) = backward_both(actual, expected);
-            for (name, input) in [("input", &x), ("weight", &weight)] {
-                assert_gradients_match(
-                    &format!("{case}: {name}"),
-                    input.grad(&fused_grads),
-                    input.grad(&burn_grads),
-                );
-            }
+            let grads = backward_both(actual, expected);
+            grads.assert_match(&format!("{case}: input"), &x);
+            grads.assert_match(&format!("{case}: weight"), &weight);
             if let Some(bias) = bias {
-                assert_gradients_match(
-                    &format!("{case}: bias"),
-                    bias.grad(&fused_grads),
-                    bias.grad(&burn_grads),
-                );
+                grads.assert_match(&format!("{case}: bias"), &bias);
             }
         }
     }
@@ -423,18 +407,10 @@ fn fused_layer_norm_matches_burn() {
         let fused = cpu_kernels::layer_norm(x.clone(), gamma.clone(), beta.clone(), epsilon);
         assert_outputs_match(&case, inference, &fused, &expected, 1e-4);
 
-        let (fused_grads, burn_grads) = backward_both(fused, expected);
-        assert_gradients_match(
-            &format!("{case}: input"),
-            x.grad(&fused_grads),
-            x.grad(&burn_grads),
-        );
+        let grads = backward_both(fused, expected);
+        grads.assert_match(&format!("{case}: input"), &x);
         for (name, parameter) in [("gamma", &gamma), ("beta", &beta)] {
-            assert_gradients_match(
-                &format!("{case}: {name}"),
-                parameter.grad(&fused_grads),
-                parameter.grad(&burn_grads),
-            );
+            grads.assert_match(&format!("{case}: {name}"), parameter);
         }
     }
 }
@@ -467,8 +443,7 @@ fn fused_activations_match_burn() {
             let inference = cpu_kernels::activation(x.clone().inner(), activation);
             let fused = cpu_kernels::activation(x.clone(), activation);
             assert_outputs_match(&case, inference, &fused, &expected, 5e-6);
-            let (fused_grads, burn_grads) = backward_both(fused, expected);
-            assert_gradients_match(&case, x.grad(&fused_grads), x.grad(&burn_grads));
+            backward_both(fused, expected).assert_match(&case, &x);
         }
     }
 }
@@ -521,19 +496,10 @@ fn fused_batch_norm_matches_burn() {
             assert!(diff < 1e-5, "{case}: {name} differs by {diff}");
         }
 
-        let (fused_grads, burn_grads) = backward_both(fused, expected);
-        assert_gradients_match(
-            &format!("{case}: input"),
-            x.grad(&fused_grads),
-            x.grad(&burn_grads),
-        );
+        let grads = backward_both(fused, expected);
+        grads.assert_match(&format!("{case}: input"), &x);
         for (name, parameter) in [("gamma", &gamma), ("beta", &beta)] {
-            let parameter = parameter.val();
-            assert_gradients_match(
-                &format!("{case}: {name}"),
-                parameter.grad(&fused_grads),
-                parameter.grad(&burn_grads),
-            );
+            grads.assert_match(&format!("{case}: {name}"), &parameter.val());
         }
     }
 }
@@ -573,24 +539,11 @@ fn fused_linear_matches_burn() {
         let fused = cpu_kernels::linear(&layer, x.clone());
         assert_outputs_match(&case, inference, &fused, &expected, 1e-4);
 
-        let (fused_grads, burn_grads) = backward_both(fused, expected);
-        assert_gradients_match(
-            &format!("{case}: input"),
-            x.grad(&fused_grads),
-            x.grad(&burn_grads),
-        );
-        let weight = layer.weight.val();
-        assert_gradients_match(
-            &format!("{case}: weight"),
-            weight.grad(&fused_grads),
-            weight.grad(&burn_grads),
-        );
+        let grads = backward_both(fused, expected);
+        grads.assert_match(&format!("{case}: input"), &x);
+        grads.assert_match(&format!("{case}: weight"), &layer.weight.val());
         let bias = layer.bias.as_ref().expect("bias").val();
-        assert_gradients_match(
-            &format!("{case}: bias"),
-            bias.grad(&fused_grads),
-            bias.grad(&burn_grads),
-        );
+        grads.assert_match(&format!("{case}: bias"), &bias);
     }
 }
 
@@ -625,8 +578,7 @@ fn fused_softmax_matches_burn() {
         let inference = cpu_kernels::softmax(x.clone().inner(), dim);
         let fused = cpu_kernels::softmax(x.clone(), dim);
         assert_outputs_match(case, inference, &fused, &expected, 1e-6);
-        let (fused_grads, burn_grads) = backward_both(fused, expected);
-        assert_gradients_match(case, x.grad(&fused_grads), x.grad(&burn_grads));
+        backward_both(fused, expected).assert_match(case, &x);
     }
 }
 
@@ -649,32 +601,42 @@ fn assert_outputs_match<const D: usize>(
 }
 
 /// The gradients each graph gives its inputs for one shared random output gradient `g` (of
-/// `Σ output * g`): the fused kernel's first, the reference's second.
-fn backward_both<const D: usize>(fused: Tensor<D>, reference: Tensor<D>) -> (Gradients, Gradients) {
+/// `Σ output * g`).
+fn backward_both<const D: usize>(fused: Tensor<D>, reference: Tensor<D>) -> BothGradients {
     let output_grad = Tensor::<D>::random(
         reference.dims(),
         Distribution::Normal(0.0, 1.0),
         &reference.device(),
     );
-    (
-        (fused * output_grad.clone()).sum().backward(),
-        (reference * output_grad).sum().backward(),
-    )
+    BothGradients {
+        fused: (fused * output_grad.clone()).sum().backward(),
+        reference: (reference * output_grad).sum().backward(),
+    }
 }
 
-/// Two gradients agree to 1e-4 of the reference's largest magnitude (and it is not zero).
-fn assert_gradients_match<const D: usize>(
-    name: &str,
-    fused: Option<Tensor<D>>,
-    reference: Option<Tensor<D>>,
-) {
-    let fused = float_values(fused.unwrap_or_else(|| panic!("{name}: no fused gradient")));
-    let reference =
-        float_values(reference.unwrap_or_else(|| panic!("{name}: no reference gradient")));
-    let scale = reference.iter().fold(0f32, |m, v| m.max(v.abs()));
-    let diff = max_abs_diff(fused, reference);
-    assert!(
-        scale > 0.1 && diff < 1e-4 * scale,
-        "{name} gradients differ by {diff} (largest {scale})"
-    );
+/// The fused kernel's graph's gradients beside the reference's.
+struct BothGradients {
+    fused: Gradients,
+    reference: Gradients,
+}
+
+impl BothGradients {
+    /// Both graphs' gradients with respect to `input` agree to 1e-4 of the reference's largest
+    /// magnitude (and it is not zero).
+    fn assert_match<const D: usize>(&self, name: &str, input: &Tensor<D>) {
+        let gradient = |grads: &Gradients, side: &str| {
+            float_values(
+                input
+                    .grad(grads)
+                    .unwrap_or_else(|| panic!("{name}: no {side} gradient")),
+            )
+        };
+        let reference = gradient(&self.reference, "reference");
+        let scale = reference.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let diff = max_abs_diff(gradient(&self.fused, "fused"), reference);
+        assert!(
+            scale > 0.1 && diff < 1e-4 * scale,
+            "{name} gradients differ by {diff} (largest {scale})"
+        );
+    }
 }
