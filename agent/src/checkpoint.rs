@@ -12,11 +12,15 @@ use std::path::{Path, PathBuf};
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Device;
 
+use crate::control::ControlConfig;
 use crate::model::SsrModel;
 use crate::model::config::SsrConfig;
 
 /// Metadata key of the config JSON.
 pub const CONFIG_KEY: &str = "ssr_config";
+/// Metadata key of the controller settings JSON (the vehicle the network was trained to drive,
+/// look-ahead, PID gains, fusion); a checkpoint without it gets [`ControlConfig::default`].
+pub const CONTROL_KEY: &str = "control";
 /// Largest safetensors header accepted.
 pub const MAX_HEADER_BYTES: u64 = 16 << 20;
 
@@ -86,6 +90,19 @@ pub fn save(
             path: path.to_path_buf(),
             source: std::io::Error::other(e.to_string()),
         })
+}
+
+/// The controller settings a checkpoint carries (checked), or the defaults when it has none.
+pub fn control_config(info: &CheckpointInfo) -> Result<ControlConfig, String> {
+    let Some(json) = info.metadata.get(CONTROL_KEY) else {
+        return Ok(ControlConfig::default());
+    };
+    let config: ControlConfig = serde_json::from_str(json)
+        .map_err(|e| format!("its '{CONTROL_KEY}' metadata is not a controller config: {e}"))?;
+    config
+        .validate()
+        .map_err(|e| format!("its '{CONTROL_KEY}' metadata: {e}"))?;
+    Ok(config)
 }
 
 /// Reads and checks a checkpoint's header: config, metadata, and that the file is complete.

@@ -5,7 +5,7 @@
 //!   `sim-bridge`, which renders and records through the same rigs; re-exported here).
 //! - [`pose`]: ego poses and the ego motion between ticks.
 //! - [`model`]: the network (backbone, BEV encoder, Scenes TokenLearner, TCP head, FFP).
-//! - [`control`]: TCP's PID controllers, Beta rules and situation-based fusion.
+//! - [`control`]: pure pursuit, speed PID, Beta rules and fusion (crate `ssr-control`).
 //! - [`policy`]: per-episode state and the step / batched-step API.
 //! - [`checkpoint`]: weights with their config in one safetensors file.
 //! - [`train`]: losses (imitation + future-BEV) used by training.
@@ -18,7 +18,7 @@
 
 pub use sim_bridge::camera;
 pub mod checkpoint;
-pub mod control;
+pub use ssr_control as control;
 pub mod device;
 pub mod model;
 pub mod policy;

@@ -62,9 +62,11 @@ pub fn load_policy(
             .map(|json| sim_bridge::camera::Rig::from_json(json))
             .transpose()
             .with_context(|| format!("checkpoint {name}: its rig"))?;
-        anyhow::Ok((model, info.config, name, rig))
+        let control = checkpoint::control_config(&info)
+            .map_err(|e| anyhow::anyhow!("checkpoint {name}: {e}"))?;
+        anyhow::Ok((model, info.config, name, rig, control))
     };
-    let (model, model_config, checkpoint, rig) =
+    let (model, model_config, checkpoint, rig, control) =
         match (&config.checkpoint, &config.untrained_config) {
             (Some(path), _) => {
                 trained(checkpoint::load(path, device)?, path.display().to_string())?
@@ -81,6 +83,7 @@ pub fn load_policy(
                     model_config,
                     "untrained (random weights)".to_string(),
                     None,
+                    ControlConfig::default(),
                 )
             }
             (None, None) => trained(
@@ -94,12 +97,7 @@ pub fn load_policy(
         checkpoint,
         expected_rig,
     };
-    let policy = SsrPolicy::new(
-        model,
-        model_config,
-        ControlConfig::default(),
-        device.clone(),
-    );
+    let policy = SsrPolicy::new(model, model_config, control, device.clone());
     Ok((policy, info))
 }
 

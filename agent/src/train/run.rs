@@ -33,6 +33,7 @@ use super::data::{Batch, SampleDraw, SampleRef, TrainingData};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use crate::checkpoint::{self, CheckpointError};
+use crate::control::ControlConfig;
 use crate::control::beta::control_from_beta;
 use crate::model::config::SsrConfig;
 use crate::model::tcp_head::HeadOutput;
@@ -442,6 +443,10 @@ impl Trainer {
             &self.config.model,
             &[
                 (RIG_METADATA_KEY, rig),
+                (
+                    checkpoint::CONTROL_KEY,
+                    serde_json::to_string(&ControlConfig::default()).expect("configs serialise"),
+                ),
                 (
                     TRAINING_METADATA_KEY,
                     serde_json::to_string(&notes).expect("notes serialise"),

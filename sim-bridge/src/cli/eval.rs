@@ -19,6 +19,7 @@ use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::local::LocalServer;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
+use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
 use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, RouteEnd, RouteRecord, ScoringConfig, summary_table};
@@ -29,7 +30,9 @@ use super::args::{
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// Who drives: `expert` (the privileged rule-based expert), `grpc://HOST:PORT` (an
+    /// Who drives: `expert` (the privileged rule-based expert), `oracle-plan` (the agent
+    /// server's controller fed the expert's plan and control, fused as served: checks the
+    /// controller), `oracle-plan-only` (the same on the plan alone), `grpc://HOST:PORT` (an
     /// agent server, e.g. `ssr-agent serve`), or `local` (starts `ssr-agent serve` on a free
     /// loopback port for the run; SSR_AGENT_* variables configure it).
     #[arg(long, default_value = "expert")]
@@ -300,17 +303,22 @@ fn earlier_records(
 
 /// The server `--agent` names (started here for `local`), or `None` for the expert.
 fn agent_target(args: &EvalArgs) -> anyhow::Result<(Option<String>, Option<LocalServer>)> {
-    if args.agent == "expert" {
+    if matches!(args.agent.as_str(), "expert" | "oracle-plan" | "oracle-plan-only") {
         return Ok((None, None));
     }
     let (target, server) = server_target(&args.agent, false)?;
     Ok((Some(target), server))
 }
 
-/// One agent: the expert in process, or a connection to the server at `target`.
+/// One agent: the expert or the oracle-plan agent in process, or a connection to the server
+/// at `target`.
 fn build_agent(args: &EvalArgs, target: Option<&str>) -> anyhow::Result<Box<dyn Agent>> {
     let Some(target) = target else {
-        return Ok(Box::new(Expert::new()));
+        return Ok(match args.agent.as_str() {
+            "oracle-plan" => Box::new(OraclePlan::new(sim_control_config())),
+            "oracle-plan-only" => Box::new(OraclePlan::plan_only(sim_control_config())),
+            _ => Box::new(Expert::new()),
+        });
     };
     let options = GrpcOptions {
         rig: args

@@ -9,8 +9,11 @@
 //!   stop sign it has not yet stopped at.
 //! - A short-horizon collision forecast (2 s, 4 s near junctions) of the ego along its route
 //!   against every moving actor at constant velocity brakes hard on a predicted overlap.
+//! - Each tick it also states its plan ([`plan`]): where these rules take it over the next 3 s.
 
 pub mod hazards;
+pub mod oracle;
+pub mod plan;
 
 pub use hazards::BrakeReason;
 
@@ -46,6 +49,8 @@ pub struct Expert {
     hazards: hazards::HazardMemory,
     params: EgoParams,
     reason: Option<BrakeReason>,
+    /// The last tick's plan, ego frame.
+    plan: Vec<DVec2>,
 }
 
 impl Expert {
@@ -72,7 +77,12 @@ impl Agent for Expert {
         self.hazards = hazards::HazardMemory::default();
         self.params = EgoParams::default();
         self.reason = None;
+        self.plan.clear();
         Ok(())
+    }
+
+    fn planned_trajectory(&self) -> Vec<DVec2> {
+        self.plan.clone()
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
@@ -95,14 +105,16 @@ impl Expert {
         self.index = route.advance_index(self.index, ego.position.truncate(), 20);
         let steer = pure_pursuit(route, self.index, &ego, &self.params);
 
-        let mut target = ROAD_SPEED.min(curve_speed(route, self.index));
-        if near_junction(map, route, self.index) {
-            target = target.min(JUNCTION_SPEED);
-        }
         let view = hazards::scan(world, route, self.index, &mut self.hazards);
-        if view.walker_near {
-            target = target.min(WALKER_SPEED);
-        }
+        let target = target_speed(map, route, self.index, view.walker_near);
+        self.plan = plan::plan(&plan::PlanStart {
+            map,
+            route,
+            index: self.index,
+            ego: &ego,
+            view: &view,
+            max_brake: self.params.max_brake,
+        });
         let free = idm(obs.speed, target, None);
         let mut accel = idm(obs.speed, target, view.obstacle);
         let mut cause = view.cause.filter(|_| accel < free - 0.1);
@@ -120,6 +132,19 @@ impl Expert {
         };
         Control { steer, ..control }
     }
+}
+
+/// The speed the expert aims for at route point `index`: cruise, capped by the curvature ahead,
+/// in and just before junctions, and near walkers.
+fn target_speed(map: &crate::map::Map, route: &DenseRoute, index: usize, walker_near: bool) -> f64 {
+    let mut target = ROAD_SPEED.min(curve_speed(route, index));
+    if near_junction(map, route, index) {
+        target = target.min(JUNCTION_SPEED);
+    }
+    if walker_near {
+        target = target.min(WALKER_SPEED);
+    }
+    target
 }
 
 /// IDM acceleration towards `target` speed with an obstacle (gap, its speed) ahead.

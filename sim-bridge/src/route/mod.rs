@@ -61,6 +61,29 @@ impl DenseRoute {
     pub fn length(&self) -> f64 {
         *self.cum.last().unwrap_or(&0.0)
     }
+
+    /// The ground position at arc length `s` (clamped to the route), interpolated between
+    /// points; beyond the last point the route is extended along its final heading.
+    pub fn position_at(&self, s: f64) -> DVec2 {
+        let Some(last) = self.points.last() else {
+            return DVec2::ZERO;
+        };
+        if s >= self.length() {
+            return last.position.truncate() + last.forward() * (s - self.length());
+        }
+        let i = self.cum.partition_point(|&c| c <= s).clamp(1, self.points.len() - 1);
+        let (a, b) = (&self.points[i - 1], &self.points[i]);
+        let span = self.cum[i] - self.cum[i - 1];
+        let t = if span > 1e-9 { ((s - self.cum[i - 1]) / span).clamp(0.0, 1.0) } else { 0.0 };
+        a.position.truncate().lerp(b.position.truncate(), t)
+    }
+
+    /// The arc length of a ground position near point `index`: that point's arc length plus
+    /// the position's offset along the route there.
+    pub fn arc_near(&self, index: usize, p: DVec2) -> f64 {
+        let point = &self.points[index];
+        (self.cum[index] + (p - point.position.truncate()).dot(point.forward())).max(0.0)
+    }
 }
 
 impl DenseRoute {

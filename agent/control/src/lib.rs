@@ -1,9 +1,14 @@
-//! From network outputs to vehicle control, as TCP's agent does it: PID controllers that follow
-//! the predicted waypoints ([`trajectory`]), the control branch's Beta distributions turned into
-//! actions ([`beta`]), and the situation-based fusion of the two ([`fusion`]), with the
-//! per-episode state all of them keep ([`EpisodeController`]).
+//! From a planned trajectory and TCP's control branch to vehicle control: pure pursuit and a
+//! speed PID that follow the waypoints ([`trajectory`]), the control branch's Beta distributions
+//! turned into actions ([`beta`]), and TCP's situation-based fusion of the two ([`fusion`]), with
+//! the per-episode state all of them keep ([`EpisodeController`]).
+//!
+//! A crate of its own so that the agent server and the simulator's oracle-plan agent (which
+//! feeds it the expert's plan) drive through the same code; it depends on nothing but serde.
 //!
 //! Control follows CARLA: steer in [-1, 1] with +1 full right, throttle and brake in [0, 1].
+//! Waypoints and target points are in the ego frame: x forward, y left, metres, origin at the
+//! centre of the vehicle box.
 
 pub mod beta;
 pub mod fusion;
@@ -23,23 +28,45 @@ pub struct Control {
     pub brake: f32,
 }
 
-/// Controller settings; defaults are TCP's.
+/// The geometry of the vehicle being steered: what pure pursuit needs to turn a path into a
+/// steer value. Defaults are sim-bridge's sedan; CARLA's Lincoln MKZ 2017 has a 2.87 m wheelbase
+/// and a 70-degree `max_steer_angle`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Vehicle {
+    /// Axle distance, m.
+    pub wheelbase: f32,
+    /// How far the rear axle sits behind the ego origin (the box centre), m.
+    pub rear_axle: f32,
+    /// Front-wheel angle at |steer| = 1, degrees.
+    pub max_wheel_angle: f32,
+}
+
+impl Default for Vehicle {
+    fn default() -> Self {
+        Self {
+            wheelbase: 2.85,
+            rear_axle: 1.425,
+            max_wheel_angle: 35.0,
+        }
+    }
+}
+
+/// Controller settings. Speed PID, brake rules and fusion are TCP's; the lateral law is pure
+/// pursuit for [`Vehicle`] (see [`trajectory`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ControlConfig {
-    pub turn_kp: f32,
-    pub turn_ki: f32,
-    pub turn_kd: f32,
+    /// The vehicle being steered.
+    pub vehicle: Vehicle,
+    /// Look-ahead beyond the box centre: `base + gain * speed`, at most `max` (m, s).
+    pub lookahead_base: f32,
+    pub lookahead_gain: f32,
+    pub lookahead_max: f32,
     pub speed_kp: f32,
     pub speed_ki: f32,
     pub speed_kd: f32,
     /// PID error window length (ticks).
     pub pid_window: usize,
-    /// Distance of the aim point along the trajectory, m.
-    pub aim_dist: f32,
-    /// Steer to the target point when its angle departs from the trajectory's end by more than
-    /// this (normalised angle, 1 = 90 degrees) and it is nearer than `dist_thresh` metres.
-    pub angle_thresh: f32,
-    pub dist_thresh: f32,
     /// Brake when the desired speed is below this (m/s) ...
     pub brake_speed: f32,
     /// ... or when speed / desired speed exceeds this.
@@ -58,16 +85,14 @@ pub struct ControlConfig {
 impl Default for ControlConfig {
     fn default() -> Self {
         Self {
-            turn_kp: 0.75,
-            turn_ki: 0.75,
-            turn_kd: 0.3,
+            vehicle: Vehicle::default(),
+            lookahead_base: 3.0,
+            lookahead_gain: 0.3,
+            lookahead_max: 10.0,
             speed_kp: 5.0,
             speed_ki: 0.5,
             speed_kd: 1.0,
             pid_window: 40,
-            aim_dist: 4.0,
-            angle_thresh: 0.3,
-            dist_thresh: 10.0,
             brake_speed: 0.4,
             brake_ratio: 1.1,
             clip_delta: 0.25,
@@ -94,6 +119,24 @@ impl ControlConfig {
                 "max_throttle = {} is outside 0..1",
                 self.max_throttle
             ));
+        }
+        let v = &self.vehicle;
+        if !(v.wheelbase > 0.5 && v.wheelbase < 20.0) {
+            return Err(format!("vehicle.wheelbase = {} m is outside 0.5..20", v.wheelbase));
+        }
+        if !(v.rear_axle.abs() < 10.0) {
+            return Err(format!("vehicle.rear_axle = {} m is outside -10..10", v.rear_axle));
+        }
+        if !(v.max_wheel_angle > 1.0 && v.max_wheel_angle < 89.0) {
+            return Err(format!(
+                "vehicle.max_wheel_angle = {} degrees is outside 1..89",
+                v.max_wheel_angle
+            ));
+        }
+        if !(self.lookahead_base > 0.0 && self.lookahead_max >= self.lookahead_base)
+            || !(self.lookahead_gain >= 0.0)
+        {
+            return Err("lookahead_base must be > 0, lookahead_gain >= 0 and lookahead_max >= lookahead_base".into());
         }
         Ok(())
     }
@@ -138,10 +181,24 @@ impl EpisodeController {
         alpha: [f32; 2],
         beta: [f32; 2],
     ) -> ControlDecision {
+        let branch = beta::control_from_beta(alpha, beta);
+        self.act_with_branch(waypoints, target_point, speed, Some(branch))
+    }
+
+    /// [`EpisodeController::act`] with the control branch's control already decided (an oracle
+    /// that knows the right control, for example), or with none: then the waypoints alone
+    /// drive.
+    pub fn act_with_branch(
+        &mut self,
+        waypoints: &[[f32; 2]],
+        target_point: [f32; 2],
+        speed: f32,
+        branch: Option<Control>,
+    ) -> ControlDecision {
         let trajectory = self
             .follower
             .control(waypoints, target_point, speed, &self.config);
-        let branch = beta::control_from_beta(alpha, beta);
+        let branch = branch.unwrap_or(trajectory);
         let turning = self.fusion.turning();
         let control = self.fusion.fuse(trajectory, branch, &self.config);
         ControlDecision {

@@ -1,0 +1,277 @@
+//! Control: PID, Beta rules, pure pursuit and speed control, and fusion against hand-computed
+//! cases and circle geometry.
+
+use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
+use ssr_control::fusion::Fusion;
+use ssr_control::pid::Pid;
+use ssr_control::trajectory::TrajectoryFollower;
+use ssr_control::{Control, ControlConfig, EpisodeController, Vehicle};
+
+fn near(a: f32, b: f32) -> bool {
+    (a - b).abs() < 1e-4
+}
+
+#[test]
+fn pid_uses_the_window_mean_and_last_difference() {
+    let mut pid = Pid::new(1.0, 0.5, 0.25, 4);
+    // window [0, 0, 0, 2]: 2 + 0.5 * 0.5 + 0.25 * 2
+    assert!(near(pid.step(2.0), 2.75));
+    // window [0, 0, 2, 1]: 1 + 0.5 * 0.75 + 0.25 * (1 - 2)
+    assert!(near(pid.step(1.0), 1.125));
+}
+
+#[test]
+fn beta_mode_and_mean_rules() {
+    assert!(
+        near(beta_point(3.0, 2.0), 2.0 / 3.0),
+        "mode when both exceed 1"
+    );
+    assert_eq!(beta_point(0.5, 2.0), 0.0);
+    assert_eq!(beta_point(2.0, 0.5), 1.0);
+    assert!(
+        near(beta_point(0.5, 0.5), 0.5),
+        "mean when neither exceeds 1"
+    );
+    assert!(near(beta_point(0.2, 0.6), 0.25));
+    let c = control_from_beta([3.0, 2.0], [2.0, 3.0]);
+    assert!(near(c.throttle, 1.0 / 3.0) && c.brake == 0.0 && near(c.steer, -1.0 / 3.0));
+    assert_eq!(
+        control_from_action(-0.03, 0.0),
+        Control {
+            steer: 0.0,
+            throttle: 0.0,
+            brake: 0.0
+        },
+        "small brakes drop"
+    );
+    assert_eq!(
+        control_from_action(-0.6, 2.0),
+        Control {
+            steer: 1.0,
+            throttle: 0.0,
+            brake: 0.6
+        }
+    );
+}
+
+#[test]
+fn speed_control_follows_the_first_second_of_the_plan() {
+    let config = ControlConfig::default();
+    let straight = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]]; // 4 m/s
+    // Below the desired speed: speed PID on the clipped error 0.25 saturates at 0.75.
+    let c = TrajectoryFollower::new(&config).control(&straight, [20.0, 0.0], 3.0, &config);
+    assert_eq!(
+        c,
+        Control {
+            steer: 0.0,
+            throttle: 0.75,
+            brake: 0.0
+        }
+    );
+    // 5 / 4 > 1.1: brake.
+    let c = TrajectoryFollower::new(&config).control(&straight, [20.0, 0.0], 5.0, &config);
+    assert_eq!(
+        c,
+        Control {
+            steer: 0.0,
+            throttle: 0.0,
+            brake: 1.0
+        }
+    );
+    // A plan that stops within its first second brakes, however fast the plan is later.
+    let stopping = [[0.1, 0.0], [0.15, 0.0], [5.0, 0.0], [10.0, 0.0]];
+    let c = TrajectoryFollower::new(&config).control(&stopping, [20.0, 0.0], 0.0, &config);
+    assert_eq!(c.brake, 1.0);
+}
+
+/// The simulator's kinematic bicycle (reference point at the box centre, half a wheelbase
+/// ahead of the rear axle; steer rate limited to full lock in 0.4 s) driving at constant speed
+/// through a 90-degree left turn of `radius` metres whose centre line the plan follows. Returns
+/// the largest distance of the box centre from the centre line.
+fn turn_error(car: &Vehicle, config: &ControlConfig, radius: f32, speed: f32) -> f32 {
+    let centre = [10.0f32, radius]; // straight along +x to x = 10, then the arc, then +y
+    let path_at = |s: f32| -> [f32; 2] {
+        let arc = radius * std::f32::consts::FRAC_PI_2;
+        if s < 10.0 {
+            [s, 0.0]
+        } else if s < 10.0 + arc {
+            let a = (s - 10.0) / radius;
+            [10.0 + radius * a.sin(), radius * (1.0 - a.cos())]
+        } else {
+            [10.0 + radius, radius + s - 10.0 - arc]
+        }
+    };
+    let distance_to_path = |p: [f32; 2]| -> f32 {
+        if p[0] <= 10.0 {
+            p[1].abs()
+        } else if p[1] >= radius {
+            (p[0] - 10.0 - radius).abs()
+        } else {
+            ((p[0] - centre[0]).hypot(p[1] - centre[1]) - radius).abs()
+        }
+    };
+    let (mut x, mut y, mut yaw, mut steer) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let mut follower = TrajectoryFollower::new(config);
+    let mut worst = 0.0f32;
+    let dt = 0.05;
+    for _ in 0..((10.0 + 2.0 * radius + 20.0) / speed / dt) as usize {
+        // The plan: six points 0.5 s apart from the nearest path point, in the ego frame.
+        let s0 = (0..((40.0 + 2.0 * radius) / 0.02) as usize)
+            .map(|i| i as f32 * 0.02)
+            .min_by(|a, b| {
+                let (pa, pb) = (path_at(*a), path_at(*b));
+                ((pa[0] - x).hypot(pa[1] - y)).total_cmp(&(pb[0] - x).hypot(pb[1] - y))
+            })
+            .unwrap();
+        let plan: Vec<[f32; 2]> = (1..=6)
+            .map(|k| {
+                let p = path_at(s0 + speed * 0.5 * k as f32);
+                let (dx, dy) = (p[0] - x, p[1] - y);
+                [dx * yaw.cos() + dy * yaw.sin(), -dx * yaw.sin() + dy * yaw.cos()]
+            })
+            .collect();
+        let command = follower.control(&plan, plan[5], speed, config).steer;
+        let max_delta = dt / 0.4;
+        steer += (command - steer).clamp(-max_delta, max_delta);
+        let wheel = -steer * car.max_wheel_angle.to_radians();
+        let lr = car.wheelbase / 2.0;
+        let beta = (lr / car.wheelbase * wheel.tan()).atan();
+        x += speed * (yaw + beta).cos() * dt;
+        y += speed * (yaw + beta).sin() * dt;
+        yaw += speed / lr * beta.sin() * dt;
+        worst = worst.max(distance_to_path([x, y]));
+    }
+    worst
+}
+
+#[test]
+fn pure_pursuit_keeps_the_simulated_car_in_its_lane_through_turns() {
+    let config = ControlConfig::default();
+    let car = config.vehicle.clone();
+    for (radius, speed) in [(12.0, 5.0), (8.0, 4.0), (30.0, 8.0), (60.0, 10.0)] {
+        let error = turn_error(&car, &config, radius, speed);
+        assert!(error < 0.55, "R {radius} m at {speed} m/s: {error:.2} m off the lane centre");
+    }
+    // Told its wheels turn twice as far as they do (CARLA's car), it steers half as much and
+    // leaves the lane (3.5 m lane, 2.12 m car: 0.7 m of margin).
+    let wrong = ControlConfig {
+        vehicle: Vehicle {
+            max_wheel_angle: 70.0,
+            ..Vehicle::default()
+        },
+        ..ControlConfig::default()
+    };
+    let error = turn_error(&car, &wrong, 12.0, 5.0);
+    assert!(error > 0.7, "half the steer: {error:.2} m");
+}
+
+#[test]
+fn a_plan_without_direction_steers_to_the_target_point() {
+    let config = ControlConfig::default();
+    let still = [[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [0.03, 0.0]];
+    let left = TrajectoryFollower::new(&config).control(&still, [10.0, 10.0], 0.0, &config);
+    assert!(left.steer < -0.3, "target to the left: {left:?}");
+    assert_eq!(left.brake, 1.0, "a still plan holds the car");
+    let behind = TrajectoryFollower::new(&config).control(&still, [-10.0, 10.0], 0.0, &config);
+    assert_eq!(behind.steer, 0.0, "a target behind gives no direction");
+    // A path shorter than the look-ahead is extended along its last segment.
+    let short = [[0.5, 0.0], [1.0, 0.5], [1.5, 1.0], [2.0, 1.5]];
+    let c = TrajectoryFollower::new(&config).control(&short, [20.0, 0.0], 1.0, &config);
+    assert!(c.steer < -0.2, "the extension keeps the path's left turn: {c:?}");
+}
+
+#[test]
+fn vehicle_settings_are_range_checked() {
+    let bad = |vehicle: Vehicle| ControlConfig {
+        vehicle,
+        ..ControlConfig::default()
+    };
+    let error = bad(Vehicle {
+        max_wheel_angle: 0.0,
+        ..Vehicle::default()
+    })
+    .validate()
+    .unwrap_err();
+    assert!(error.contains("max_wheel_angle"), "{error}");
+    let error = bad(Vehicle {
+        wheelbase: f32::NAN,
+        ..Vehicle::default()
+    })
+    .validate()
+    .unwrap_err();
+    assert!(error.contains("wheelbase"), "{error}");
+    assert!(ControlConfig::default().validate().is_ok());
+}
+
+#[test]
+fn fusion_switches_weights_after_sustained_turning() {
+    let config = ControlConfig::default();
+    let trajectory = Control {
+        steer: 0.2,
+        throttle: 0.6,
+        brake: 0.0,
+    };
+    let branch = Control {
+        steer: 0.6,
+        throttle: 0.2,
+        brake: 0.0,
+    };
+    let mut fusion = Fusion::new(config.turn_window);
+    for _ in 0..11 {
+        let c = fusion.fuse(trajectory, branch, &config);
+        assert!(
+            near(c.steer, 0.32) && near(c.throttle, 0.48),
+            "trajectory-weighted: {c:?}"
+        );
+    }
+    assert!(fusion.turning(), "11 of 20 steers above 0.1");
+    let c = fusion.fuse(trajectory, branch, &config);
+    assert!(
+        near(c.steer, 0.48) && near(c.throttle, 0.32),
+        "branch-weighted: {c:?}"
+    );
+
+    let braking = Control {
+        steer: 0.0,
+        throttle: 0.6,
+        brake: 1.0,
+    };
+    let c = Fusion::new(20).fuse(
+        braking,
+        Control {
+            steer: 0.0,
+            throttle: 0.5,
+            brake: 0.0,
+        },
+        &config,
+    );
+    assert!(
+        near(c.brake, 0.7) && c.throttle == 0.0,
+        "a fused brake over 0.5 cuts the throttle"
+    );
+}
+
+#[test]
+fn episode_controller_reports_both_sources() {
+    let mut controller = EpisodeController::new(ControlConfig::default());
+    let d = controller.act(
+        &[[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]],
+        [20.0, 0.0],
+        3.0,
+        [3.0, 2.0],
+        [2.0, 2.0],
+    );
+    assert_eq!(d.trajectory.throttle, 0.75);
+    assert!(near(d.branch.throttle, 1.0 / 3.0));
+    assert!(near(d.control.throttle, 0.3 * (1.0 / 3.0) + 0.7 * 0.75));
+    assert!(!d.turning);
+    assert!(
+        ControlConfig {
+            alpha: 1.5,
+            ..ControlConfig::default()
+        }
+        .validate()
+        .is_err()
+    );
+}
+
