@@ -1,9 +1,12 @@
 //! The inference API: an [`SsrPolicy`] (network + controller settings on a device) steps
-//! episodes, each with its own [`EpisodeState`] (previous BEV and pose, PID windows, fusion
-//! history). [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
+//! episodes, each with its own [`EpisodeState`] (its recent BEVs and poses, PID windows, fusion
+//! history). A step attends to the BEV of the step [`HISTORY_TICKS`] before it (0.5 s at
+//! 20 Hz), the history age the network was trained with. [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
 //!
 //! Every input is checked before anything runs; a bad input returns a [`StepError`] naming the
 //! episode and the field, and leaves every episode's state as it was.
+
+use std::collections::VecDeque;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
@@ -11,7 +14,7 @@ use burn::tensor::{Device, Tensor};
 use crate::camera::{Rig, RigError};
 use crate::control::{ControlConfig, ControlDecision, EpisodeController};
 use crate::model::backbone::frame_to_input;
-use crate::model::bev::{GeometryTensors, SampleGeometry};
+use crate::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use crate::model::config::SsrConfig;
 use crate::model::stl::COMMANDS;
 use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
@@ -90,7 +93,9 @@ pub enum StepError {
 /// What one episode remembers between ticks.
 #[derive(Debug, Clone)]
 pub struct EpisodeState {
-    previous: Option<(Tensor<3>, Pose2)>,
+    /// The BEVs and poses of the last [`HISTORY_TICKS`] steps, oldest first: the oldest is the
+    /// history of the next step once the queue is full.
+    recent: VecDeque<(Tensor<3>, Pose2)>,
     controller: EpisodeController,
     ticks: u64,
 }
@@ -101,9 +106,14 @@ impl EpisodeState {
         self.ticks
     }
 
-    /// Whether the next step has a previous BEV to attend to.
+    /// Whether the next step has a history BEV (from [`HISTORY_TICKS`] steps before it) to
+    /// attend to; the first steps of an episode have none.
     pub fn has_previous_bev(&self) -> bool {
-        self.previous.is_some()
+        self.history().is_some()
+    }
+
+    fn history(&self) -> Option<&(Tensor<3>, Pose2)> {
+        self.recent.front().filter(|_| self.recent.len() == HISTORY_TICKS)
     }
 }
 
@@ -230,7 +240,7 @@ impl SsrPolicy {
     /// A fresh episode with its own controller settings (e.g. another fusion alpha).
     pub fn new_episode_with(&self, control: ControlConfig) -> EpisodeState {
         EpisodeState {
-            previous: None,
+            recent: VecDeque::with_capacity(HISTORY_TICKS),
             controller: EpisodeController::new(control),
             ticks: 0,
         }
@@ -242,9 +252,9 @@ impl SsrPolicy {
         check_input(input)
     }
 
-    /// Bytes of tensor state one episode keeps (its previous BEV).
+    /// Bytes of tensor state one episode keeps (its last [`HISTORY_TICKS`] BEVs).
     pub fn episode_state_bytes(&self) -> usize {
-        self.config.bev.grid.cells() * self.config.channels * std::mem::size_of::<f32>()
+        HISTORY_TICKS * self.config.bev.grid.cells() * self.config.channels * std::mem::size_of::<f32>()
     }
 
     /// One tick of one episode.
@@ -327,22 +337,21 @@ impl SsrPolicy {
             .zip(states.iter())
             .map(|(input, state)| {
                 let motion = state
-                    .previous
-                    .as_ref()
+                    .history()
                     .map(|(_, pose)| EgoMotion::between(*pose, input.pose));
                 SampleGeometry::new(
                     &self.config.bev.grid,
                     heights,
                     &input.rig,
                     motion,
-                    input.speed,
+                    self.config.shown_speed(input.speed),
                 )
             })
             .collect();
         let previous_bev = Tensor::cat(
             states
                 .iter()
-                .map(|s| match &s.previous {
+                .map(|s| match s.history() {
                     Some((bev, _)) => bev.clone(),
                     None => Tensor::zeros([1, q, c], &self.device),
                 })
@@ -364,7 +373,10 @@ impl SsrPolicy {
             ),
             previous_bev,
             speed: float_tensor(
-                inputs.iter().map(|i| i.speed).collect(),
+                inputs
+                    .iter()
+                    .map(|i| self.config.shown_speed(i.speed).unwrap_or(0.0))
+                    .collect(),
                 [b, 1],
                 &self.device,
             ),
@@ -423,7 +435,12 @@ impl SsrPolicy {
                     predicted_speed: speed[i] * crate::model::tcp_head::SPEED_SCALE,
                 }
             });
-            state.previous = Some((output.bev.clone().narrow(0, i, 1), input.pose));
+            if state.recent.len() == HISTORY_TICKS {
+                state.recent.pop_front();
+            }
+            state
+                .recent
+                .push_back((output.bev.clone().narrow(0, i, 1), input.pose));
             state.ticks += 1;
             results.push(StepOutput {
                 decision,

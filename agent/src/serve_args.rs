@@ -67,6 +67,9 @@ pub struct ServeArgs {
     /// and a Vulkan, Metal or DX12 adapter.
     #[arg(long, env = "SSR_AGENT_BACKEND")]
     backend: Option<Backend>,
+    /// The unstick rule: after 50 s stopped, creep 2 s along the plan [default: true].
+    #[arg(long, env = "SSR_AGENT_UNSTICK")]
+    unstick: Option<bool>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -123,6 +126,7 @@ impl ServeArgs {
         set(&mut config.drain_timeout_s, &self.drain_timeout_s);
         set(&mut config.log_format, &self.log_format);
         set(&mut config.backend, &self.backend);
+        set(&mut config.unstick, &self.unstick);
         config.validate()?;
         Ok(config)
     }

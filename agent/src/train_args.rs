@@ -8,7 +8,7 @@ use clap::{Args, ValueEnum};
 use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::train::config::{Schedule, TrainConfig};
-use ssr_agent::train::data::TrainingData;
+use ssr_agent::train::data::{Labels, TrainingData};
 use ssr_agent::train::run::{self, TrainOptions, format_l2};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -71,6 +71,18 @@ pub struct TrainArgs {
     /// episode's first tick, so the network cannot just repeat what the expert was doing.
     #[arg(long, default_value_t = 0.0)]
     history_dropout: f64,
+    /// Waypoint labels: the expert's plan from each frame's state, or the positions it went on
+    /// to drive (perturbations included).
+    #[arg(long, value_enum, default_value = "plan")]
+    labels: Labels,
+    /// Draw samples uniformly instead of by weight (standstills down; starts, turns, lane
+    /// changes and perturbed frames up).
+    #[arg(long)]
+    uniform_sampling: bool,
+    /// Show the network the ego's speed and motion (the copycat shortcut; off by default: the
+    /// speed is then only an auxiliary prediction).
+    #[arg(long, conflicts_with = "init")]
+    ego_status: bool,
     /// Weight of the future-BEV loss (SSR: 1).
     #[arg(long, default_value_t = 1.0)]
     bev_weight: f32,
@@ -109,6 +121,7 @@ impl TrainArgs {
             None => SsrConfig::from_name_or_file(&self.model)?,
         };
         model.tokens.dense_bev |= self.no_stl;
+        model.ego_status |= self.ego_status;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
         }
@@ -139,6 +152,8 @@ impl TrainArgs {
         config.clip_norm = self.clip_norm;
         config.augment = self.augment;
         config.history_dropout = self.history_dropout;
+        config.labels = self.labels;
+        config.balanced = !self.uniform_sampling;
         config.init = self.init.clone();
         config.loss.bev = self.bev_weight;
         config.future_bev = !self.no_ffp;
@@ -166,6 +181,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let data = TrainingData::open(
         &args.data,
         &config.model,
+        config.labels,
         config.validation_fraction,
         |done, total| {
             bar.set_length(total as u64);

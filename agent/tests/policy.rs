@@ -4,6 +4,7 @@
 mod common;
 
 use common::{policy_of, rig, step_input, tiny_config};
+use ssr_agent::model::bev::HISTORY_TICKS;
 use ssr_agent::policy::{InputError, SsrPolicy, StepError};
 
 fn policy() -> SsrPolicy {
@@ -33,10 +34,15 @@ fn an_episode_keeps_its_bev_and_debug_maps_come_back() {
         debug.token_attention[0].len(),
         debug.bev_rows * debug.bev_cols
     );
-    assert!(episode.has_previous_bev() && episode.ticks() == 1);
-    policy.step(&mut episode, &step_input(&rig, 1, 1)).unwrap();
-    assert_eq!(episode.ticks(), 2);
-    assert_eq!(policy.episode_state_bytes(), 8 * 8 * 16 * 4);
+    // The history is the BEV of the step HISTORY_TICKS (0.5 s) back, as in training.
+    for tick in 1..HISTORY_TICKS as u32 {
+        assert!(!episode.has_previous_bev(), "no history yet at tick {tick}");
+        policy.step(&mut episode, &step_input(&rig, tick, 1)).unwrap();
+    }
+    assert!(episode.has_previous_bev() && episode.ticks() == HISTORY_TICKS as u64);
+    policy.step(&mut episode, &step_input(&rig, HISTORY_TICKS as u32, 1)).unwrap();
+    assert!(episode.has_previous_bev() && episode.ticks() == HISTORY_TICKS as u64 + 1);
+    assert_eq!(policy.episode_state_bytes(), HISTORY_TICKS * 8 * 8 * 16 * 4);
 }
 
 #[test]

@@ -16,7 +16,7 @@ use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::{SsrModel, float_values};
 use ssr_agent::train::augment::Photometric;
 use ssr_agent::train::config::{Schedule, TrainConfig};
-use ssr_agent::train::data::{SampleDraw, TrainingData, action_of};
+use ssr_agent::train::data::{Labels, SampleDraw, TrainingData, action_of};
 use ssr_agent::train::run::{MetricsLine, StepMetrics, TrainError, TrainOptions, train};
 
 /// Held by every test that seeds the device or draws initial weights. `train` seeds the
@@ -66,7 +66,7 @@ fn config(steps: u64) -> TrainConfig {
 
 fn open(data: &Path, config: &TrainConfig) -> Arc<TrainingData> {
     Arc::new(
-        TrainingData::open(data, &config.model, config.validation_fraction, |_, _| {}).unwrap(),
+        TrainingData::open(data, &config.model, config.labels, config.validation_fraction, |_, _| {}).unwrap(),
     )
 }
 
@@ -296,11 +296,46 @@ fn a_dropped_history_trains_the_first_frame_path() {
 }
 
 #[test]
+fn labels_come_from_the_plan_or_the_driven_path_and_datasets_without_plans_are_refused() {
+    let tmp = Scratch::new();
+    let data = tmp.fixture("labels");
+    let mut config = config(1);
+    let lateral = |config: &TrainConfig| {
+        let set = open(&data, config);
+        let batch = set
+            .batch(&set.train[..1], &config.model, |_| SampleDraw::default())
+            .unwrap();
+        batch.waypoints[1]
+    };
+    assert_eq!(config.labels, Labels::Plan, "the plan by default");
+    assert_eq!(lateral(&config), 0.25, "the fixture's plan");
+    config.labels = Labels::Driven;
+    assert_eq!(lateral(&config), 0.0, "where the fixture's car went");
+
+    // A dataset recorded before plans were stored: the plan is refused with the way out.
+    let episode = std::fs::read_dir(data.join("episodes")).unwrap().next().unwrap().unwrap().path();
+    let lines = episode.join("measurements.jsonl");
+    let text = std::fs::read_to_string(&lines).unwrap();
+    let old: String = text
+        .lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            record.as_object_mut().unwrap().remove("plan");
+            format!("{record}\n")
+        })
+        .collect();
+    std::fs::write(&lines, old).unwrap();
+    let error = open_error(&data, &config.model);
+    assert!(error.contains("plan") && error.contains("--labels driven"), "{error}");
+    assert!(TrainingData::open(&data, &config.model, Labels::Driven, 0.1, |_, _| {}).is_ok());
+}
+
+#[test]
 fn routes_split_whole_and_samples_need_a_future() {
     let tmp = Scratch::new();
     let data = tmp.fixture("split");
     let config = config(1);
-    let set = TrainingData::open(&data, &config.model, 0.5, |_, _| {}).unwrap();
+    let set = TrainingData::open(&data, &config.model, config.labels, 0.5, |_, _| {}).unwrap();
     assert_eq!(set.train_routes + set.validation_routes, FIXTURE_ROUTES);
     assert!(set.train_routes > 0 && set.validation_routes > 0);
     let episodes = |samples: &[ssr_agent::train::data::SampleRef]| {
@@ -312,13 +347,13 @@ fn routes_split_whole_and_samples_need_a_future() {
     assert!(episodes(&set.train).is_disjoint(&episodes(&set.validation)));
     // 10 frames at 2 Hz: the last 3 have no frame 1.5 s ahead.
     assert_eq!(set.train.len() + set.validation.len(), FIXTURE_ROUTES * 7);
-    let none = TrainingData::open(&data, &config.model, 0.0, |_, _| {}).unwrap();
+    let none = TrainingData::open(&data, &config.model, config.labels, 0.0, |_, _| {}).unwrap();
     assert_eq!(none.validation.len(), 0);
 }
 
 /// Why `TrainingData::open` refused `data`.
 fn open_error(data: &Path, model: &SsrConfig) -> String {
-    TrainingData::open(data, model, 0.1, |_, _| {})
+    TrainingData::open(data, model, Labels::Plan, 0.1, |_, _| {})
         .err()
         .expect("the dataset is refused")
         .to_string()

@@ -1,7 +1,8 @@
 //! From a planned trajectory and TCP's control branch to vehicle control: pure pursuit and a
 //! speed PID that follow the waypoints ([`trajectory`]), the control branch's Beta distributions
-//! turned into actions ([`beta`]), and TCP's situation-based fusion of the two ([`fusion`]), with
-//! the per-episode state all of them keep ([`EpisodeController`]).
+//! turned into actions ([`beta`]), TCP's situation-based fusion of the two ([`fusion`]), and a
+//! timed rule that gets a car going again after a long stop ([`unstick`]), with the per-episode
+//! state all of them keep ([`EpisodeController`]).
 //!
 //! A crate of its own so that the agent server and the simulator's oracle-plan agent (which
 //! feeds it the expert's plan) drive through the same code; it depends on nothing but serde.
@@ -14,11 +15,14 @@ pub mod beta;
 pub mod fusion;
 pub mod pid;
 pub mod trajectory;
+pub mod unstick;
 
 use serde::{Deserialize, Serialize};
 
 use fusion::Fusion;
 use trajectory::TrajectoryFollower;
+pub use unstick::Unstick;
+use unstick::UnstickState;
 
 /// A control command (CARLA convention).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -80,6 +84,8 @@ pub struct ControlConfig {
     pub turn_window: usize,
     pub turn_steer: f32,
     pub turn_count: usize,
+    /// The timed unstick rule (on by default).
+    pub unstick: Unstick,
 }
 
 impl Default for ControlConfig {
@@ -101,6 +107,7 @@ impl Default for ControlConfig {
             turn_window: 20,
             turn_steer: 0.1,
             turn_count: 10,
+            unstick: Unstick::default(),
         }
     }
 }
@@ -120,6 +127,7 @@ impl ControlConfig {
                 self.max_throttle
             ));
         }
+        self.unstick.validate()?;
         let v = &self.vehicle;
         if !(v.wheelbase > 0.5 && v.wheelbase < 20.0) {
             return Err(format!("vehicle.wheelbase = {} m is outside 0.5..20", v.wheelbase));
@@ -152,6 +160,9 @@ pub struct ControlDecision {
     pub branch: Control,
     /// Whether the fusion trusted the control branch more this tick ("turning").
     pub turning: bool,
+    /// Whether the unstick rule overrode the fused control this tick.
+    #[serde(default)]
+    pub unsticking: bool,
 }
 
 /// Everything the control side remembers about one episode.
@@ -159,6 +170,7 @@ pub struct ControlDecision {
 pub struct EpisodeController {
     follower: TrajectoryFollower,
     fusion: Fusion,
+    unstick: UnstickState,
     config: ControlConfig,
 }
 
@@ -167,6 +179,7 @@ impl EpisodeController {
         Self {
             follower: TrajectoryFollower::new(&config),
             fusion: Fusion::new(config.turn_window),
+            unstick: UnstickState::default(),
             config,
         }
     }
@@ -200,12 +213,16 @@ impl EpisodeController {
             .control(waypoints, target_point, speed, &self.config);
         let branch = branch.unwrap_or(trajectory);
         let turning = self.fusion.turning();
-        let control = self.fusion.fuse(trajectory, branch, &self.config);
+        let fused = self.fusion.fuse(trajectory, branch, &self.config);
+        let (control, unsticking) =
+            self.unstick
+                .apply(fused, speed, trajectory.steer, &self.config.unstick);
         ControlDecision {
             control,
             trajectory,
             branch,
             turning,
+            unsticking,
         }
     }
 }

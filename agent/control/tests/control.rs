@@ -5,7 +5,7 @@ use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
 use ssr_control::fusion::Fusion;
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
-use ssr_control::{Control, ControlConfig, EpisodeController, Vehicle};
+use ssr_control::{Control, ControlConfig, EpisodeController, Unstick, Vehicle};
 
 fn near(a: f32, b: f32) -> bool {
     (a - b).abs() < 1e-4
@@ -275,3 +275,57 @@ fn episode_controller_reports_both_sources() {
     );
 }
 
+
+#[test]
+fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
+    let config = ControlConfig::default();
+    let rule = config.unstick.clone();
+    let hold = [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]];
+    let left_target = [10.0, 5.0];
+    let wait_ticks = (rule.after_s * 20.0) as usize;
+    let creep_ticks = (rule.creep_s * 20.0) as usize;
+
+    let mut controller = EpisodeController::new(config.clone());
+    let mut decisions = Vec::new();
+    for _ in 0..wait_ticks + creep_ticks + 10 {
+        decisions.push(controller.act_with_branch(&hold, left_target, 0.0, None));
+    }
+    assert!(
+        decisions[..wait_ticks - 1].iter().all(|d| !d.unsticking && d.control.brake == 1.0),
+        "the controller holds the car until the wait is over"
+    );
+    let creeping = &decisions[wait_ticks - 1..wait_ticks - 1 + creep_ticks];
+    for d in creeping {
+        assert!(d.unsticking, "{d:?}");
+        assert_eq!(d.control.brake, 0.0);
+        assert_eq!(d.control.throttle, rule.creep_throttle);
+        assert!(d.control.steer < 0.0, "towards the target point on the left");
+    }
+    assert!(
+        decisions[wait_ticks - 1 + creep_ticks..].iter().all(|d| !d.unsticking),
+        "after the creep the count starts again"
+    );
+
+    // Moving resets the count; the creep never exceeds its speed.
+    let mut controller = EpisodeController::new(config.clone());
+    for tick in 0..wait_ticks / 2 + wait_ticks {
+        let speed = if tick == wait_ticks / 2 { 1.0 } else { 0.0 };
+        assert!(!controller.act_with_branch(&hold, left_target, speed, None).unsticking);
+    }
+    assert!(controller.act_with_branch(&hold, left_target, 0.0, None).unsticking);
+    let creep = controller.act_with_branch(&hold, left_target, rule.creep_speed + 0.1, None);
+    assert!(creep.unsticking && creep.control.throttle == 0.0, "{creep:?}");
+
+    let off = ControlConfig {
+        unstick: Unstick {
+            enabled: false,
+            ..Unstick::default()
+        },
+        ..config
+    };
+    let mut controller = EpisodeController::new(off);
+    for _ in 0..wait_ticks * 3 {
+        let d = controller.act_with_branch(&hold, left_target, 0.0, None);
+        assert!(!d.unsticking && d.control.brake == 1.0);
+    }
+}

@@ -25,6 +25,17 @@ pub struct SsrConfig {
     pub tokens: TokenConfig,
     pub head: HeadConfig,
     pub ffp: FfpConfig,
+    /// Whether the network sees the ego's status: its speed (in the head's measurement encoder
+    /// and the BEV can-bus) and its motion since the history frame (can-bus). Ego status is
+    /// the copycat shortcut (speed near 0 predicts "stay stopped"; CILRS, "Is ego status all
+    /// you need"); without it the speed is only an auxiliary prediction, and the motion still
+    /// aligns the previous BEV. Checkpoints from before the switch have it on.
+    #[serde(default = "ego_status_default")]
+    pub ego_status: bool,
+}
+
+fn ego_status_default() -> bool {
+    true
 }
 
 /// ResNet with basic blocks.
@@ -100,6 +111,11 @@ pub struct ConfigError {
 }
 
 impl SsrConfig {
+    /// The speed the network is shown: `speed` with ego status on, `None` without.
+    pub fn shown_speed(&self, speed: f32) -> Option<f32> {
+        self.ego_status.then_some(speed)
+    }
+
     /// The preset names [`SsrConfig::preset`] knows.
     pub const PRESETS: [&'static str; 2] = ["cpu-default", "paper"];
 
@@ -207,6 +223,7 @@ impl SsrConfig {
                 layers: 2,
                 fuser_slots: 64,
             },
+            ego_status: false,
         }
     }
 
@@ -262,6 +279,7 @@ impl SsrConfig {
                 layers: 2,
                 fuser_slots: 32,
             },
+            ego_status: false,
         }
     }
 

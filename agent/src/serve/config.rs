@@ -64,6 +64,9 @@ pub struct ServeConfig {
     /// Where the network runs: the CPU, or a GPU through wgpu (a build with the `wgpu`
     /// feature).
     pub backend: Backend,
+    /// The controller's unstick rule (creep along the plan after a long stop; see
+    /// `ssr_control::unstick`); `false` turns it off for every episode.
+    pub unstick: bool,
 }
 
 impl Default for ServeConfig {
@@ -86,6 +89,7 @@ impl Default for ServeConfig {
             drain_timeout_s: 30.0,
             log_format: LogFormat::Human,
             backend: Backend::Cpu,
+            unstick: true,
         }
     }
 }

@@ -97,6 +97,8 @@ pub fn load_policy(
         checkpoint,
         expected_rig,
     };
+    let mut control = control;
+    control.unstick.enabled = config.unstick;
     let policy = SsrPolicy::new(model, model_config, control, device.clone());
     Ok((policy, info))
 }

@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::data::Labels;
 use super::loss::LossWeights;
 use crate::model::config::SsrConfig;
 
@@ -41,6 +42,13 @@ pub struct TrainConfig {
     /// expert was just doing from the history instead of the scene); 0 = never.
     #[serde(default)]
     pub history_dropout: f64,
+    /// Where the waypoint labels come from (runs from before the switch: driven positions).
+    #[serde(default)]
+    pub labels: Labels,
+    /// Draw training samples by [`super::data::sampling_weight`] (fewer standstills; more
+    /// starts, turns, lane changes and recoveries) instead of uniformly.
+    #[serde(default)]
+    pub balanced: bool,
     /// The checkpoint the weights start from (fine-tuning); `None` = fresh weights from `seed`.
     #[serde(default)]
     pub init: Option<std::path::PathBuf>,
@@ -58,7 +66,8 @@ pub struct TrainConfig {
 
 impl TrainConfig {
     /// Defaults: AdamW at 3e-4 with 300 warm-up steps and a cosine decay to 5 %, batch 8,
-    /// per-parameter clipping at 1.0, TCP/SSR loss weights, FFP on.
+    /// per-parameter clipping at 1.0, TCP/SSR loss weights, FFP on, the expert's plan as
+    /// waypoint labels, balanced sampling.
     pub fn new(model: SsrConfig, steps: u64) -> Self {
         Self {
             model,
@@ -73,6 +82,8 @@ impl TrainConfig {
             future_bev: true,
             augment: 1.0,
             history_dropout: 0.0,
+            labels: Labels::Plan,
+            balanced: true,
             init: None,
             validation_fraction: 0.05,
             validate_every: 1000,

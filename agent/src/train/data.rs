@@ -1,10 +1,13 @@
 //! Training samples from a collected expert dataset (`sim-bridge collect`).
 //!
 //! A sample is one stored frame t with everything SSR trains on: the frame itself, the frame
-//! [`HISTORY_S`] before it (its BEV, encoded without history, is the temporal history), the
-//! frame [`FUTURE_BEV_S`] later (its BEV is the FFP's target) and the expert's labels
-//! (waypoints, control now and at each future step, speed). Measurements of every episode are read once
-//! into an index; images are read from disk batch by batch.
+//! [`HISTORY_S`] before it (its BEV, encoded with the frame before that as its own history, is
+//! the temporal history: the contract serving keeps, see [`HISTORY_S`]), the frame
+//! [`FUTURE_BEV_S`] later (its BEV is the FFP's target) and the expert's labels (waypoints,
+//! control now and at each future step, speed). Waypoint labels are the expert's plan from the
+//! frame's state ([`Labels::Plan`]) or the positions it went on to drive ([`Labels::Driven`]).
+//! Measurements of every episode are read once into an index, with each sample's sampling
+//! weight; images are read from disk batch by batch.
 //!
 //! Episodes are split into training and validation by a hash of their route (town, route set,
 //! route id), so every repetition of a route lands on the same side and validation routes are
@@ -42,6 +45,18 @@ pub struct SampleDraw {
     pub drop_history: bool,
 }
 
+/// Where the waypoint labels come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Labels {
+    /// The expert's plan from the frame's state (on the route's centre line at the expert's
+    /// speed profile): clean inside perturbations, where driven positions follow the drift.
+    Plan,
+    /// The positions the car went on to drive (the first bundled checkpoint's labels).
+    #[default]
+    Driven,
+}
+
 /// One sample: a frame of an episode (indices into [`TrainingData`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SampleRef {
@@ -61,7 +76,10 @@ pub struct TrainingData {
     history_offset: usize,
     future_offset: usize,
     pred_len: usize,
+    labels: Labels,
     pub train: Vec<SampleRef>,
+    /// Each training sample's sampling weight ([`sampling_weight`]), in `train`'s order.
+    pub train_weights: Vec<f32>,
     pub validation: Vec<SampleRef>,
     /// Routes (town/set/id) on each side.
     pub train_routes: usize,
@@ -87,6 +105,7 @@ impl TrainingData {
     pub fn open(
         root: &Path,
         config: &SsrConfig,
+        labels: Labels,
         validation_fraction: f64,
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Self, DatasetError> {
@@ -122,6 +141,7 @@ impl TrainingData {
         let total = m.episode_list.len();
         let mut episodes = Vec::with_capacity(total);
         let (mut train, mut validation) = (Vec::new(), Vec::new());
+        let mut train_weights = Vec::new();
         let mut routes = (
             std::collections::BTreeSet::new(),
             std::collections::BTreeSet::new(),
@@ -151,16 +171,29 @@ impl TrainingData {
                 (&mut train, &mut routes.0)
             };
             side_routes.insert((&entry.town, &entry.route_set, &entry.route_id));
+            if labels == Labels::Plan && frames.iter().any(|f| f.plan.len() < pred_len) {
+                return Err(DatasetError::invalid(
+                    &dataset.episode_dir(&entry.name).join("measurements.jsonl"),
+                    format!(
+                        "frames without the expert's {pred_len}-step plan (recorded before plans                          were stored?): collect the data again, or train with --labels driven"
+                    ),
+                ));
+            }
             let usable = frames.iter().filter(|f| {
                 f.future_complete
                     && f.waypoints.len() >= pred_len
                     && f.future_controls.len() >= pred_len
                     && f.index + future_offset < frames.len()
             });
-            side.extend(usable.map(|f| SampleRef {
-                episode: index as u32,
-                frame: f.index as u32,
-            }));
+            for f in usable {
+                if !held_out {
+                    train_weights.push(sampling_weight(f));
+                }
+                side.push(SampleRef {
+                    episode: index as u32,
+                    frame: f.index as u32,
+                });
+            }
             episodes.push(Episode {
                 name: entry.name.clone(),
                 frames,
@@ -181,7 +214,9 @@ impl TrainingData {
             history_offset,
             future_offset,
             pred_len,
+            labels,
             train,
+            train_weights,
             validation,
             train_routes,
             validation_routes,
@@ -259,42 +294,49 @@ impl TrainingData {
                 photometric,
                 drop_history,
             } = draw(i);
-            let history = (!drop_history)
-                .then(|| self.record(sample, -(self.history_offset as isize)))
-                .flatten();
+            let back = self.history_offset as isize;
+            let history = (!drop_history).then(|| self.record(sample, -back)).flatten();
+            let deep = history.and_then(|_| self.record(sample, -2 * back));
             let jitter = photometric.as_ref();
+            let blank = batch.cameras * 3 * config.image_height * config.image_width;
             self.images(sample, now, config, jitter, &mut batch.current_images)?;
             self.images(sample, future, config, jitter, &mut future_images)?;
-            match history {
-                Some(h) => self.images(sample, h, config, jitter, &mut batch.context_images)?,
-                None => batch.context_images.extend(std::iter::repeat_n(
-                    0.0,
-                    batch.cameras * 3 * config.image_height * config.image_width,
-                )),
+            for (frame, out) in [
+                (history, &mut batch.context_images),
+                (deep, &mut batch.deep_images),
+            ] {
+                match frame {
+                    Some(r) => self.images(sample, r, config, jitter, out)?,
+                    None => out.extend(std::iter::repeat_n(0.0, blank)),
+                }
             }
             let pose = |r: &FrameRecord| {
                 Pose2::new(r.position[0] as f32, r.position[1] as f32, r.yaw as f32)
             };
-            let motion = history.map(|h| EgoMotion::between(pose(h), pose(now)));
-            batch.current_geometry.push(SampleGeometry::new(
-                grid,
-                heights,
-                rig,
-                motion,
-                now.speed as f32,
-            ));
-            let still =
-                |r: &FrameRecord| SampleGeometry::new(grid, heights, rig, None, r.speed as f32);
-            batch.context_geometry.push(still(history.unwrap_or(now)));
-            future_geometry.push(still(future));
+            let geometry = |r: &FrameRecord, before: Option<&FrameRecord>| {
+                let motion = before.map(|b| EgoMotion::between(pose(b), pose(r)));
+                let speed = config.shown_speed(r.speed as f32);
+                SampleGeometry::new(grid, heights, rig, motion, speed)
+            };
+            batch.current_geometry.push(geometry(now, history));
+            batch.context_geometry.push(geometry(history.unwrap_or(now), deep));
+            batch.deep_geometry.push(geometry(deep.unwrap_or(now), None));
+            future_geometry.push(geometry(future, None));
             batch.speed.push(now.speed as f32);
+            batch
+                .shown_speed
+                .push(config.shown_speed(now.speed as f32).unwrap_or(0.0));
             batch
                 .target_point
                 .extend(now.target_point.map(|v| v as f32));
             let mut command = [0f32; COMMANDS];
             command[command_index(now.command).unwrap_or(3)] = 1.0;
             batch.command.extend(command);
-            for waypoint in &now.waypoints[..p] {
+            let labels = match self.labels {
+                Labels::Plan => &now.plan,
+                Labels::Driven => &now.waypoints,
+            };
+            for waypoint in &labels[..p] {
                 batch.waypoints.extend(waypoint.map(|v| v as f32));
             }
             for control in std::iter::once(&now.control).chain(&now.future_controls[..p]) {
@@ -306,6 +348,31 @@ impl TrainingData {
         batch.context_geometry.append(&mut future_geometry);
         Ok(batch)
     }
+}
+
+/// How often a training frame is drawn relative to an ordinary one: standing still (and staying
+/// still) is a fifth of the data and teaches little, so it is drawn a third as often; starting
+/// from standstill, turns, lane changes and perturbed frames (recoveries) are rare and decide
+/// closed-loop driving, so they are drawn more often.
+pub fn sampling_weight(frame: &FrameRecord) -> f32 {
+    let still = frame.speed < 0.1;
+    let starting = frame.speed < 1.0 && frame.control.throttle > 0.1;
+    let mut weight: f32 = if starting {
+        3.0
+    } else if still {
+        0.3
+    } else {
+        1.0
+    };
+    weight *= match frame.command {
+        1 | 2 => 2.0,
+        5 | 6 => 4.0,
+        _ => 1.0,
+    };
+    if frame.noise {
+        weight *= 1.5;
+    }
+    weight
 }
 
 /// TCP's action of a control: [acceleration (throttle, or minus the brake), steer].
@@ -327,9 +394,15 @@ pub struct Batch {
     current_images: Vec<f32>,
     /// `[2B * cameras, 3, H, W]` history frames (zeros where none) then future frames.
     context_images: Vec<f32>,
+    /// `[B * cameras, 3, H, W]` the history frames' own history frames (zeros where none).
+    deep_images: Vec<f32>,
     current_geometry: Vec<SampleGeometry>,
     context_geometry: Vec<SampleGeometry>,
+    deep_geometry: Vec<SampleGeometry>,
+    /// The speed label, m/s.
     speed: Vec<f32>,
+    /// The speed the network is shown (0 without ego status).
+    shown_speed: Vec<f32>,
     target_point: Vec<f32>,
     command: Vec<f32>,
     /// `[B, P, 2]` expert waypoints, ego frame.
@@ -372,24 +445,42 @@ impl Batch {
                 device,
             ),
             previous_bev,
-            speed: repeated(&self.speed, 1),
+            speed: repeated(&self.shown_speed, 1),
             target_point: repeated(&self.target_point, 2),
             command: repeated(&self.command, COMMANDS),
         }
     }
 
-    /// The context frames, each without a previous BEV: the B history frames (their BEVs are
-    /// the current frames' history), then, with `futures`, the B future frames (the FFP's
-    /// targets).
-    pub fn context_input(&self, config: &SsrConfig, futures: bool, device: &Device) -> ModelInput {
+    /// The B history frames' own history frames, without a previous BEV: their BEVs are the
+    /// history of the history frames.
+    pub fn deep_input(&self, config: &SsrConfig, device: &Device) -> ModelInput {
+        let zeros = Tensor::zeros([self.size, config.bev.grid.cells(), config.channels], device);
+        self.input(config, &self.deep_images, &self.deep_geometry, zeros, device)
+    }
+
+    /// The context frames: the B history frames attending to `deep_bev` `[B, Q, C]` (their
+    /// BEVs are the current frames' history), then, with `futures`, the B future frames without
+    /// history (the FFP's targets).
+    pub fn context_input(
+        &self,
+        config: &SsrConfig,
+        deep_bev: Tensor<3>,
+        futures: bool,
+        device: &Device,
+    ) -> ModelInput {
         let count = if futures { 2 * self.size } else { self.size };
-        let zeros = Tensor::zeros([count, config.bev.grid.cells(), config.channels], device);
+        let previous = if futures {
+            let zeros = Tensor::zeros([self.size, config.bev.grid.cells(), config.channels], device);
+            Tensor::cat(vec![deep_bev, zeros], 0)
+        } else {
+            deep_bev
+        };
         let per_sample = self.context_images.len() / (2 * self.size);
         self.input(
             config,
             &self.context_images[..count * per_sample],
             &self.context_geometry[..count],
-            zeros,
+            previous,
             device,
         )
     }

@@ -56,7 +56,12 @@ impl BatchLoader {
                 for step in steps {
                     let epoch = step / per_epoch;
                     if epoch_order.as_ref().is_none_or(|(e, _)| *e != epoch) {
-                        epoch_order = Some((epoch, shuffled(&data.train, seed, epoch)));
+                        let order = if config.balanced {
+                            weighted(&data.train, &data.train_weights, seed, epoch)
+                        } else {
+                            shuffled(&data.train, seed, epoch)
+                        };
+                        epoch_order = Some((epoch, order));
                     }
                     let (_, order) = epoch_order.as_ref().expect("set above");
                     let position = (step % per_epoch) as usize * batch_size;
@@ -108,6 +113,27 @@ fn draw(config: &TrainConfig, seed: u64) -> SampleDraw {
         drop_history: config.history_dropout > 0.0
             && ChaCha8Rng::seed_from_u64(!seed).random_bool(config.history_dropout),
     }
+}
+
+/// Epoch `epoch`'s seeded draw of as many samples as there are, with replacement, each with
+/// probability proportional to its weight (balanced sampling).
+fn weighted(train: &[SampleRef], weights: &[f32], seed: u64, epoch: u64) -> Vec<SampleRef> {
+    let mut total = 0.0f64;
+    let cumulative: Vec<f64> = weights
+        .iter()
+        .map(|w| {
+            total += f64::from(*w);
+            total
+        })
+        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ epoch.wrapping_mul(0x9e37_79b9) ^ 0xba1a_2ced);
+    (0..train.len())
+        .map(|_| {
+            let x = rng.random_range(0.0..total);
+            let i = cumulative.partition_point(|&c| c <= x).min(train.len() - 1);
+            train[i]
+        })
+        .collect()
 }
 
 /// Epoch `epoch`'s seeded shuffle of the training samples. Step k of the epoch takes the k-th

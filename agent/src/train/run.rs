@@ -492,8 +492,8 @@ impl Trainer {
 }
 
 /// The losses of a batch and the head's output. `context_model` (without gradients, on
-/// `inner`) gives the history BEVs and the FFP's targets; `model` (on `device`) runs the
-/// current frames.
+/// `inner`) gives the history BEVs (each from its own history frame, as serving does) and the
+/// FFP's targets; `model` (on `device`) runs the current frames.
 fn batch_losses(
     model: &SsrModel,
     context_model: &SsrModel,
@@ -503,7 +503,9 @@ fn batch_losses(
     device: &Device,
 ) -> (Losses, HeadOutput) {
     let b = batch.size;
-    let context = batch.context_input(&config.model, config.future_bev, inner);
+    let deep = batch.deep_input(&config.model, inner);
+    let deep_bev = context_model.encode_bev(context_model.image_features(deep.images.clone()), &deep);
+    let context = batch.context_input(&config.model, deep_bev, config.future_bev, inner);
     let context_bev = context_model.encode_bev(
         context_model.image_features(context.images.clone()),
         &context,

@@ -54,6 +54,9 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
                 noise: false,
                 brake_reason: None,
                 waypoints: (1..=6).map(|k| [speed * 0.5 * k as f64, 0.0]).collect(),
+                // The plan leads 0.25 m to the left of where the car went, so a test can
+                // tell which labels it trained on.
+                plan: (1..=6).map(|k| [speed * 0.5 * k as f64, 0.25]).collect(),
                 future_controls: vec![control; 6],
                 future_complete: true,
                 images: vec![image],

@@ -86,7 +86,7 @@ pub fn model_input(
         dyaw: 0.05,
     });
     let geometry: Vec<SampleGeometry> = (0..batch)
-        .map(|_| SampleGeometry::new(&grid, &config.bev.pillar_heights, &rig, motion, 5.0))
+        .map(|_| SampleGeometry::new(&grid, &config.bev.pillar_heights, &rig, motion, Some(5.0)))
         .collect();
     let mut command = vec![0.0; batch * COMMANDS];
     for b in 0..batch {

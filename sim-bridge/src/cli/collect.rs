@@ -35,15 +35,45 @@ pub struct CollectArgs {
     /// the route id and the repetition, so a resumed collection replays the same runs.
     #[arg(long, default_value_t = 1)]
     repetitions: usize,
-    /// Steering perturbations per simulated second (0 disables noise injection).
+    /// Perturbations per simulated second (0 disables noise injection).
     #[arg(long, default_value_t = NoiseConfig::default().rate)]
     noise_rate: f64,
+    /// Smallest and largest steering offset of a lateral perturbation, `MIN,MAX`.
+    #[arg(long, default_value = "0.1,0.3", value_parser = parse_range)]
+    noise_steer: [f64; 2],
+    /// Smallest and largest duration of a perturbation, seconds, `MIN,MAX`.
+    #[arg(long, default_value = "0.5,1.0", value_parser = parse_range)]
+    noise_duration: [f64; 2],
+    /// Share of the perturbations that hold the pedals (coast and brake lightly, or press on)
+    /// instead of pushing the steering.
+    #[arg(long, default_value_t = 0.0)]
+    noise_longitudinal: f64,
     /// Worker threads (one route run each).
     #[arg(long, default_value_t = default_jobs(), value_parser = clap::value_parser!(u64).range(1..=256))]
     jobs: u64,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+}
+
+/// `MIN,MAX` with 0 <= MIN <= MAX, both finite.
+fn parse_range(value: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<&str> = value.split(',').collect();
+    let [low, high] = parts.as_slice() else {
+        return Err(format!("'{value}' is not MIN,MAX"));
+    };
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v >= 0.0)
+            .ok_or_else(|| format!("'{s}' is not a finite number >= 0"))
+    };
+    let (low, high) = (parse(low)?, parse(high)?);
+    if low > high {
+        return Err(format!("MIN {low} is above MAX {high}"));
+    }
+    Ok([low, high])
 }
 
 fn default_jobs() -> u64 {
@@ -65,6 +95,12 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     }
     if !(args.noise_rate >= 0.0 && args.noise_rate.is_finite()) {
         bail!("--noise-rate must be a finite number >= 0");
+    }
+    if !(0.0..=1.0).contains(&args.noise_longitudinal) {
+        bail!("--noise-longitudinal must be a share in 0..1");
+    }
+    if args.noise_steer[1] > 1.0 || args.noise_duration[0] <= 0.0 {
+        bail!("--noise-steer must lie in 0..1 and --noise-duration above 0");
     }
     if ticks_per_frame(args.rate).is_none() {
         bail!(
@@ -110,7 +146,9 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         rate_hz: args.rate,
         noise: NoiseConfig {
             rate: args.noise_rate,
-            ..NoiseConfig::default()
+            duration: args.noise_duration,
+            steer: args.noise_steer,
+            longitudinal: args.noise_longitudinal,
         },
         jobs: args.jobs as usize,
     };

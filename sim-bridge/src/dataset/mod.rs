@@ -70,8 +70,15 @@ pub struct FrameRecord {
     pub noise: bool,
     /// Why the expert brakes or holds still, if it does for a hazard.
     pub brake_reason: Option<BrakeReason>,
-    /// Future ego positions every [`FUTURE_STEP`] s, in this frame's ego frame, m.
+    /// Future ego positions every [`FUTURE_STEP`] s, in this frame's ego frame, m: where the
+    /// car went (perturbations included).
     pub waypoints: Vec<[f64; 2]>,
+    /// The expert's plan from this frame's state ([`FUTURE_COUNT`] waypoints every
+    /// [`FUTURE_STEP`] s on the route's centre line, ego frame, m): where it means to go, the
+    /// trajectory label (inside a perturbation it leads back to the lane, where `waypoints`
+    /// follow the drift). Empty in datasets recorded before it existed.
+    #[serde(default)]
+    pub plan: Vec<[f64; 2]>,
     /// The expert's control at the same future instants.
     pub future_controls: Vec<Control>,
     /// False when the route ended before the last future instant (then fewer than
@@ -81,8 +88,10 @@ pub struct FrameRecord {
     pub images: Vec<String>,
 }
 
-/// Noise injection: now and then the executed steering is pushed off the expert's for a short
-/// while; the recorded label stays the expert's own (its correction).
+/// Noise injection: now and then the executed control is pushed off the expert's for a short
+/// while, laterally (a steering offset) or, for a share of the perturbations, longitudinally (the
+/// pedals held: coasting with a light brake, or pressing on); the recorded labels stay the
+/// expert's own (its correction).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct NoiseConfig {
     /// Perturbations started per simulated second, on average (0 = none).
@@ -91,6 +100,9 @@ pub struct NoiseConfig {
     pub duration: [f64; 2],
     /// Steering offset magnitude (drawn uniformly, random sign).
     pub steer: [f64; 2],
+    /// Share of the perturbations that act on the pedals instead of the steering.
+    #[serde(default)]
+    pub longitudinal: f64,
 }
 
 impl Default for NoiseConfig {
@@ -99,6 +111,7 @@ impl Default for NoiseConfig {
             rate: 0.1,
             duration: [0.5, 1.0],
             steer: [0.1, 0.3],
+            longitudinal: 0.0,
         }
     }
 }

@@ -29,6 +29,15 @@ struct TickState {
     label: Control,
 }
 
+/// What a perturbation does to the executed control.
+#[derive(Debug, Clone, Copy)]
+enum Perturbation {
+    /// Adds this to the steer.
+    Steer(f64),
+    /// Holds the pedals: this throttle and brake.
+    Pedals { throttle: f64, brake: f64 },
+}
+
 /// The expert, recording into an episode folder.
 pub struct EpisodeRecorder {
     expert: Expert,
@@ -37,8 +46,8 @@ pub struct EpisodeRecorder {
     ticks_per_frame: u64,
     noise: NoiseConfig,
     rng: ChaCha8Rng,
-    /// Remaining ticks of the current perturbation and its steering offset.
-    perturbation: Option<(u64, f64)>,
+    /// Remaining ticks of the current perturbation and what it does.
+    perturbation: Option<(u64, Perturbation)>,
     history: Vec<TickState>,
     pending: VecDeque<FrameRecord>,
     measurements: std::io::BufWriter<std::fs::File>,
@@ -118,14 +127,40 @@ impl EpisodeRecorder {
             let [s0, s1] = self.noise.steer;
             let ticks = (self.rng.random_range(d0..=d1.max(d0)) / DT).round() as u64;
             let sign = if self.rng.random_bool(0.5) { 1.0 } else { -1.0 };
-            let offset = sign * self.rng.random_range(s0..=s1.max(s0));
-            self.perturbation = Some((ticks.max(1), offset));
+            let kind = if self.rng.random_bool(self.noise.longitudinal.clamp(0.0, 1.0)) {
+                // Half coast with a light brake (the car falls behind its plan), half press on
+                // (it runs ahead of it).
+                if sign > 0.0 {
+                    Perturbation::Pedals {
+                        throttle: 0.0,
+                        brake: self.rng.random_range(0.1..=0.3),
+                    }
+                } else {
+                    Perturbation::Pedals {
+                        throttle: self.rng.random_range(0.4..=0.7),
+                        brake: 0.0,
+                    }
+                }
+            } else {
+                Perturbation::Steer(sign * self.rng.random_range(s0..=s1.max(s0)))
+            };
+            self.perturbation = Some((ticks.max(1), kind));
         }
         match self.perturbation {
-            Some((left, offset)) => {
-                self.perturbation = (left > 1).then_some((left - 1, offset));
-                let steer = (label.steer + offset).clamp(-1.0, 1.0);
-                (Control { steer, ..label }, true)
+            Some((left, kind)) => {
+                self.perturbation = (left > 1).then_some((left - 1, kind));
+                let executed = match kind {
+                    Perturbation::Steer(offset) => Control {
+                        steer: (label.steer + offset).clamp(-1.0, 1.0),
+                        ..label
+                    },
+                    Perturbation::Pedals { throttle, brake } => Control {
+                        throttle,
+                        brake,
+                        ..label
+                    },
+                };
+                (executed, true)
             }
             None => (label, false),
         }
@@ -196,6 +231,12 @@ impl EpisodeRecorder {
                 noise,
                 brake_reason: self.expert.brake_reason(),
                 waypoints: Vec::new(),
+                plan: self
+                    .expert
+                    .planned_trajectory()
+                    .iter()
+                    .map(|w| w.to_array())
+                    .collect(),
                 future_controls: Vec::new(),
                 future_complete: false,
                 images,

@@ -266,18 +266,23 @@ impl<'m> World<'m> {
         self.collisions()
     }
 
-    /// Contacts of the ego box with every other actor; a crash stops the ego and takes a hit
-    /// walker or cyclist out of the scene.
+    /// Contacts of the ego box with every other actor. A contact with something ahead of the
+    /// ego (within 60 degrees of its heading) stops it, since it cannot drive through; one at
+    /// its side or rear does not, so a scrape does not pin the ego in place for as long as the
+    /// boxes touch (the kinematic model has no physics to push them apart). A hit walker or
+    /// cyclist leaves the scene.
     fn collisions(&mut self) -> Vec<CollisionEvent> {
         let ego = self.ego.state();
         let ego_box = ego.obb();
         let mut events = Vec::new();
+        let mut blocked = false;
         for a in self.actors() {
-            if (a.z - ego.position.z).abs() > 3.0 || (a.obb.centre - ego_box.centre).length() > 8.0
-            {
+            let offset = a.obb.centre - ego_box.centre;
+            if (a.z - ego.position.z).abs() > 3.0 || offset.length() > 8.0 {
                 continue;
             }
             if a.obb.overlaps(&ego_box) {
+                blocked |= offset.dot(ego.forward()) > 0.5 * offset.length();
                 events.push(CollisionEvent {
                     other_id: a.id,
                     class: a.kind.collision_class(),
@@ -285,12 +290,12 @@ impl<'m> World<'m> {
                 });
             }
         }
-        if !events.is_empty() {
+        if blocked {
             self.ego.speed = 0.0;
-            let hit: Vec<u32> = events.iter().map(|e| e.other_id).collect();
-            for c in self.crossers.iter_mut().filter(|c| hit.contains(&c.id)) {
-                c.gone = true;
-            }
+        }
+        let hit: Vec<u32> = events.iter().map(|e| e.other_id).collect();
+        for c in self.crossers.iter_mut().filter(|c| hit.contains(&c.id)) {
+            c.gone = true;
         }
         events
     }

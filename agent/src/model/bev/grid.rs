@@ -81,14 +81,16 @@ pub struct SampleGeometry {
 }
 
 impl SampleGeometry {
-    /// Geometry for a rig at the current tick. `motion` is the ego motion since the previous
-    /// tick of the same episode, `None` on the first frame.
+    /// Geometry for a rig at the current tick. `motion` is the ego motion since the history
+    /// frame of the same episode, `None` on the first frame. `speed` (m/s) is the ego status
+    /// shown to the can-bus with that motion, `None` when the network sees no ego status (then
+    /// the motion only aligns the previous BEV).
     pub fn new(
         grid: &BevGrid,
         pillar_heights: &[f32],
         rig: &Rig,
         motion: Option<EgoMotion>,
-        speed: f32,
+        speed: Option<f32>,
     ) -> Self {
         let q = grid.cells();
         let mut camera_points =
@@ -124,13 +126,16 @@ impl SampleGeometry {
             camera_hits,
             previous_points,
             has_previous,
-            can_bus: [
-                motion_or_still.dx,
-                motion_or_still.dy,
-                motion_or_still.dyaw,
-                speed / 12.0,
-                if has_previous { 1.0 } else { 0.0 },
-            ],
+            can_bus: match speed {
+                Some(speed) => [
+                    motion_or_still.dx,
+                    motion_or_still.dy,
+                    motion_or_still.dyaw,
+                    speed / 12.0,
+                    if has_previous { 1.0 } else { 0.0 },
+                ],
+                None => [0.0, 0.0, 0.0, 0.0, if has_previous { 1.0 } else { 0.0 }],
+            },
         }
     }
 }

@@ -9,7 +9,7 @@ mod temporal;
 
 pub use grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
 pub use spatial::ImageFeatures;
-pub use temporal::{HISTORY_S, align_previous_bev};
+pub use temporal::{HISTORY_S, HISTORY_TICKS, align_previous_bev};
 
 use burn::module::{Module, Param};
 use burn::nn::{LayerNorm, Linear};

@@ -18,10 +18,15 @@ use crate::model::sampling::{bilinear_sample, deformable_aggregate};
 /// Queue slots: the aligned previous BEV and the current queries.
 const SLOTS: usize = 2;
 
-/// How far before a training sample its history frame is, seconds: SSR trains on 2 Hz
-/// keyframes with a queue of two, the history frame's BEV encoded without a history of its
-/// own. At inference the previous tick's BEV is the history (see the model card for why).
+/// How old the history BEV is, seconds, in training and serving alike (one temporal contract):
+/// SSR trains on 2 Hz keyframes with a queue of two. Serving attends to the BEV it computed
+/// [`HISTORY_TICKS`] steps earlier, itself computed with the one before it (ten interleaved
+/// recursive chains at 0.5 s); training encodes the frame 0.5 s back with the frame 1 s back as
+/// its own history, so both the BEV and the ego motion fed to the can-bus have the age and the
+/// distribution they have when serving.
 pub const HISTORY_S: f64 = 0.5;
+/// [`HISTORY_S`] in steps of the leaderboard's 20 Hz.
+pub const HISTORY_TICKS: usize = 10;
 
 /// Resamples the previous BEV (`[B, Q, C]`) into the current ego frame: cell i takes the
 /// previous BEV at `previous_points[:, i]` (normalised coordinates in the previous grid,

@@ -1,0 +1,114 @@
+//! The unstick rule: an imitation agent that has stopped tends to stay stopped (its inputs say
+//! "standing still", and standing still is what the expert did next in most such frames: the
+//! inertia problem). After [`Unstick::after_s`] seconds below [`STOPPED_SPEED`], the car creeps
+//! along its plan for [`Unstick::creep_s`] seconds at up to [`Unstick::creep_speed`], then the
+//! count starts again.
+//!
+//! A camera-only agent has no detector to tell whether its path is free, so unlike
+//! TransFuser++'s rule (which creeps only when a LiDAR safety box is empty) this one is timed
+//! alone. The wait is set longer than the longest red light of a four-way junction (about 45 s
+//! in sim-bridge and CARLA), so a car held at a light is not pushed over its line, and well
+//! under the leaderboard's 180 s "agent blocked". While creeping, the trajectory's steer
+//! follows the plan (or the target point when the plan gives no direction).
+
+use serde::{Deserialize, Serialize};
+
+use super::Control;
+
+/// Below this speed (m/s) the car counts as stopped (the leaderboard's "blocked" speed).
+pub const STOPPED_SPEED: f32 = 0.1;
+/// Control ticks per second (the leaderboard's 20 Hz).
+pub const TICKS_PER_SECOND: f32 = 20.0;
+
+/// Settings of the rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Unstick {
+    /// Whether the rule acts.
+    pub enabled: bool,
+    /// Seconds stopped before creeping.
+    pub after_s: f32,
+    /// Seconds of creeping.
+    pub creep_s: f32,
+    /// Speed the creep does not exceed, m/s.
+    pub creep_speed: f32,
+    /// Throttle while below the creep speed.
+    pub creep_throttle: f32,
+}
+
+impl Default for Unstick {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            after_s: 50.0,
+            creep_s: 2.0,
+            creep_speed: 2.0,
+            creep_throttle: 0.5,
+        }
+    }
+}
+
+impl Unstick {
+    /// Checks ranges; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let fields = [
+            ("unstick.after_s", self.after_s, 0.05, 3600.0),
+            ("unstick.creep_s", self.creep_s, 0.05, 60.0),
+            ("unstick.creep_speed", self.creep_speed, 0.1, 10.0),
+            ("unstick.creep_throttle", self.creep_throttle, 0.0, 1.0),
+        ];
+        for (name, value, low, high) in fields {
+            if !(low..=high).contains(&value) {
+                return Err(format!("{name} = {value} is outside {low}..{high}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The rule's per-episode state.
+#[derive(Debug, Clone, Default)]
+pub struct UnstickState {
+    stopped_ticks: u32,
+    creep_ticks_left: u32,
+}
+
+impl UnstickState {
+    /// The control to apply given the controller's `control` this tick, the speed (m/s) and the
+    /// steer that follows the plan; and whether the rule overrode it.
+    pub fn apply(
+        &mut self,
+        control: Control,
+        speed: f32,
+        plan_steer: f32,
+        rule: &Unstick,
+    ) -> (Control, bool) {
+        if !rule.enabled {
+            return (control, false);
+        }
+        if self.creep_ticks_left == 0 {
+            self.stopped_ticks = if speed < STOPPED_SPEED {
+                self.stopped_ticks + 1
+            } else {
+                0
+            };
+            if (self.stopped_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
+                return (control, false);
+            }
+            self.stopped_ticks = 0;
+            self.creep_ticks_left = (rule.creep_s * TICKS_PER_SECOND).ceil() as u32;
+        }
+        self.creep_ticks_left -= 1;
+        let throttle = if speed < rule.creep_speed {
+            rule.creep_throttle
+        } else {
+            0.0
+        };
+        let creep = Control {
+            steer: plan_steer,
+            throttle,
+            brake: 0.0,
+        };
+        (creep, true)
+    }
+}
