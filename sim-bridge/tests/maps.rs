@@ -81,3 +81,37 @@ fn placing_lights_is_only_for_maps_without_any() {
     );
     assert!(with.lights.iter().all(|l| l.from_map));
 }
+
+/// CARLA's junction roads step their laneOffset at a lane-section boundary while the lanes
+/// beside it compensate, so the centre lines are continuous. A lane must not end with a
+/// sideways jump to where the next section's offset would put it (a 3.5 m spike here; up to
+/// 7 m in Town04), which the dense route would draw out and back and the route-deviation
+/// check could not get past.
+#[test]
+fn a_lane_offset_step_at_a_section_boundary_leaves_the_lanes_continuous() {
+    let xml = include_str!("maps/offset_step.xodr");
+    let map = Map::from_str("offset-step", xml, MapOptions::default()).unwrap();
+    let driving: Vec<_> = map
+        .lanes
+        .iter()
+        .filter(|l| l.kind == sim_bridge::map::LaneKind::Driving)
+        .collect();
+    assert_eq!(driving.len(), 2, "one driving lane per section");
+    for lane in &driving {
+        for w in lane.points.windows(3) {
+            let (u, v) = ((w[1] - w[0]).truncate(), (w[2] - w[1]).truncate());
+            assert!(
+                u.angle_to(v).abs() < 0.2,
+                "lane {} turns {:.2} rad between {:?} and {:?}",
+                lane.lane_id,
+                u.angle_to(v),
+                w[1],
+                w[2]
+            );
+        }
+    }
+    let (first, second) = (driving[0], driving[1]);
+    let gap = (first.points.last().unwrap().truncate() - second.points[0].truncate()).length();
+    assert!(gap < 0.5, "the lanes meet: {gap:.2} m apart");
+    assert_eq!(first.successors, vec![second.idx]);
+}
