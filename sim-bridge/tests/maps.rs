@@ -115,3 +115,21 @@ fn a_lane_offset_step_at_a_section_boundary_leaves_the_lanes_continuous() {
     assert!(gap < 0.5, "the lanes meet: {gap:.2} m apart");
     assert_eq!(first.successors, vec![second.idx]);
 }
+
+/// A road too short to carry geometry (CARLA's Town03 has roads of 1 mm between its
+/// roundabout and the streets) still links the roads on either side: the lane before it leads
+/// into the lane after it.
+#[test]
+fn a_road_too_short_for_geometry_still_links_its_neighbours() {
+    let xml = include_str!("maps/degenerate_road.xodr");
+    let map = Map::from_str("degenerate-road", xml, MapOptions::default()).unwrap();
+    let lane_of = |road: &str| {
+        map.lanes
+            .iter()
+            .find(|l| l.road_id == road && l.kind == sim_bridge::map::LaneKind::Driving)
+            .unwrap_or_else(|| panic!("road {road} has a driving lane"))
+    };
+    let (before, after) = (lane_of("1"), lane_of("3"));
+    assert_eq!(before.successors, vec![after.idx]);
+    assert_eq!(after.predecessors, vec![before.idx]);
+}

@@ -320,5 +320,41 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         lane.left = left;
         lane.right = right;
     }
+    stitch_link_gaps(&mut lanes);
     (lanes, junction_ids)
+}
+
+/// How close a dead end must come to another lane's start to be joined to it, metres.
+const STITCH_DISTANCE: f64 = 0.5;
+/// And how well their headings must agree, radians.
+const STITCH_HEADING: f64 = 0.5;
+
+/// Joins a driving lane that has no successor to the driving lanes that start where it ends,
+/// heading the same way. OpenDRIVE files hold links into roads too short to carry geometry
+/// (CARLA's Town03 has roads of 1 mm and 1 cm between roundabout connectors and the streets);
+/// such a road has no lanes once baked, so every link through it is lost and the lanes on
+/// either side dead-end, where the geometry runs on without a gap.
+fn stitch_link_gaps(lanes: &mut [Lane]) {
+    let is_driving = |l: &Lane| l.kind == LaneKind::Driving;
+    let starts: Vec<(LaneIdx, DVec3, f64)> = lanes
+        .iter()
+        .filter(|l| is_driving(l) && l.predecessors.is_empty())
+        .map(|l| (l.idx, l.points[0], l.pose_at(0.0).yaw))
+        .collect();
+    let mut joins = Vec::new();
+    for lane in lanes.iter().filter(|l| is_driving(l) && l.successors.is_empty()) {
+        let end = lane.pose_at(lane.length());
+        for &(start, at, yaw) in &starts {
+            if start != lane.idx
+                && (at - end.position).length() < STITCH_DISTANCE
+                && angle_diff(yaw, end.yaw).abs() < STITCH_HEADING
+            {
+                joins.push((lane.idx, start));
+            }
+        }
+    }
+    for (from, to) in joins {
+        lanes[from.get()].successors.push(to);
+        lanes[to.get()].predecessors.push(from);
+    }
 }
