@@ -4,8 +4,12 @@
 //!
 //! Between consecutive keypoints an A* search runs over (lane, entry arc length) states with two
 //! kinds of edge: driving on into a successor lane, and a lane change into a same-direction
-//! neighbour outside junctions (costed [`LANE_CHANGE_LENGTH`] + [`LANE_CHANGE_PENALTY`] so that
-//! routes change lanes only when they must). Labels: points on junction connectors get LEFT,
+//! neighbour outside junctions (costed
+//! [`LANE_CHANGE_LENGTH`] + [`LANE_CHANGE_PENALTY`] so that routes change lanes only when they
+//! must). A keypoint's goal is every lane it matches equally well: CARLA's junctions hold
+//! connectors that overlap for tens of metres, and a route that reached the keypoint on the
+//! neighbouring connector must not be sent around the block to reach the other. The next search
+//! starts where the previous one arrived. Labels: points on junction connectors get LEFT,
 //! RIGHT or STRAIGHT from the heading change over the whole junction (|change| < 33 degrees is
 //! STRAIGHT, as CARLA's `_turn_decision`); points of a lane change get CHANGELANELEFT/RIGHT;
 //! everything else is LANEFOLLOW. A lane change is drawn as a smooth lateral transition over
@@ -28,6 +32,9 @@ pub const LANE_CHANGE_LENGTH: f64 = 12.0;
 pub const LANE_CHANGE_PENALTY: f64 = 20.0;
 /// Search effort cap per keypoint pair (states expanded).
 const MAX_EXPANSIONS: usize = 200_000;
+/// Lanes whose centre lines pass this close to a keypoint (and agree with its heading and
+/// height like the matched lane) are goals as good as it, metres.
+const GOAL_SPREAD: f64 = 1.0;
 /// Junction heading changes below this are STRAIGHT (CARLA uses 33 degrees... in its own way).
 const STRAIGHT_LIMIT: f64 = 33.0 * std::f64::consts::PI / 180.0;
 
@@ -91,21 +98,38 @@ pub fn plan_route(map: &Map, spec: &RouteSpec) -> Result<DenseRoute, PlanError> 
         })
         .collect::<Result<Vec<_>, _>>()?;
     let mut legs: Vec<Leg> = Vec::new();
-    for (i, pair) in spots.windows(2).enumerate() {
-        let found = search(map, pair[0], pair[1]).ok_or(PlanError::NoPath {
+    let mut from = spots[0][0];
+    for (i, goals) in spots.iter().enumerate().skip(1) {
+        let (found, reached) = search(map, from, goals).ok_or(PlanError::NoPath {
             route: spec.id.clone(),
-            from: i,
-            to: i + 1,
+            from: i - 1,
+            to: i,
         })?;
         legs.extend(found);
+        from = reached;
     }
     Ok(DenseRoute::new(densify(map, &legs), spec.keypoint_length()))
 }
 
-/// The lane spot of a keypoint: the driving lane that matches its position and heading.
-fn snap(map: &Map, k: &Keypoint) -> Option<LaneSpot> {
+/// The lane spots of a keypoint: the driving lane that matches its position and heading first,
+/// then the other driving lanes that pass as close to it with the same heading and height.
+fn snap(map: &Map, k: &Keypoint) -> Option<Vec<LaneSpot>> {
     let (lane, proj) = map.lane_for_pose(k.position, k.yaw)?;
-    Some(LaneSpot { lane, s: proj.s })
+    let matched = map.lane(lane).pose_at(proj.s);
+    let mut spots = vec![LaneSpot { lane, s: proj.s }];
+    for (other, p) in map.lanes_near(k.position.truncate(), proj.distance + GOAL_SPREAD, |l| {
+        l.kind == LaneKind::Driving
+    }) {
+        let pose = map.lane(other).pose_at(p.s);
+        if other != lane
+            && angle_diff(pose.yaw, matched.yaw).abs() < 0.3
+            && (pose.position.z - matched.position.z).abs() < 1.5
+            && (pose.position - matched.position).truncate().length() < GOAL_SPREAD
+        {
+            spots.push(LaneSpot { lane: other, s: p.s });
+        }
+    }
+    Some(spots)
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -133,9 +157,9 @@ impl Ord for Open {
     }
 }
 
-/// A* from `start` to `goal`; returns the legs.
-fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
-    let goal_pos = map.lane(goal.lane).pose_at(goal.s).position;
+/// A* from `start` to the first of `goals` reached; returns the legs and the goal reached.
+fn search(map: &Map, start: LaneSpot, goals: &[LaneSpot]) -> Option<(Vec<Leg>, LaneSpot)> {
+    let goal_pos = map.lane(goals[0].lane).pose_at(goals[0].s).position;
     let h = |spot: LaneSpot| (map.lane(spot.lane).pose_at(spot.s).position - goal_pos).length();
     // Arena of visited states: (spot, parent, leg that reached it).
     let mut arena: Vec<(LaneSpot, Option<usize>, Option<Leg>)> = vec![(start, None, None)];
@@ -154,7 +178,10 @@ fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
             return None;
         }
         let lane = map.lane(spot.lane);
-        if spot.lane == goal.lane && spot.s <= goal.s + 1e-6 {
+        if let Some(&goal) = goals
+            .iter()
+            .find(|goal| spot.lane == goal.lane && spot.s <= goal.s + 1e-6)
+        {
             let mut legs = vec![Leg::Drive {
                 lane: spot.lane,
                 from: spot.s,
@@ -166,7 +193,7 @@ fn search(map: &Map, start: LaneSpot, goal: LaneSpot) -> Option<Vec<Leg>> {
                 at = parent;
             }
             legs.reverse();
-            return Some(legs);
+            return Some((legs, goal));
         }
         let mut push = |next: LaneSpot, cost: f64, leg: Leg, arena: &mut Vec<_>| {
             let key = (next.lane, (next.s * 2.0).round() as i64);
