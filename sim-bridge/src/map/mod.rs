@@ -153,9 +153,10 @@ impl Map {
         &self.lanes[idx.get()]
     }
 
-    /// The driving lane whose centre line is nearest `p` (within 50 m).
+    /// The driving lane whose centre line is nearest `p`, however far (CARLA's `get_waypoint`
+    /// projects to the road from anywhere: route files hold keypoints up to 100 m off the map).
     pub fn nearest_driving(&self, p: DVec2) -> Option<(LaneIdx, Projection)> {
-        self.nearest(p, 50.0, |l| l.kind == LaneKind::Driving)
+        self.nearest(p, f64::INFINITY, |l| l.kind == LaneKind::Driving)
     }
 
     /// The lane accepted by `keep` nearest `p`, within `max_distance` metres.

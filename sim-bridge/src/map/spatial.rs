@@ -68,7 +68,9 @@ impl SegmentGrid {
         }
         let centre = cell_of(p);
         let mut best: Option<(LaneIdx, Projection)> = None;
-        let max_ring = self.max_ring.min((max_distance / CELL).ceil() as i32 + 1);
+        let max_ring = self
+            .max_ring
+            .min(((max_distance / CELL).ceil() as i32).saturating_add(1));
         for ring in 0..=max_ring {
             // Every point of ring r is at least (r - 1) * CELL away.
             let reach = (ring - 1).max(0) as f64 * CELL;

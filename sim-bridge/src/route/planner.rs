@@ -41,10 +41,8 @@ const STRAIGHT_LIMIT: f64 = 33.0 * std::f64::consts::PI / 180.0;
 /// Why a route could not be planned.
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
-    /// A keypoint is not near any driving lane.
-    #[error(
-        "route {route}: keypoint {index} at ({x:.1}, {y:.1}) is not within 50 m of a driving lane"
-    )]
+    /// A keypoint has no driving lane to match (the map has none).
+    #[error("route {route}: keypoint {index} at ({x:.1}, {y:.1}): the map has no driving lane")]
     OffMap {
         route: String,
         index: usize,
