@@ -89,3 +89,42 @@ fn every_carla_route_file_plans_on_its_town() {
     assert!(planned > 1900, "{planned} routes planned");
     assert!(failed.len() <= 9, "{} routes failed: {failed:#?}", failed.len());
 }
+
+/// A dense route never turns back on itself: consecutive 1 m steps differ in heading by less
+/// than 90 degrees. (xodr's laneOffset artefact and bad lane joins drew spikes, out and straight
+/// back, that the leaderboard's route-deviation check cannot get past.)
+#[test]
+fn dense_routes_on_carla_towns_never_turn_back() {
+    let Some(dir) = carla_dir() else { return };
+    let mut reversals = Vec::new();
+    for town in ["01", "03", "04", "06"] {
+        let map =
+            Map::load_file(&dir.join(format!("Town{town}.xodr")), MapOptions::default()).unwrap();
+        for length in ["long", "short"] {
+            let file = dir.join(format!("training_routes/transfuser/routes_town{town}_{length}.xml"));
+            for spec in xml::read_file(&file).unwrap() {
+                let Ok(route) = planner::plan_route(&map, &spec) else {
+                    continue;
+                };
+                for (i, w) in route.points.windows(3).enumerate() {
+                    let (u, v) = (
+                        (w[1].position - w[0].position).truncate(),
+                        (w[2].position - w[1].position).truncate(),
+                    );
+                    if u.length() > 0.05 && v.length() > 0.05 && u.dot(v) < 0.0 {
+                        reversals.push(format!(
+                            "Town{town} {length} route {} point {} at ({:.1}, {:.1}) lanes {} {}",
+                            spec.id,
+                            i + 1,
+                            w[1].position.x,
+                            w[1].position.y,
+                            map.lane(w[0].lane).road_id,
+                            map.lane(w[2].lane).road_id
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    assert!(reversals.is_empty(), "{} reversals: {reversals:#?}", reversals.len());
+}

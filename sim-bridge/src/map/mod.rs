@@ -204,34 +204,6 @@ pub fn angle_diff(a: f64, b: f64) -> f64 {
     d
 }
 
-/// The sharpest turn between two consecutive segments of a lane centre line that is still
-/// geometry, radians; a sharper one at an end vertex is an evaluation artefact.
-const MAX_END_KINK: f64 = std::f64::consts::FRAC_PI_4;
-
-/// Drops end vertices of a lane centre line (in road s order) that turn back sharply from the
-/// line before them. xodr 0.8 evaluates a road's laneOffset at a lane section's end with the
-/// *next* section's record, so where the offset steps at a section boundary (CARLA's junction
-/// roads: up to 7 m) the section's last vertex jumps sideways by the whole step, out and back,
-/// and the dense route drawn over it carries a spike that the leaderboard's route-deviation
-/// check (which only looks 5 points ahead) cannot get past. Real centre lines are smooth; the
-/// successor lane starts where the dropped vertex should have been.
-fn drop_end_kinks(points: &mut Vec<DVec3>) {
-    let kinked = |a: DVec3, b: DVec3, c: DVec3| {
-        let (u, v) = ((b - a).truncate(), (c - b).truncate());
-        u.length() > 1e-6 && v.length() > 1e-6 && u.angle_to(v).abs() > MAX_END_KINK
-    };
-    while points.len() > 2 {
-        let n = points.len();
-        if !kinked(points[n - 3], points[n - 2], points[n - 1]) {
-            break;
-        }
-        points.pop();
-    }
-    while points.len() > 2 && kinked(points[2], points[1], points[0]) {
-        points.remove(0);
-    }
-}
-
 /// Bake xodr lanes into travel-ordered [`Lane`]s; returns them and the OpenDRIVE junction id of
 /// each junction index handed out (in order of first appearance).
 fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
@@ -255,7 +227,6 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
             .iter()
             .map(|p| DVec3::new(p.x as f64, p.y as f64, p.z as f64))
             .collect();
-        drop_end_kinks(&mut points);
         if src.direction == xodr::Direction::Backward {
             points.reverse();
         }
@@ -321,8 +292,44 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         lane.left = left;
         lane.right = right;
     }
+    close_section_seams(&mut lanes);
     stitch_link_gaps(&mut lanes);
     (lanes, junction_ids)
+}
+
+/// Makes lanes of one road meet where a lane section ends and the next begins. xodr 0.8
+/// evaluates a road's laneOffset at a section's end with the *next* section's record (and
+/// splits sections where a laneOffset record starts), so where the offset steps there (CARLA's
+/// junction roads: 2.9 m in Town03, up to 7 m in Town04) the lower section's last vertex lands
+/// where the next section's lanes are. A dense route drawn over it has a spike, out and
+/// straight back, that the leaderboard's route-deviation check (5 points ahead) cannot get
+/// past. The vertex is moved onto the next section's lane, whose start is right.
+fn close_section_seams(lanes: &mut [Lane]) {
+    let mut moves = Vec::new();
+    for lane in lanes.iter() {
+        for &next in &lane.successors {
+            let next_lane = &lanes[next.get()];
+            if next_lane.road_id != lane.road_id || next_lane.section == lane.section {
+                continue;
+            }
+            let (end, start) = (*lane.points.last().expect("2+ points"), next_lane.points[0]);
+            // The lower section (in road s) holds the wrong vertex: the travelling lane's end
+            // on a lane that follows s, the next lane's start on one that runs against it.
+            if lane.section < next_lane.section {
+                moves.push((lane.idx, true, start));
+            } else {
+                moves.push((next, false, end));
+            }
+        }
+    }
+    for (idx, at_end, to) in moves {
+        let lane = &mut lanes[idx.get()];
+        match at_end {
+            true => *lane.points.last_mut().expect("2+ points") = to,
+            false => lane.points[0] = to,
+        }
+        lane.cum = lanes::cumulative_length(&lane.points);
+    }
 }
 
 /// How close a dead end must come to another lane's start to be joined to it, metres.
