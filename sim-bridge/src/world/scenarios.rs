@@ -327,7 +327,23 @@ fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(
     None
 }
 
-/// Parked cars on parking lanes, about one per 12 m with gaps, from the seed.
+/// Whether a box on the ground reaches into a driving lane (a corner or the centre lies within
+/// half a lane width of a driving lane's centre line).
+fn reaches_driving_lane(map: &Map, obb: &Obb) -> bool {
+    let forward = DVec2::from_angle(obb.yaw);
+    let left = forward.perp();
+    let corners = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0), (0.0, 0.0)];
+    corners.iter().any(|(a, b)| {
+        let p = obb.centre + forward * (a * obb.half.x) + left * (b * obb.half.y);
+        map.lanes_near(p, 4.0, |l| l.kind == LaneKind::Driving)
+            .iter()
+            .any(|(lane, proj)| proj.distance < map.lane(*lane).width / 2.0)
+    })
+}
+
+/// Parked cars on parking lanes, about one per 12 m with gaps, from the seed; none where the
+/// car would reach into a driving lane (CARLA's Town03 has parking lanes that run beside a
+/// junction's connectors).
 pub fn parked_cars(map: &Map, rng: &mut impl Rng) -> Vec<StaticProp> {
     let mut out = Vec::new();
     for lane in map
@@ -339,14 +355,17 @@ pub fn parked_cars(map: &Map, rng: &mut impl Rng) -> Vec<StaticProp> {
         while s + 3.0 < lane.length() {
             if rng.random_range(0.0..1.0) < 0.45 {
                 let pose = lane.pose_at(s);
-                out.push(StaticProp {
-                    obb: Obb {
-                        centre: pose.position.truncate(),
-                        yaw: pose.yaw,
-                        half: DVec2::new(2.2, 0.95),
-                    },
-                    z: pose.position.z,
-                });
+                let obb = Obb {
+                    centre: pose.position.truncate(),
+                    yaw: pose.yaw,
+                    half: DVec2::new(2.2, 0.95),
+                };
+                if !reaches_driving_lane(map, &obb) {
+                    out.push(StaticProp {
+                        obb,
+                        z: pose.position.z,
+                    });
+                }
             }
             s += rng.random_range(6.0..9.0);
         }

@@ -5,9 +5,12 @@
 //! Junction rule: a connector lane conflicts with another if their centre lines cross or they
 //! end in the same lane. A vehicle within [`REQUEST_DISTANCE`] of a junction may enter when no
 //! conflicting connector is occupied (by a vehicle or the ego) and no conflicting vehicle that
-//! arrived earlier is waiting to enter; otherwise it holds at the stop line. Vehicles stuck for
-//! [`RESPAWN_AFTER_S`] out of the ego's sight (more than [`RESPAWN_CLEARANCE`] away) are moved
-//! to a free place elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
+//! arrived earlier is waiting to enter; otherwise it holds at the stop line. A vehicle whose path
+//! runs into a lane that ends (a lane drop, as on CARLA's Town06 highways) merges into a
+//! neighbour that goes on, as CARLA's traffic manager does. Vehicles stuck for
+//! [`RESPAWN_AFTER_S`] out of the ego's sight (more than [`RESPAWN_CLEARANCE`] away), or at such a
+//! lane end anywhere, are moved to a free place elsewhere, as a stand-in for CARLA's traffic
+//! manager clearing jams.
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -443,18 +446,29 @@ impl Traffic {
     ) {
         for v in &mut self.vehicles {
             let lane = map.lane(v.lane);
-            if lane.in_junction() || v.lateral != 0.0 || v.speed < 3.0 || lane.length() - v.s < 40.0
+            if lane.in_junction() || v.lateral != 0.0 {
+                continue;
+            }
+            // A path into a lane end must merge before it; other changes are rare and need room.
+            let must_merge = runs_into_lane_end(map, v) && lane.length() - v.s < MERGE_AHEAD;
+            if !must_merge
+                && (v.speed < 3.0
+                    || lane.length() - v.s < 40.0
+                    || rng.random_range(0.0..1.0) > LANE_CHANGE_RATE * dt)
             {
                 continue;
             }
-            if rng.random_range(0.0..1.0) > LANE_CHANGE_RATE * dt {
-                continue;
-            }
-            let target = if rng.random_range(0.0..1.0) < 0.5 {
-                lane.left
+            let sides = if rng.random_range(0.0..1.0) < 0.5 {
+                [lane.left, lane.right]
             } else {
-                lane.right
+                [lane.right, lane.left]
             };
+            let goes_on = |t: &LaneIdx| !must_merge || !map.lane(*t).successors.is_empty();
+            let target = sides
+                .into_iter()
+                .flatten()
+                .filter(|t| map.lane(*t).kind == LaneKind::Driving && goes_on(t))
+                .next();
             let Some(target) = target.filter(|t| map.lane(*t).kind == LaneKind::Driving) else {
                 continue;
             };
@@ -464,7 +478,7 @@ impl Traffic {
                 list.iter()
                     .all(|&(s, _, _, _)| !(proj.s - 12.0..proj.s + 18.0).contains(&s))
             });
-            if !room || map.lane(target).length() - proj.s < 30.0 {
+            if !room || (!must_merge && map.lane(target).length() - proj.s < 30.0) {
                 continue;
             }
             v.lane = target;
@@ -480,7 +494,8 @@ impl Traffic {
         for i in 0..self.vehicles.len() {
             let v = &self.vehicles[i];
             let far = (v.pose(map).0.truncate() - ego.position).length() > RESPAWN_CLEARANCE;
-            if v.stopped_for < RESPAWN_AFTER_S || !far {
+            let at_lane_end = v.next.is_empty() && map.lane(v.lane).successors.is_empty();
+            if v.stopped_for < RESPAWN_AFTER_S || !(far || at_lane_end) {
                 continue;
             }
             if let Some((lane, s)) = self.free_spot(map, ego.position, 80.0, rng) {
@@ -518,6 +533,15 @@ fn new_vehicle(map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) ->
     };
     extend_path(map, &mut v, rng);
     v
+}
+
+/// How far before the end of a lane that ends a vehicle tries to merge, m.
+const MERGE_AHEAD: f64 = 80.0;
+
+/// Whether the vehicle's path ends in a lane with no successor.
+fn runs_into_lane_end(map: &Map, v: &Vehicle) -> bool {
+    let last = *v.next.last().unwrap_or(&v.lane);
+    v.next.len() < 3 && map.lane(last).successors.is_empty() && !map.lane(v.lane).in_junction()
 }
 
 /// Keep at least two lanes of path ahead, choosing successors at random.
