@@ -105,7 +105,9 @@ impl WorldArgs {
     /// The world of one run on `map` with world seed `seed`.
     pub fn config(&self, map: &Map, seed: u64) -> WorldConfig {
         WorldConfig {
-            vehicles: self.vehicles.unwrap_or_else(|| default_vehicles(map)),
+            vehicles: self
+                .vehicles
+                .unwrap_or_else(|| sim_bridge::world::leaderboard_vehicles(map)),
             walkers: self.walkers,
             scenarios: !self.no_scenarios,
             parked_cars: !self.no_parked_cars,
@@ -115,16 +117,6 @@ impl WorldArgs {
     }
 }
 
-/// The leaderboard's background-vehicle count for a town (Town05: 120).
-pub fn default_vehicles(map: &Map) -> usize {
-    match map.name.to_ascii_lowercase().as_str() {
-        "town02" => 100,
-        "town04" => 200,
-        "town06" => 150,
-        "ssr_train_small" => 60,
-        _ => 120,
-    }
-}
 
 /// The server an `--agent` value names: `grpc://HOST:PORT` (or `http://`), or `local`: a child
 /// `ssr-agent serve` (with a metrics port if `metrics`), alive as long as the returned handle.

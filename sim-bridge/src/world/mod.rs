@@ -28,6 +28,17 @@ use traffic::{EgoPresence, Traffic};
 /// Simulation step, seconds (20 Hz).
 pub const DT: f64 = 0.05;
 
+/// The leaderboard's background-vehicle count for a town (Town05: 120).
+pub fn leaderboard_vehicles(map: &Map) -> usize {
+    match map.name.to_ascii_lowercase().as_str() {
+        "town02" => 100,
+        "town04" => 200,
+        "town06" => 150,
+        "ssr_train_small" => 60,
+        _ => 120,
+    }
+}
+
 /// What to populate the world with.
 #[derive(Debug, Clone, Copy)]
 pub struct WorldConfig {
