@@ -9,7 +9,8 @@ use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::train::config::{Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, TrainingData};
-use ssr_agent::train::run::{self, TrainOptions, format_l2};
+use ssr_agent::train::run::{self, TrainOptions};
+use ssr_agent::train::validation::format_l2;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum ScheduleKind {
@@ -217,12 +218,22 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         println!(
             "validation at step {} ({} samples): L2 at 1/2/3 s {} m, steer/throttle/brake MAE {:.3}/{:.3}/{:.3}",
             v.step,
-            v.samples,
-            format_l2(&v.l2_m),
-            v.steer_mae,
-            v.throttle_mae,
-            v.brake_mae
+            v.all.samples,
+            format_l2(&v.all.l2_m),
+            v.all.steer_mae,
+            v.all.throttle_mae,
+            v.all.brake_mae
         );
+        for (situation, g) in &v.by_situation {
+            println!(
+                "  {situation:>11} ({:>5} samples): L2 {} m, steer/throttle/brake MAE {:.3}/{:.3}/{:.3}",
+                g.samples,
+                format_l2(&g.l2_m),
+                g.steer_mae,
+                g.throttle_mae,
+                g.brake_mae
+            );
+        }
     }
     println!("checkpoint: {}", summary.checkpoint.display());
     Ok(())

@@ -133,3 +133,18 @@ fn special_functions_match_known_values() {
     assert!((digamma(1.0) + 0.577_215_664_901_532_9).abs() < 1e-8);
     assert!((digamma(0.5) + 1.963_510_026_021_423_5).abs() < 1e-8);
 }
+
+#[test]
+fn validation_situations_follow_the_command_and_count_start_ups() {
+    use ssr_agent::train::validation::situations;
+    let one_hot = |i: usize| {
+        let mut v = [0.0f32; 6];
+        v[i] = 1.0;
+        v
+    };
+    assert_eq!(situations(&one_hot(0), 5.0, 0.5), ["left"]);
+    assert_eq!(situations(&one_hot(1), 5.0, 0.0), ["right"]);
+    assert_eq!(situations(&one_hot(3), 0.2, 0.6), ["follow", "start"]);
+    assert_eq!(situations(&one_hot(3), 0.2, 0.0), ["follow"], "standing, not starting");
+    assert_eq!(situations(&one_hot(5), 8.0, 0.3), ["change-lane"]);
+}

@@ -113,12 +113,16 @@ fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
     let last: f32 = losses[12..].iter().sum();
     assert!(last < 0.8 * first, "loss did not fall: {losses:?}");
     let validation = summary.validation.expect("validated at the end");
-    assert!(validation.samples > 0);
-    assert_eq!(validation.l2_m.len(), 3);
+    assert!(validation.all.samples > 0);
+    assert_eq!(validation.all.l2_m.len(), 3);
     assert!(
-        validation.l2_m[1].is_some() && validation.l2_m[2].is_none(),
+        validation.all.l2_m[1].is_some() && validation.all.l2_m[2].is_none(),
         "tiny plans 2 s"
     );
+    // The fixture's frames all follow the lane: one situation, holding every sample.
+    let follow = &validation.by_situation["follow"];
+    assert_eq!(follow.samples, validation.all.samples);
+    assert_eq!(follow.l2_m, validation.all.l2_m);
 
     // The final checkpoint loads back into the same network, with the rig and notes.
     assert_eq!(summary.checkpoint, out.join("final.safetensors"));

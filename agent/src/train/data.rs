@@ -414,6 +414,16 @@ pub struct Batch {
 }
 
 impl Batch {
+    /// Each sample's command one-hot.
+    pub fn commands(&self) -> Vec<&[f32]> {
+        self.command.chunks(COMMANDS).collect()
+    }
+
+    /// Sample `i`'s speed label, m/s.
+    pub fn speed_label(&self, i: usize) -> f32 {
+        self.speed[i]
+    }
+
     fn input(
         &self,
         config: &SsrConfig,

@@ -1,6 +1,7 @@
 //! Training: expert datasets to SSR samples ([`data`], [`augment`], [`loader`]), TCP's
-//! imitation losses plus SSR's future-BEV loss ([`loss`]), and the loop with AdamW, schedule,
-//! validation, checkpoints and resume ([`run`]), configured by [`config`].
+//! imitation losses plus SSR's future-BEV loss ([`loss`]), the loop with AdamW, schedule,
+//! checkpoints and resume ([`run`]), configured by [`config`], and its open-loop validation
+//! metrics ([`validation`]).
 
 pub mod augment;
 pub mod config;
@@ -9,3 +10,4 @@ pub mod loader;
 pub mod loss;
 pub mod run;
 pub mod special;
+pub mod validation;

@@ -29,12 +29,12 @@ use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use super::config::TrainConfig;
-use super::data::{Batch, SampleDraw, SampleRef, TrainingData};
+use super::data::{Batch, SampleDraw, TrainingData};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
+use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::ControlConfig;
-use crate::control::beta::control_from_beta;
 use crate::model::config::SsrConfig;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
@@ -43,9 +43,6 @@ use sim_bridge::dataset::DatasetError;
 
 /// Checkpoint metadata key of the training notes (JSON: config, step, data, validation).
 pub const TRAINING_METADATA_KEY: &str = "training";
-/// Horizons of the open-loop L2, seconds (waypoints are 0.5 s apart).
-pub const L2_HORIZONS_S: [f64; 3] = [1.0, 2.0, 3.0];
-
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
     #[error("dataset: {0}")]
@@ -108,20 +105,6 @@ pub struct StepMetrics {
     pub samples_per_s: f64,
 }
 
-/// Open-loop metrics over the validation routes.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ValidationMetrics {
-    pub step: u64,
-    pub samples: usize,
-    pub loss: f32,
-    /// L2 of the planned waypoint at [`L2_HORIZONS_S`] to the expert's, metres (`None` where
-    /// the model plans less far).
-    pub l2_m: Vec<Option<f32>>,
-    /// Mean absolute error of the control branch's control against the expert's.
-    pub steer_mae: f32,
-    pub throttle_mae: f32,
-    pub brake_mae: f32,
-}
 
 /// What a finished (or stopped) run reports.
 #[derive(Debug, Clone)]
@@ -340,10 +323,9 @@ impl Trainer {
             if at_end || (every > 0 && self.step.is_multiple_of(every)) {
                 let validation = self.validate()?;
                 bar.println(format!(
-                    "step {}: validation L2 {} m, steer MAE {:.3}",
+                    "step {}: validation {}",
                     self.step,
-                    format_l2(&validation.l2_m),
-                    validation.steer_mae
+                    validation.summary()
                 ));
                 self.log(&MetricsLine::Validation(validation.clone()))?;
                 self.last_validation = Some(validation);
@@ -528,11 +510,6 @@ fn batch_losses(
     )
 }
 
-/// Waypoints up to `horizon_s` (waypoints are 0.5 s apart): the horizon's waypoint is the
-/// one before this index.
-fn waypoints_until(horizon_s: f64) -> usize {
-    (horizon_s / sim_bridge::dataset::FUTURE_STEP).round() as usize
-}
 
 fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
     let value = |t: &Tensor<1>| float_values(t.clone())[0];
@@ -549,84 +526,8 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
     }
 }
 
-/// Up to `limit` samples spread evenly over `samples` (all when `limit` is 0).
-fn spread(samples: &[SampleRef], limit: usize) -> Vec<SampleRef> {
-    if limit == 0 || samples.len() <= limit {
-        return samples.to_vec();
-    }
-    (0..limit)
-        .map(|i| samples[i * samples.len() / limit])
-        .collect()
-}
 
-/// Running sums of the validation metrics.
-#[derive(Default)]
-struct ValidationSums {
-    samples: usize,
-    loss: f64,
-    l2: [f64; L2_HORIZONS_S.len()],
-    steer: f64,
-    throttle: f64,
-    brake: f64,
-}
 
-impl ValidationSums {
-    fn add(&mut self, batch: &Batch, head: &HeadOutput, p: usize, loss: f32) {
-        let waypoints = float_values(head.waypoints.clone());
-        let alpha = float_values(head.alpha.clone());
-        let beta = float_values(head.beta.clone());
-        for i in 0..batch.size {
-            for (h, horizon) in L2_HORIZONS_S.iter().enumerate() {
-                let k = waypoints_until(*horizon) - 1;
-                if k < p {
-                    let at = (i * p + k) * 2;
-                    let dx = waypoints[at] - batch.waypoints[at];
-                    let dy = waypoints[at + 1] - batch.waypoints[at + 1];
-                    self.l2[h] += (dx * dx + dy * dy).sqrt() as f64;
-                }
-            }
-            let control = control_from_beta(
-                [alpha[2 * i], alpha[2 * i + 1]],
-                [beta[2 * i], beta[2 * i + 1]],
-            );
-            let expert = &batch.expert[i];
-            self.steer += (control.steer as f64 - expert.steer).abs();
-            self.throttle += (control.throttle as f64 - expert.throttle).abs();
-            self.brake += (control.brake as f64 - expert.brake).abs();
-        }
-        self.loss += loss as f64 * batch.size as f64;
-        self.samples += batch.size;
-    }
-
-    fn finish(self, step: u64, p: usize) -> ValidationMetrics {
-        let n = self.samples.max(1) as f64;
-        let mean = |sum: f64| (sum / n) as f32;
-        ValidationMetrics {
-            step,
-            samples: self.samples,
-            loss: mean(self.loss),
-            l2_m: L2_HORIZONS_S
-                .iter()
-                .zip(self.l2)
-                .map(|(horizon, sum)| {
-                    let k = waypoints_until(*horizon);
-                    (k <= p && self.samples > 0).then(|| mean(sum))
-                })
-                .collect(),
-            steer_mae: mean(self.steer),
-            throttle_mae: mean(self.throttle),
-            brake_mae: mean(self.brake),
-        }
-    }
-}
-
-/// "0.41 / 0.93 / 1.62" for the horizons, "-" where not planned.
-pub fn format_l2(l2: &[Option<f32>]) -> String {
-    l2.iter()
-        .map(|v| v.map_or("-".into(), |v| format!("{v:.2}")))
-        .collect::<Vec<_>>()
-        .join(" / ")
-}
 
 /// Keeps the metrics lines of steps up to `step` (a resumed run redraws the rest).
 fn keep_metrics_until(path: &Path, step: u64) -> Result<(), TrainError> {

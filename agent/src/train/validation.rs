@@ -1,0 +1,207 @@
+//! Open-loop validation metrics over the held-out routes: the loss, the L2 of the planned
+//! waypoints at 1, 2 and 3 s, the control branch's errors, and the same per situation (each
+//! command, and start-ups from standstill), since a mean over a validation set that is half
+//! lane following hides the turns and starts closed-loop driving depends on.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::data::{Batch, SampleRef};
+use crate::control::beta::control_from_beta;
+use crate::model::float_values;
+use crate::model::tcp_head::HeadOutput;
+
+/// Horizons of the open-loop L2, seconds.
+pub const L2_HORIZONS_S: [f64; 3] = [1.0, 2.0, 3.0];
+
+/// Errors over one set of validation samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GroupMetrics {
+    pub samples: usize,
+    /// L2 of the planned waypoint at [`L2_HORIZONS_S`] to the label, metres (`None` where the
+    /// model plans less far).
+    pub l2_m: Vec<Option<f32>>,
+    /// Mean absolute error of the control branch's control against the expert's.
+    pub steer_mae: f32,
+    pub throttle_mae: f32,
+    pub brake_mae: f32,
+}
+
+/// Open-loop metrics over the validation routes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ValidationMetrics {
+    pub step: u64,
+    pub loss: f32,
+    /// Over every sample (flattened: the metrics lines keep their earlier shape).
+    #[serde(flatten)]
+    pub all: GroupMetrics,
+    /// The same per situation ([`situations`]); empty in runs from before it was reported.
+    #[serde(default)]
+    pub by_situation: BTreeMap<String, GroupMetrics>,
+}
+
+impl ValidationMetrics {
+    /// One line: L2 and steer error over all samples, then the 2 s L2 per situation.
+    pub fn summary(&self) -> String {
+        let per: Vec<String> = self
+            .by_situation
+            .iter()
+            .map(|(name, g)| {
+                let l2 = g.l2_m.get(1).copied().flatten();
+                format!("{name} {}", l2.map_or("-".into(), |v| format!("{v:.2}")))
+            })
+            .collect();
+        format!(
+            "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}",
+            format_l2(&self.all.l2_m),
+            self.all.steer_mae,
+            per.join(", ")
+        )
+    }
+}
+
+/// The situations a validation sample counts in: its command (`left`, `right`, `straight`,
+/// `follow`, `change-lane`) and `start` when the car stands (below 1 m/s) and the expert
+/// accelerates.
+pub fn situations(command: &[f32], speed: f32, expert_throttle: f64) -> Vec<&'static str> {
+    let index = command
+        .iter()
+        .position(|&v| v > 0.5)
+        .expect("a one-hot command");
+    let mut out = vec![match index {
+        0 => "left",
+        1 => "right",
+        2 => "straight",
+        3 => "follow",
+        _ => "change-lane",
+    }];
+    if speed < 1.0 && expert_throttle > 0.1 {
+        out.push("start");
+    }
+    out
+}
+
+/// Up to `limit` samples spread evenly over `samples` (all when `limit` is 0).
+pub fn spread(samples: &[SampleRef], limit: usize) -> Vec<SampleRef> {
+    if limit == 0 || samples.len() <= limit {
+        return samples.to_vec();
+    }
+    (0..limit)
+        .map(|i| samples[i * samples.len() / limit])
+        .collect()
+}
+
+/// Waypoints up to `horizon_s` (waypoints are 0.5 s apart): the horizon's waypoint is the
+/// one before this index.
+pub fn waypoints_until(horizon_s: f64) -> usize {
+    (horizon_s / sim_bridge::dataset::FUTURE_STEP).round() as usize
+}
+
+/// Running sums of one group's errors.
+#[derive(Default, Clone)]
+struct GroupSums {
+    samples: usize,
+    l2: [f64; L2_HORIZONS_S.len()],
+    steer: f64,
+    throttle: f64,
+    brake: f64,
+}
+
+impl GroupSums {
+    fn accumulate(&mut self, other: &GroupSums) {
+        self.samples += other.samples;
+        for (sum, value) in self.l2.iter_mut().zip(other.l2) {
+            *sum += value;
+        }
+        self.steer += other.steer;
+        self.throttle += other.throttle;
+        self.brake += other.brake;
+    }
+
+    fn finish(&self, p: usize) -> GroupMetrics {
+        let n = self.samples.max(1) as f64;
+        let mean = |sum: f64| (sum / n) as f32;
+        GroupMetrics {
+            samples: self.samples,
+            l2_m: L2_HORIZONS_S
+                .iter()
+                .zip(self.l2)
+                .map(|(horizon, sum)| {
+                    (waypoints_until(*horizon) <= p && self.samples > 0).then(|| mean(sum))
+                })
+                .collect(),
+            steer_mae: mean(self.steer),
+            throttle_mae: mean(self.throttle),
+            brake_mae: mean(self.brake),
+        }
+    }
+}
+
+/// Running sums of the validation metrics.
+#[derive(Default)]
+pub struct ValidationSums {
+    loss: f64,
+    all: GroupSums,
+    by_situation: BTreeMap<&'static str, GroupSums>,
+}
+
+impl ValidationSums {
+    /// Adds a batch's head output (with `p` waypoints) and mean loss.
+    pub fn add(&mut self, batch: &Batch, head: &HeadOutput, p: usize, loss: f32) {
+        let waypoints = float_values(head.waypoints.clone());
+        let alpha = float_values(head.alpha.clone());
+        let beta = float_values(head.beta.clone());
+        let commands = batch.commands();
+        for i in 0..batch.size {
+            let mut one = GroupSums {
+                samples: 1,
+                ..GroupSums::default()
+            };
+            for (h, horizon) in L2_HORIZONS_S.iter().enumerate() {
+                let k = waypoints_until(*horizon) - 1;
+                if k < p {
+                    let at = (i * p + k) * 2;
+                    let dx = waypoints[at] - batch.waypoints[at];
+                    let dy = waypoints[at + 1] - batch.waypoints[at + 1];
+                    one.l2[h] = (dx * dx + dy * dy).sqrt() as f64;
+                }
+            }
+            let control = control_from_beta(
+                [alpha[2 * i], alpha[2 * i + 1]],
+                [beta[2 * i], beta[2 * i + 1]],
+            );
+            let expert = &batch.expert[i];
+            one.steer = (control.steer as f64 - expert.steer).abs();
+            one.throttle = (control.throttle as f64 - expert.throttle).abs();
+            one.brake = (control.brake as f64 - expert.brake).abs();
+            self.all.accumulate(&one);
+            for group in situations(commands[i], batch.speed_label(i), expert.throttle) {
+                self.by_situation.entry(group).or_default().accumulate(&one);
+            }
+        }
+        self.loss += loss as f64 * batch.size as f64;
+    }
+
+    /// The means, at optimiser step `step`.
+    pub fn finish(self, step: u64, p: usize) -> ValidationMetrics {
+        ValidationMetrics {
+            step,
+            loss: (self.loss / self.all.samples.max(1) as f64) as f32,
+            all: self.all.finish(p),
+            by_situation: self
+                .by_situation
+                .iter()
+                .map(|(name, sums)| (name.to_string(), sums.finish(p)))
+                .collect(),
+        }
+    }
+}
+
+/// "0.41 / 0.93 / 1.62" for the horizons, "-" where not planned.
+pub fn format_l2(l2: &[Option<f32>]) -> String {
+    l2.iter()
+        .map(|v| v.map_or("-".into(), |v| format!("{v:.2}")))
+        .collect::<Vec<_>>()
+        .join(" / ")
+}
