@@ -366,3 +366,81 @@ fn a_killed_collection_resumes_without_losing_or_duplicating_frames() {
     };
     assert_eq!(manifest(&killed), manifest(&clean));
 }
+
+/// `--maps DIR` takes the map a route file's town names, and a route that cannot be planned
+/// is a failed run with zero scores in the results (as the leaderboard counts it), not a
+/// route left out; `eval` then exits non-zero after writing them.
+#[test]
+fn eval_finds_maps_by_town_and_scores_unplannable_routes_as_failures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let maps = dir.join("maps");
+    std::fs::create_dir_all(&maps).unwrap();
+    std::fs::write(
+        maps.join("LineTown.xodr"),
+        include_str!("maps/degenerate_road.xodr"),
+    )
+    .unwrap();
+    // One 60 m one-way lane along +x (CARLA's y is the map's -y): route 0 drives it, route 1
+    // asks for the opposite way.
+    let routes = dir.join("routes.xml");
+    std::fs::write(
+        &routes,
+        r#"<routes>
+  <route id="0" town="LineTown">
+    <waypoint x="2.0" y="1.75" z="0.0" yaw="0.0"/>
+    <waypoint x="55.0" y="1.75" z="0.0" yaw="0.0"/>
+  </route>
+  <route id="1" town="LineTown">
+    <waypoint x="55.0" y="1.75" z="0.0" yaw="180.0"/>
+    <waypoint x="2.0" y="1.75" z="0.0" yaw="180.0"/>
+  </route>
+</routes>"#,
+    )
+    .unwrap();
+    let out = dir.join("results.json");
+    let run = sim_bridge(&[
+        "eval",
+        "--routes",
+        routes.to_str().unwrap(),
+        "--maps",
+        maps.to_str().unwrap(),
+        "--vehicles",
+        "0",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "an unplannable route fails the run");
+    assert!(stderr.contains("1 of 2 routes could not be planned"), "{stderr}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let records = json["_checkpoint"]["records"].as_array().unwrap();
+    assert_eq!(records.len(), 2);
+    assert_eq!(records[0]["status"], "Completed");
+    let failed = records[1]["status"].as_str().unwrap();
+    assert!(
+        failed.starts_with("Failed - Route could not be planned: ") && failed.contains("no path"),
+        "{failed}"
+    );
+    assert_eq!(records[1]["scores"]["score_composed"], 0.0);
+    let global = json["_checkpoint"]["global_record"]["scores"]["score_composed"]
+        .as_f64()
+        .unwrap();
+    assert!((global - 50.0).abs() < 1.0, "the failure counts in the mean: {global}");
+
+    // A town with no map in the folder is named.
+    std::fs::remove_file(maps.join("LineTown.xodr")).unwrap();
+    let run = sim_bridge(&[
+        "eval",
+        "--routes",
+        routes.to_str().unwrap(),
+        "--maps",
+        maps.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success() && stderr.contains("LineTown.xodr"), "{stderr}");
+}

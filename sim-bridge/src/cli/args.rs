@@ -9,7 +9,7 @@ use clap::Args;
 use sim_bridge::client::local::LocalServer;
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::DenseRoute;
-use sim_bridge::route::planner::plan_route;
+use sim_bridge::route::planner::{PlanError, plan_route};
 use sim_bridge::route::xml::RouteSpec;
 use sim_bridge::world::WorldConfig;
 
@@ -22,6 +22,10 @@ pub struct RouteArgs {
     /// The map: an .xodr file or a bundled town name (defaults to a bundled set's own town).
     #[arg(long)]
     pub map: Option<PathBuf>,
+    /// A folder of maps named after their towns (Town05.xodr, ...): a CARLA route file's map
+    /// is the one its routes' `town` names.
+    #[arg(long, conflicts_with = "map")]
+    pub maps: Option<PathBuf>,
     /// Only these route ids (comma separated).
     #[arg(long, value_delimiter = ',')]
     pub route_ids: Vec<String>,
@@ -39,14 +43,42 @@ pub struct PlannedRoute {
     pub dense: DenseRoute,
 }
 
+/// A selected route and its dense route, or why it could not be planned.
+pub type RoutePlan = (RouteSpec, Result<DenseRoute, PlanError>);
+
 impl RouteArgs {
     /// The map and the selected routes, planned. A route that cannot be planned is reported
     /// and left out; none at all is an error.
     pub fn load(&self) -> anyhow::Result<(Map, Vec<PlannedRoute>)> {
+        let (map, plans) = self.load_each()?;
+        let mut planned = Vec::with_capacity(plans.len());
+        for (spec, dense) in plans {
+            match dense {
+                Ok(dense) => planned.push(PlannedRoute { spec, dense }),
+                Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
+            }
+        }
+        if planned.is_empty() {
+            bail!(
+                "no route of {} could be planned on map {}",
+                self.routes,
+                map.name
+            );
+        }
+        Ok((map, planned))
+    }
+
+    /// The map and every selected route with its plan or the reason it has none.
+    pub fn load_each(&self) -> anyhow::Result<(Map, Vec<RoutePlan>)> {
         let options = MapOptions {
             place_missing_lights: !self.no_placed_lights,
         };
-        let (map, mut specs) = super::load_routes(&self.routes, self.map.as_ref(), options)?;
+        let (map, mut specs) = super::load_routes(
+            &self.routes,
+            self.map.as_ref(),
+            self.maps.as_ref(),
+            options,
+        )?;
         if !self.route_ids.is_empty() {
             specs.retain(|s| self.route_ids.contains(&s.id));
             if specs.is_empty() {
@@ -60,21 +92,14 @@ impl RouteArgs {
         if let Some(limit) = self.limit {
             specs.truncate(limit);
         }
-        let mut planned = Vec::with_capacity(specs.len());
-        for spec in specs {
-            match plan_route(&map, &spec) {
-                Ok(dense) => planned.push(PlannedRoute { spec, dense }),
-                Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
-            }
-        }
-        if planned.is_empty() {
-            bail!(
-                "no route of {} could be planned on map {}",
-                self.routes,
-                map.name
-            );
-        }
-        Ok((map, planned))
+        let plans = specs
+            .into_iter()
+            .map(|spec| {
+                let dense = plan_route(&map, &spec);
+                (spec, dense)
+            })
+            .collect();
+        Ok((map, plans))
     }
 }
 

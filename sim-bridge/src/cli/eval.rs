@@ -25,7 +25,7 @@ use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, RouteEnd, RouteRecord, ScoringConfig, summary_table};
 
 use super::args::{
-    PlannedRoute, RouteArgs, WorldArgs, parse_positive, parse_seconds, server_target,
+    RouteArgs, RoutePlan, WorldArgs, parse_positive, parse_seconds, server_target,
 };
 
 #[derive(Debug, Args)]
@@ -107,7 +107,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             _ => agent,
         })
     };
-    let (map, planned) = args.route.load()?;
+    // Every selected route runs; one that cannot be planned is a failed record, as the
+    // leaderboard would count it.
+    let (map, planned) = args.route.load_each()?;
     if let Some(dir) = &args.pictures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
@@ -151,11 +153,32 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             {
                 continue;
             }
-            let (repetition, PlannedRoute { spec, dense }) =
+            let (repetition, (spec, dense)) =
                 (index / planned.len(), &planned[index % planned.len()]);
-            let world = args
-                .world
-                .config(&map, args.world.seed.wrapping_add(repetition as u64));
+            let seed = args.world.seed.wrapping_add(repetition as u64);
+            let dense = match dense {
+                Ok(dense) => dense,
+                Err(reason) => {
+                    let record = RouteRecord::unplannable(
+                        index,
+                        &spec.id,
+                        spec.keypoint_length(),
+                        repetition,
+                        seed,
+                        &reason.to_string(),
+                    );
+                    bars.suspend(|| {
+                        eprintln!("route {:>4} rep {repetition}: {}", spec.id, record.status)
+                    });
+                    let mut finished = finished.lock().expect("no worker panics holding it");
+                    finished.records[index] = Some(record);
+                    let results = Results::new(finished.done(), total, Vec::new());
+                    std::fs::write(&args.out, results.to_json())
+                        .with_context(|| format!("writing {}", args.out.display()))?;
+                    continue;
+                }
+            };
+            let world = args.world.config(&map, seed);
             let bar = bars.add(progress_bar(
                 args.quiet,
                 &format!("route {} rep {repetition}", spec.id),
@@ -232,6 +255,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             finished.crashes
         );
     }
+    let unplannable = planned.iter().filter(|(_, dense)| dense.is_err()).count();
+    if unplannable > 0 {
+        bail!(
+            "{unplannable} of {} routes could not be planned; they count as failed runs with \
+             zero scores (see above)",
+            planned.len()
+        );
+    }
     Ok(())
 }
 
@@ -254,7 +285,7 @@ impl Finished {
 /// would otherwise mix two evaluations.
 fn earlier_records(
     path: &Path,
-    planned: &[PlannedRoute],
+    planned: &[RoutePlan],
     total: usize,
     seed: u64,
 ) -> anyhow::Result<Vec<Option<RouteRecord>>> {
@@ -268,7 +299,7 @@ fn earlier_records(
         Results::from_json(&text).with_context(|| format!("resuming from {}", path.display()))?;
     for record in results.checkpoint.records {
         let index = record.index;
-        let spec = &planned[index % planned.len()].spec;
+        let spec = &planned[index % planned.len()].0;
         let repetition = index / planned.len();
         let expected_seed = seed.wrapping_add(repetition as u64);
         if index >= total

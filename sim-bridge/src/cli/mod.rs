@@ -95,6 +95,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 pub fn load_routes(
     routes: &str,
     map: Option<&PathBuf>,
+    maps: Option<&PathBuf>,
     options: MapOptions,
 ) -> anyhow::Result<(Map, Vec<RouteSpec>)> {
     let map_arg = map.map(|m| m.to_string_lossy().into_owned());
@@ -118,12 +119,39 @@ pub fn load_routes(
         );
     }
     let specs = xml::read_file(&path)?;
-    let Some(map_arg) = map_arg else {
-        bail!(
-            "--routes {routes} is a route file: give its map with --map <file.xodr | bundled town>"
-        );
+    let map_arg = match (map_arg, maps) {
+        (Some(map), _) => map,
+        (None, Some(dir)) => town_map(&specs, dir, routes)?,
+        (None, None) => bail!(
+            "--routes {routes} is a route file: give its map with --map <file.xodr | bundled \
+             town>, or a folder of maps named after the towns with --maps DIR"
+        ),
     };
     Ok((load_map(&map_arg, options)?, specs))
+}
+
+/// DIR/<town>.xodr for a route file whose routes all name one town (CARLA's `town="Town05"`).
+fn town_map(specs: &[RouteSpec], dir: &std::path::Path, routes: &str) -> anyhow::Result<String> {
+    let mut towns: Vec<&str> = specs.iter().map(|s| s.town.as_str()).collect();
+    towns.sort_unstable();
+    towns.dedup();
+    let town = match towns.as_slice() {
+        [town] if !town.is_empty() => *town,
+        [] | [_] => bail!("--routes {routes}: its routes name no town; give the map with --map"),
+        many => bail!(
+            "--routes {routes} names {} towns ({}); evaluate one town per run with --map",
+            many.len(),
+            many.join(", ")
+        ),
+    };
+    let path = dir.join(format!("{town}.xodr"));
+    if !path.is_file() {
+        bail!(
+            "--maps {}: no {town}.xodr there for the town --routes {routes} names",
+            dir.display()
+        );
+    }
+    Ok(path.to_string_lossy().into_owned())
 }
 
 /// A map from an .xodr path or a bundled town name.

@@ -47,7 +47,7 @@ pub fn run(cmd: RoutesCommand) -> anyhow::Result<()> {
             Ok(())
         }
         RoutesCommand::Show { set, map } => {
-            let (map, specs) = super::load_routes(&set, map.as_ref(), MapOptions::default())?;
+            let (map, specs) = super::load_routes(&set, map.as_ref(), None, MapOptions::default())?;
             println!(
                 "{:<8} {:>9} {:>9} {:>5} {:>5} {:>5} {:>5} {:>5} {:>9}",
                 "route", "kp len m", "dense m", "kps", "plan", "left", "right", "chg", "timeout s"

@@ -135,7 +135,40 @@ pub struct RouteRecord {
     pub status: String,
 }
 
+/// Start of the status of a route that could not be planned over the lane graph; the reason
+/// follows. Such a route counts with zero scores: the leaderboard would have stopped at it.
+pub const UNPLANNABLE_STATUS: &str = "Failed - Route could not be planned";
+
 impl RouteRecord {
+    /// The record of run `index`, a route that could not be planned (`reason`), of keypoint
+    /// length `route_length`, repetition `repetition` with world seed `seed`.
+    pub fn unplannable(
+        index: usize,
+        route_id: &str,
+        route_length: f64,
+        repetition: usize,
+        seed: u64,
+        reason: &str,
+    ) -> Self {
+        RouteRecord {
+            index,
+            infractions: Infractions::default(),
+            meta: RouteMeta {
+                route_length,
+                repetition: Some(repetition),
+                seed: Some(seed),
+                ..RouteMeta::default()
+            },
+            route_id: route_id.to_string(),
+            scores: Scores {
+                score_composed: 0.0,
+                score_penalty: 1.0,
+                score_route: 0.0,
+            },
+            status: format!("{UNPLANNABLE_STATUS}: {reason}"),
+        }
+    }
+
     /// Whether the route was completed.
     pub fn completed(&self) -> bool {
         self.status == "Completed"
