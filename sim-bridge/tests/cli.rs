@@ -399,18 +399,21 @@ fn eval_finds_maps_by_town_and_scores_unplannable_routes_as_failures() {
     )
     .unwrap();
     let out = dir.join("results.json");
-    let run = sim_bridge(&[
-        "eval",
-        "--routes",
-        routes.to_str().unwrap(),
-        "--maps",
-        maps.to_str().unwrap(),
-        "--vehicles",
-        "0",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let eval = || {
+        sim_bridge(&[
+            "eval",
+            "--routes",
+            routes.to_str().unwrap(),
+            "--maps",
+            maps.to_str().unwrap(),
+            "--vehicles",
+            "0",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let run = eval();
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success(), "an unplannable route fails the run");
     assert!(stderr.contains("1 of 2 routes could not be planned"), "{stderr}");
@@ -432,15 +435,7 @@ fn eval_finds_maps_by_town_and_scores_unplannable_routes_as_failures() {
 
     // A town with no map in the folder is named.
     std::fs::remove_file(maps.join("LineTown.xodr")).unwrap();
-    let run = sim_bridge(&[
-        "eval",
-        "--routes",
-        routes.to_str().unwrap(),
-        "--maps",
-        maps.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let run = eval();
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success() && stderr.contains("LineTown.xodr"), "{stderr}");
 }
