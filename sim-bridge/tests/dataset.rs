@@ -58,6 +58,7 @@ fn config(out: &Path, noise: f64) -> CollectConfig {
             rate: noise,
             ..NoiseConfig::default()
         },
+        driver: None,
         jobs: 2,
     }
 }
@@ -68,7 +69,7 @@ fn a_collection_reads_back_with_consistent_futures() {
     let out = tmp.path().join("dataset");
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 3);
-    let summary = collect(&config(&out, 0.5), &tasks, |_| {}).unwrap();
+    let summary = collect(&config(&out, 0.5), &tasks, None, |_| {}).unwrap();
     assert_eq!(summary.recorded, 3);
     let data = Dataset::open(&out).unwrap();
     let m = &data.manifest;
@@ -145,7 +146,7 @@ fn the_dataset_stores_exactly_the_frames_an_agent_is_shown() {
     let out = tmp.path().join("dataset");
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 1);
-    collect(&config(&out, 0.0), &tasks, |_| {}).unwrap();
+    collect(&config(&out, 0.0), &tasks, None, |_| {}).unwrap();
     let data = Dataset::open(&out).unwrap();
     let name = &data.manifest.episode_list[0].name;
     let frames = data.frames(name).unwrap();
@@ -183,7 +184,7 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
 
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 1);
-    collect(&config(&out, 0.0), &tasks, |_| {}).unwrap();
+    collect(&config(&out, 0.0), &tasks, None, |_| {}).unwrap();
     let data = Dataset::open(&out).unwrap();
     let name = data.manifest.episode_list[0].name.clone();
     let dir = data.episode_dir(&name);
@@ -209,14 +210,14 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     // Another rig is refused rather than mixed in.
     let mut other = config(&out, 0.0);
     other.rig = Rig::tcp();
-    let err = collect(&other, &tasks, |_| {}).unwrap_err().to_string();
+    let err = collect(&other, &tasks, None, |_| {}).unwrap_err().to_string();
     assert!(err.contains("another rig"), "{err}");
 
     // The same run listed twice would write one folder from two threads.
     let (map2, set2) = small_town();
     let mut twice = self::tasks(&map2, set2, 1);
     twice.extend(self::tasks(&map2, set2, 1));
-    let err = collect(&config(&out, 0.0), &twice, |_| {})
+    let err = collect(&config(&out, 0.0), &twice, None, |_| {})
         .unwrap_err()
         .to_string();
     assert!(err.contains("listed twice"), "{err}");
@@ -224,7 +225,7 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     // Resuming with another seed for a recorded run is refused, not silently skipped.
     let mut reseeded = self::tasks(&map2, set2, 1);
     reseeded[0].world.seed = 99;
-    let err = collect(&config(&out, 0.0), &reseeded, |_| {})
+    let err = collect(&config(&out, 0.0), &reseeded, None, |_| {})
         .unwrap_err()
         .to_string();
     assert!(
@@ -238,4 +239,66 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     std::fs::write(&manifest, text.replace("\"version\": 1", "\"version\": 99")).unwrap();
     let err = Dataset::open(&out).unwrap_err().to_string();
     assert!(err.contains("version 99"), "{err}");
+}
+
+/// A driver that ignores the route: full throttle, steering a little left, never braking.
+struct Wanderer;
+
+impl Agent for Wanderer {
+    fn name(&self) -> String {
+        "wanderer".into()
+    }
+    fn start_route(&mut self, _: &RouteContext<'_>) -> Result<(), AgentError> {
+        Ok(())
+    }
+    fn sensors(&self) -> Option<Rig> {
+        Some(Rig::tcp_small())
+    }
+    fn run_step(&mut self, obs: &Observation, _: &World<'_>) -> Result<Control, AgentError> {
+        assert_eq!(obs.frames.len(), 1, "a driver sees every tick's frame");
+        Ok(Control {
+            steer: -0.05,
+            throttle: 0.6,
+            brake: 0.0,
+        })
+    }
+}
+
+/// DAgger: with a driver, the driver's control is executed and the expert labels the states it
+/// reaches; the episode says who drove, and a collection with another driver is refused.
+#[test]
+fn a_driver_drives_while_the_expert_labels_its_states() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("dagger");
+    let (map, set) = small_town();
+    let tasks = tasks(&map, set, 1);
+    let mut dagger = config(&out, 0.0);
+    dagger.driver = Some("wanderer".into());
+    let factory = || Ok(Box::new(Wanderer) as Box<dyn Agent>);
+    collect(&dagger, &tasks, Some(&factory), |_| {}).unwrap();
+    let data = Dataset::open(&out).unwrap();
+    let entry = &data.manifest.episode_list[0];
+    let frames = data.frames(&entry.name).unwrap();
+    assert!(frames.len() > 5, "{} frames", frames.len());
+    for pair in frames.windows(2) {
+        assert_eq!(pair[1].tick - pair[0].tick, 10, "stored at 2 Hz, not every tick");
+    }
+    for f in &frames {
+        assert_eq!((f.executed.throttle, f.executed.steer), (0.6, -0.05), "the driver drove");
+        assert!(!f.noise);
+        assert_eq!(f.plan.len(), FUTURE_COUNT, "the expert's plan labels the frame");
+    }
+    assert!(
+        frames.iter().any(|f| f.control != f.executed),
+        "the labels are the expert's own"
+    );
+    let info: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(data.episode_dir(&entry.name).join("episode.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(info["driver"], "wanderer");
+    let err = collect(&config(&out, 0.0), &tasks, None, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("driver"), "{err}");
 }

@@ -12,7 +12,9 @@ use sim_bridge::dataset::NoiseConfig;
 use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
 use sim_bridge::map::Map;
 
-use super::args::{PlannedRoute, RouteArgs, WorldArgs};
+use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
+use sim_bridge::agent::Agent;
+use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 
 #[derive(Debug, Args)]
 pub struct CollectArgs {
@@ -48,6 +50,12 @@ pub struct CollectArgs {
     /// instead of pushing the steering.
     #[arg(long, default_value_t = 0.0)]
     noise_longitudinal: f64,
+    /// DAgger: who drives instead of the expert, `grpc://HOST:PORT` (an agent server) or
+    /// `local` (starts `ssr-agent serve`; SSR_AGENT_* variables such as SSR_AGENT_CHECKPOINT
+    /// configure it). The expert still labels every stored frame from the state the driver
+    /// reached; noise injection is off.
+    #[arg(long)]
+    driver: Option<String>,
     /// Worker threads (one route run each).
     #[arg(long, default_value_t = default_jobs(), value_parser = clap::value_parser!(u64).range(1..=256))]
     jobs: u64,
@@ -140,16 +148,35 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             }
         }
     }
+    let (target, _local_server) = match &args.driver {
+        Some(driver) => {
+            let (target, server) = server_target(driver, false)?;
+            (Some(target), server)
+        }
+        None => (None, None),
+    };
+    let make_driver = |target: &str| -> Result<Box<dyn Agent>, String> {
+        let options = GrpcOptions {
+            // The driver sees the frames the dataset stores.
+            rig: Some(rig.clone()),
+            client: "sim-bridge collect (DAgger driver)".into(),
+            ..GrpcOptions::default()
+        };
+        let agent = GrpcAgent::connect(target, options).map_err(|e| format!("{e:#}"))?;
+        Ok(Box::new(agent) as Box<dyn Agent>)
+    };
+    let driver_factory = target.as_deref().map(|t| move || make_driver(t));
     let config = CollectConfig {
         out: args.out.clone(),
-        rig,
+        rig: rig.clone(),
         rate_hz: args.rate,
         noise: NoiseConfig {
-            rate: args.noise_rate,
+            rate: if args.driver.is_some() { 0.0 } else { args.noise_rate },
             duration: args.noise_duration,
             steer: args.noise_steer,
             longitudinal: args.noise_longitudinal,
         },
+        driver: args.driver.clone(),
         jobs: args.jobs as usize,
     };
     let bar = if args.quiet {
@@ -165,7 +192,10 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     bar.set_prefix("collect");
     let frames = std::sync::atomic::AtomicUsize::new(0);
     let started = std::time::Instant::now();
-    let summary = collect(&config, &tasks, |done| {
+    let driver = driver_factory
+        .as_ref()
+        .map(|f| f as &(dyn Fn() -> Result<Box<dyn Agent>, String> + Sync));
+    let summary = collect(&config, &tasks, driver, |done| {
         if !done.skipped {
             let total = frames.fetch_add(done.info.frames, std::sync::atomic::Ordering::Relaxed)
                 + done.info.frames;

@@ -18,6 +18,7 @@ use super::{
     Dataset, DatasetError, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FORMAT, FUTURE_COUNT,
     FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, safe_name, write_atomic,
 };
+use crate::agent::Agent;
 use crate::camera::Rig;
 use crate::eval::run_route;
 use crate::map::Map;
@@ -35,9 +36,15 @@ pub struct CollectConfig {
     /// Stored frames per simulated second (20 Hz divided by a whole number of ticks).
     pub rate_hz: f64,
     pub noise: NoiseConfig,
+    /// Who drives, when not the expert (DAgger), as recorded in each episode: the learner's
+    /// server, for example.
+    pub driver: Option<String>,
     /// Worker threads.
     pub jobs: usize,
 }
+
+/// Makes one worker's driver (each worker thread drives its own, e.g. its own connection).
+pub type DriverFactory<'a> = &'a (dyn Fn() -> Result<Box<dyn Agent>, String> + Sync);
 
 /// One route run to record.
 pub struct EpisodeTask<'m> {
@@ -79,10 +86,12 @@ pub struct EpisodeDone {
     pub skipped: bool,
 }
 
-/// Record every task not yet in the dataset; `progress` hears of each episode as it ends.
+/// Record every task not yet in the dataset; `progress` hears of each episode as it ends. With
+/// `driver` (and `config.driver` naming it), its agents drive and the expert labels.
 pub fn collect(
     config: &CollectConfig,
     tasks: &[EpisodeTask<'_>],
+    driver: Option<DriverFactory<'_>>,
     progress: impl Fn(&EpisodeDone) + Sync,
 ) -> Result<CollectSummary, DatasetError> {
     let ticks_per_frame = ticks_per_frame(config.rate_hz).ok_or_else(|| {
@@ -123,10 +132,20 @@ pub fn collect(
     let summary = Mutex::new(CollectSummary::default());
     let first_error: Mutex<Option<DatasetError>> = Mutex::new(None);
     let worker = || {
+        let mut own_driver = match driver.map(|make| make()).transpose() {
+            Ok(d) => d,
+            Err(e) => {
+                failed.store(true, Ordering::Relaxed);
+                let error = DatasetError::invalid(&config.out, format!("the driver: {e}"));
+                first_error.lock().expect("error lock").get_or_insert(error);
+                return;
+            }
+        };
         while !failed.load(Ordering::Relaxed) {
             let k = next.fetch_add(1, Ordering::Relaxed);
             let Some(task) = tasks.get(k) else { break };
-            let result = collect_one(config, task, ticks_per_frame).and_then(|done| {
+            let result = collect_one(config, task, ticks_per_frame, own_driver.as_deref_mut());
+            let result = result.and_then(|done| {
                 let mut s = summary.lock().expect("summary lock");
                 if done.skipped {
                     s.skipped += 1;
@@ -171,6 +190,7 @@ fn collect_one(
     config: &CollectConfig,
     task: &EpisodeTask<'_>,
     ticks_per_frame: u64,
+    driver: Option<&mut (dyn Agent + 'static)>,
 ) -> Result<EpisodeDone, DatasetError> {
     let name = task.name();
     let episodes = config.out.join("episodes");
@@ -182,12 +202,13 @@ fn collect_one(
             && info.rig == config.rig
             && info.ticks_per_frame == ticks_per_frame
             && info.noise == config.noise
+            && info.driver == config.driver
             && info.randomise_appearance == task.world.randomise_appearance;
         if !same {
             return Err(DatasetError::invalid(
                 &info_path,
-                "recorded with another seed, rig, rate, noise or look than this collection \
-                 asks for; collect into a new folder (or repeat the original command)",
+                "recorded with another seed, rig, rate, noise, driver or look than this \
+                 collection asks for; collect into a new folder (or repeat the original command)",
             ));
         }
         return Ok(EpisodeDone {
@@ -207,6 +228,7 @@ fn collect_one(
         ticks_per_frame,
         config.noise,
         seed,
+        driver,
     )
     .map_err(io)?;
     let run = run_route(
@@ -233,6 +255,7 @@ fn collect_one(
         rate_hz: config.rate_hz,
         ticks_per_frame,
         noise: config.noise,
+        driver: config.driver.clone(),
         randomise_appearance: task.world.randomise_appearance,
         frames: totals.frames,
         truncated_frames: totals.truncated_frames,

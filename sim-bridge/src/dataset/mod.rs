@@ -145,6 +145,9 @@ pub struct EpisodeInfo {
     pub rate_hz: f64,
     pub ticks_per_frame: u64,
     pub noise: NoiseConfig,
+    /// Who drove, when not the expert (DAgger: the learner, labelled by the expert).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub driver: Option<String>,
     pub randomise_appearance: bool,
     pub frames: usize,
     /// Frames whose future was cut by the end of the route.

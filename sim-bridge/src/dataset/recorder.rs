@@ -1,7 +1,12 @@
 //! Records one episode while the expert drives: an [`Agent`] that asks for the rig's frames
-//! every `ticks_per_frame` ticks, writes them as PNG, injects steering noise into the executed
-//! control while labelling each frame with the expert's own control, and fills in each frame's
+//! every `ticks_per_frame` ticks, writes them as PNG, injects noise into the executed control
+//! while labelling each frame with the expert's own control and plan, and fills in each frame's
 //! future (waypoints and controls every 0.5 s for 3 s) once that future has been driven.
+//!
+//! With a driver (DAgger: the learner being trained, through its server), the driver's control
+//! is executed instead of the expert's, so the episode visits the states the learner drives
+//! into, and each frame is still labelled by the expert, who watches every tick from the same
+//! state: its control and its plan from there.
 //! One recorder records one route run: a second `start_route` is refused (an error at
 //! [`EpisodeRecorder::finish`]), since the episode folder holds one run.
 
@@ -38,9 +43,11 @@ enum Perturbation {
     Pedals { throttle: f64, brake: f64 },
 }
 
-/// The expert, recording into an episode folder.
-pub struct EpisodeRecorder {
+/// The expert, recording into an episode folder (and, with a driver, labelling the states the
+/// driver visits).
+pub struct EpisodeRecorder<'d> {
     expert: Expert,
+    driver: Option<&'d mut (dyn Agent + 'static)>,
     rig: Rig,
     dir: PathBuf,
     ticks_per_frame: u64,
@@ -65,14 +72,16 @@ pub struct RecordingTotals {
     pub bytes: u64,
 }
 
-impl EpisodeRecorder {
-    /// Record into `dir` (created, with one subfolder per camera).
+impl<'d> EpisodeRecorder<'d> {
+    /// Record into `dir` (created, with one subfolder per camera); `driver`, if any, drives
+    /// (its rig must be `rig`: it sees the frames the dataset stores).
     pub fn create(
         dir: &Path,
         rig: Rig,
         ticks_per_frame: u64,
         noise: NoiseConfig,
         seed: u64,
+        driver: Option<&'d mut (dyn Agent + 'static)>,
     ) -> std::io::Result<Self> {
         for camera in &rig.cameras {
             std::fs::create_dir_all(dir.join(&camera.id))?;
@@ -80,6 +89,7 @@ impl EpisodeRecorder {
         let file = std::fs::File::create(dir.join("measurements.jsonl"))?;
         Ok(Self {
             expert: Expert::new(),
+            driver,
             rig,
             dir: dir.to_path_buf(),
             ticks_per_frame: ticks_per_frame.max(1),
@@ -215,7 +225,7 @@ impl EpisodeRecorder {
         executed: Control,
         noise: bool,
     ) -> std::io::Result<()> {
-        if !obs.frames.is_empty() {
+        if !obs.frames.is_empty() && obs.frame.is_multiple_of(self.ticks_per_frame) {
             let images = self.store_frames(obs)?;
             self.pending.push_back(FrameRecord {
                 index: self.frames,
@@ -256,9 +266,12 @@ impl EpisodeRecorder {
     }
 }
 
-impl Agent for EpisodeRecorder {
+impl Agent for EpisodeRecorder<'_> {
     fn name(&self) -> String {
-        "expert (recording)".into()
+        match &self.driver {
+            Some(driver) => format!("{} (labelled by the expert, recording)", driver.name()),
+            None => "expert (recording)".into(),
+        }
     }
 
     fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
@@ -267,7 +280,16 @@ impl Agent for EpisodeRecorder {
                 "an episode recorder records one route run; this one was started twice",
             ));
         }
+        if let Some(driver) = self.driver.as_deref_mut() {
+            driver.start_route(ctx)?;
+        }
         self.expert.start_route(ctx)
+    }
+
+    fn end_route(&mut self) {
+        if let Some(driver) = self.driver.as_deref_mut() {
+            driver.end_route();
+        }
     }
 
     fn sensors(&self) -> Option<Rig> {
@@ -275,7 +297,8 @@ impl Agent for EpisodeRecorder {
     }
 
     fn wants_frames(&self, frame: u64) -> bool {
-        frame.is_multiple_of(self.ticks_per_frame)
+        // A driver sees every tick; only every ticks_per_frame-th is stored.
+        self.driver.is_some() || frame.is_multiple_of(self.ticks_per_frame)
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
@@ -292,7 +315,10 @@ impl Agent for EpisodeRecorder {
             yaw: obs.yaw,
             label,
         });
-        let (executed, noise) = self.perturb(label);
+        let (executed, noise) = match self.driver.as_deref_mut() {
+            Some(driver) => (driver.run_step(obs, world)?, false),
+            None => self.perturb(label),
+        };
         if self.error.is_none()
             && let Err(e) = self.record_tick(obs, label, executed, noise)
         {
