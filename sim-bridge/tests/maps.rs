@@ -133,3 +133,23 @@ fn a_road_too_short_for_geometry_still_links_its_neighbours() {
     assert_eq!(before.successors, vec![after.idx]);
     assert_eq!(after.predecessors, vec![before.idx]);
 }
+
+/// A keypoint far from every lane still matches the nearest driving lane, as CARLA's
+/// `get_waypoint` projects to the road from anywhere (TransFuser's Town01 and Town06 short
+/// routes hold keypoints up to 100 m off the map).
+#[test]
+fn a_keypoint_far_off_the_map_matches_the_nearest_lane() {
+    let xml = include_str!("maps/degenerate_road.xodr");
+    let map = Map::from_str("degenerate-road", xml, MapOptions::default()).unwrap();
+    let routes = sim_bridge::route::xml::parse(
+        "far",
+        r#"<routes><route id="0" town="x">
+            <waypoint x="2.0" y="1.75" z="0.0"/>
+            <waypoint x="55.0" y="-90.0" z="0.0"/>
+        </route></routes>"#,
+    )
+    .unwrap();
+    let route = sim_bridge::route::planner::plan_route(&map, &routes[0]).unwrap();
+    let end = route.points.last().unwrap().position;
+    assert!((end.x - 55.0).abs() < 1.0 && (end.y + 1.75).abs() < 0.5, "{end:?}");
+}

@@ -17,8 +17,8 @@ const CELL: f64 = 8.0;
 #[derive(Debug, Default)]
 pub struct SegmentGrid {
     cells: HashMap<(i32, i32), Vec<(LaneIdx, u32)>>,
-    /// Largest ring worth visiting (the grid's half-extent in cells).
-    max_ring: i32,
+    /// The cells that hold segments lie within these, inclusive (`None` when there are none).
+    bounds: Option<((i32, i32), (i32, i32))>,
 }
 
 fn cell_of(p: DVec2) -> (i32, i32) {
@@ -46,12 +46,19 @@ impl SegmentGrid {
                 hi = (hi.0.max(c1.0), hi.1.max(c1.1));
             }
         }
-        let max_ring = if cells.is_empty() {
-            0
-        } else {
-            (hi.0 - lo.0).max(hi.1 - lo.1) + 1
-        };
-        Self { cells, max_ring }
+        let bounds = (!cells.is_empty()).then_some((lo, hi));
+        Self { cells, bounds }
+    }
+
+    /// The ring around `centre` beyond which no cell holds a segment.
+    fn last_ring(&self, centre: (i32, i32)) -> i32 {
+        self.bounds.map_or(-1, |(lo, hi)| {
+            [centre.0 - lo.0, hi.0 - centre.0, centre.1 - lo.1, hi.1 - centre.1]
+                .into_iter()
+                .max()
+                .unwrap_or(0)
+                .max(0)
+        })
     }
 
     /// The lane accepted by `keep` whose centre line is nearest `p` in plan, with the projection,
@@ -69,7 +76,7 @@ impl SegmentGrid {
         let centre = cell_of(p);
         let mut best: Option<(LaneIdx, Projection)> = None;
         let max_ring = self
-            .max_ring
+            .last_ring(centre)
             .min(((max_distance / CELL).ceil() as i32).saturating_add(1));
         for ring in 0..=max_ring {
             // Every point of ring r is at least (r - 1) * CELL away.
