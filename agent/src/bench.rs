@@ -77,7 +77,15 @@ fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput 
         dyaw: 0.01,
     };
     let geometry: Vec<SampleGeometry> = (0..batch)
-        .map(|_| SampleGeometry::new(&grid, &config.bev.pillar_heights, &rig, Some(motion), Some(6.0)))
+        .map(|_| {
+            SampleGeometry::new(
+                &grid,
+                &config.bev.pillar_heights,
+                &rig,
+                Some(motion),
+                Some(6.0),
+            )
+        })
         .collect();
     let mut command = vec![0.0; batch * COMMANDS];
     for b in 0..batch {

@@ -113,7 +113,9 @@ impl EpisodeState {
     }
 
     fn history(&self) -> Option<&(Tensor<3>, Pose2)> {
-        self.recent.front().filter(|_| self.recent.len() == HISTORY_TICKS)
+        self.recent
+            .front()
+            .filter(|_| self.recent.len() == HISTORY_TICKS)
     }
 }
 
@@ -254,7 +256,10 @@ impl SsrPolicy {
 
     /// Bytes of tensor state one episode keeps (its last [`HISTORY_TICKS`] BEVs).
     pub fn episode_state_bytes(&self) -> usize {
-        HISTORY_TICKS * self.config.bev.grid.cells() * self.config.channels * std::mem::size_of::<f32>()
+        HISTORY_TICKS
+            * self.config.bev.grid.cells()
+            * self.config.channels
+            * std::mem::size_of::<f32>()
     }
 
     /// One tick of one episode.

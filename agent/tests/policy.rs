@@ -37,10 +37,14 @@ fn an_episode_keeps_its_bev_and_debug_maps_come_back() {
     // The history is the BEV of the step HISTORY_TICKS (0.5 s) back, as in training.
     for tick in 1..HISTORY_TICKS as u32 {
         assert!(!episode.has_previous_bev(), "no history yet at tick {tick}");
-        policy.step(&mut episode, &step_input(&rig, tick, 1)).unwrap();
+        policy
+            .step(&mut episode, &step_input(&rig, tick, 1))
+            .unwrap();
     }
     assert!(episode.has_previous_bev() && episode.ticks() == HISTORY_TICKS as u64);
-    policy.step(&mut episode, &step_input(&rig, HISTORY_TICKS as u32, 1)).unwrap();
+    policy
+        .step(&mut episode, &step_input(&rig, HISTORY_TICKS as u32, 1))
+        .unwrap();
     assert!(episode.has_previous_bev() && episode.ticks() == HISTORY_TICKS as u64 + 1);
     assert_eq!(policy.episode_state_bytes(), HISTORY_TICKS * 8 * 8 * 16 * 4);
 }

@@ -145,6 +145,10 @@ fn validation_situations_follow_the_command_and_count_start_ups() {
     assert_eq!(situations(&one_hot(0), 5.0, 0.5), ["left"]);
     assert_eq!(situations(&one_hot(1), 5.0, 0.0), ["right"]);
     assert_eq!(situations(&one_hot(3), 0.2, 0.6), ["follow", "start"]);
-    assert_eq!(situations(&one_hot(3), 0.2, 0.0), ["follow"], "standing, not starting");
+    assert_eq!(
+        situations(&one_hot(3), 0.2, 0.0),
+        ["follow"],
+        "standing, not starting"
+    );
     assert_eq!(situations(&one_hot(5), 8.0, 0.3), ["change-lane"]);
 }

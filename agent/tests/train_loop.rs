@@ -66,7 +66,14 @@ fn config(steps: u64) -> TrainConfig {
 
 fn open(data: &Path, config: &TrainConfig) -> Arc<TrainingData> {
     Arc::new(
-        TrainingData::open(data, &config.model, config.labels, config.validation_fraction, |_, _| {}).unwrap(),
+        TrainingData::open(
+            data,
+            &config.model,
+            config.labels,
+            config.validation_fraction,
+            |_, _| {},
+        )
+        .unwrap(),
     )
 }
 
@@ -317,7 +324,12 @@ fn labels_come_from_the_plan_or_the_driven_path_and_datasets_without_plans_are_r
     assert_eq!(lateral(&config), 0.0, "where the fixture's car went");
 
     // A dataset recorded before plans were stored: the plan is refused with the way out.
-    let episode = std::fs::read_dir(data.join("episodes")).unwrap().next().unwrap().unwrap().path();
+    let episode = std::fs::read_dir(data.join("episodes"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
     let lines = episode.join("measurements.jsonl");
     let text = std::fs::read_to_string(&lines).unwrap();
     let old: String = text
@@ -330,7 +342,10 @@ fn labels_come_from_the_plan_or_the_driven_path_and_datasets_without_plans_are_r
         .collect();
     std::fs::write(&lines, old).unwrap();
     let error = open_error(&data, &config.model);
-    assert!(error.contains("plan") && error.contains("--labels driven"), "{error}");
+    assert!(
+        error.contains("plan") && error.contains("--labels driven"),
+        "{error}"
+    );
     assert!(TrainingData::open(&data, &config.model, Labels::Driven, 0.1, |_, _| {}).is_ok());
 }
 

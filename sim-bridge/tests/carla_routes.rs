@@ -89,9 +89,16 @@ fn every_carla_route_file_plans_on_its_town() {
             }
         }
     }
-    eprintln!("{planned} routes planned, {} failed: {failed:#?}", failed.len());
+    eprintln!(
+        "{planned} routes planned, {} failed: {failed:#?}",
+        failed.len()
+    );
     assert!(planned > 1900, "{planned} routes planned");
-    assert!(failed.len() <= 9, "{} routes failed: {failed:#?}", failed.len());
+    assert!(
+        failed.len() <= 9,
+        "{} routes failed: {failed:#?}",
+        failed.len()
+    );
 }
 
 /// A dense route never turns back on itself: consecutive 1 m steps differ in heading by less
@@ -105,7 +112,9 @@ fn dense_routes_on_carla_towns_never_turn_back() {
         let map =
             Map::load_file(&dir.join(format!("Town{town}.xodr")), MapOptions::default()).unwrap();
         for length in ["long", "short"] {
-            let file = dir.join(format!("training_routes/transfuser/routes_town{town}_{length}.xml"));
+            let file = dir.join(format!(
+                "training_routes/transfuser/routes_town{town}_{length}.xml"
+            ));
             for spec in xml::read_file(&file).unwrap() {
                 let Ok(route) = planner::plan_route(&map, &spec) else {
                     continue;
@@ -130,7 +139,11 @@ fn dense_routes_on_carla_towns_never_turn_back() {
             }
         }
     }
-    assert!(reversals.is_empty(), "{} reversals: {reversals:#?}", reversals.len());
+    assert!(
+        reversals.is_empty(),
+        "{} reversals: {reversals:#?}",
+        reversals.len()
+    );
 }
 
 /// The privileged expert drives a fixed sample of TransFuser's long routes on each CARLA town
@@ -144,7 +157,9 @@ fn the_expert_drives_a_sample_of_long_routes_on_each_carla_town() {
     for (town, floor) in [("01", 90.0), ("03", 35.0), ("04", 70.0), ("06", 70.0)] {
         let map =
             Map::load_file(&dir.join(format!("Town{town}.xodr")), MapOptions::default()).unwrap();
-        let file = dir.join(format!("training_routes/transfuser/routes_town{town}_long.xml"));
+        let file = dir.join(format!(
+            "training_routes/transfuser/routes_town{town}_long.xml"
+        ));
         let specs: Vec<_> = xml::read_file(&file).unwrap().into_iter().take(4).collect();
         let world = WorldConfig {
             vehicles: leaderboard_vehicles(&map),
@@ -172,6 +187,9 @@ fn the_expert_drives_a_sample_of_long_routes_on_each_carla_town() {
             .collect();
         let mean = scores.iter().sum::<f64>() / scores.len() as f64;
         eprintln!("Town{town}: DS {scores:?}, mean {mean:.1}");
-        assert!(mean >= floor, "Town{town}: mean DS {mean:.1} under {floor}: {scores:?}");
+        assert!(
+            mean >= floor,
+            "Town{town}: mean DS {mean:.1} under {floor}: {scores:?}"
+        );
     }
 }

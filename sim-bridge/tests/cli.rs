@@ -416,7 +416,10 @@ fn eval_finds_maps_by_town_and_scores_unplannable_routes_as_failures() {
     let run = eval();
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success(), "an unplannable route fails the run");
-    assert!(stderr.contains("1 of 2 routes could not be planned"), "{stderr}");
+    assert!(
+        stderr.contains("1 of 2 routes could not be planned"),
+        "{stderr}"
+    );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let records = json["_checkpoint"]["records"].as_array().unwrap();
@@ -431,11 +434,17 @@ fn eval_finds_maps_by_town_and_scores_unplannable_routes_as_failures() {
     let global = json["_checkpoint"]["global_record"]["scores"]["score_composed"]
         .as_f64()
         .unwrap();
-    assert!((global - 50.0).abs() < 1.0, "the failure counts in the mean: {global}");
+    assert!(
+        (global - 50.0).abs() < 1.0,
+        "the failure counts in the mean: {global}"
+    );
 
     // A town with no map in the folder is named.
     std::fs::remove_file(maps.join("LineTown.xodr")).unwrap();
     let run = eval();
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success() && stderr.contains("LineTown.xodr"), "{stderr}");
+    assert!(
+        !run.status.success() && stderr.contains("LineTown.xodr"),
+        "{stderr}"
+    );
 }

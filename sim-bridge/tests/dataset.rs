@@ -210,7 +210,9 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     // Another rig is refused rather than mixed in.
     let mut other = config(&out, 0.0);
     other.rig = Rig::tcp();
-    let err = collect(&other, &tasks, None, |_| {}).unwrap_err().to_string();
+    let err = collect(&other, &tasks, None, |_| {})
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("another rig"), "{err}");
 
     // The same run listed twice would write one folder from two threads.
@@ -281,12 +283,24 @@ fn a_driver_drives_while_the_expert_labels_its_states() {
     let frames = data.frames(&entry.name).unwrap();
     assert!(frames.len() > 5, "{} frames", frames.len());
     for pair in frames.windows(2) {
-        assert_eq!(pair[1].tick - pair[0].tick, 10, "stored at 2 Hz, not every tick");
+        assert_eq!(
+            pair[1].tick - pair[0].tick,
+            10,
+            "stored at 2 Hz, not every tick"
+        );
     }
     for f in &frames {
-        assert_eq!((f.executed.throttle, f.executed.steer), (0.6, -0.05), "the driver drove");
+        assert_eq!(
+            (f.executed.throttle, f.executed.steer),
+            (0.6, -0.05),
+            "the driver drove"
+        );
         assert!(!f.noise);
-        assert_eq!(f.plan.len(), FUTURE_COUNT, "the expert's plan labels the frame");
+        assert_eq!(
+            f.plan.len(),
+            FUTURE_COUNT,
+            "the expert's plan labels the frame"
+        );
     }
     assert!(
         frames.iter().any(|f| f.control != f.executed),

@@ -151,5 +151,8 @@ fn a_keypoint_far_off_the_map_matches_the_nearest_lane() {
     .unwrap();
     let route = sim_bridge::route::planner::plan_route(&map, &routes[0]).unwrap();
     let end = route.points.last().unwrap().position;
-    assert!((end.x - 55.0).abs() < 1.0 && (end.y + 1.75).abs() < 0.5, "{end:?}");
+    assert!(
+        (end.x - 55.0).abs() < 1.0 && (end.y + 1.75).abs() < 0.5,
+        "{end:?}"
+    );
 }

@@ -29,7 +29,17 @@ fn drive(map: &Map, spec: &RouteSpec, agent: &mut dyn Agent) -> (f64, String) {
         seed: 3,
         ..WorldConfig::default()
     };
-    let run = run_route(map, spec, &dense, agent, world, ScoringConfig::default(), 0, 0, |_| {});
+    let run = run_route(
+        map,
+        spec,
+        &dense,
+        agent,
+        world,
+        ScoringConfig::default(),
+        0,
+        0,
+        |_| {},
+    );
     (run.record.scores.score_composed, run.record.status)
 }
 
@@ -52,7 +62,11 @@ impl Agent for PlanWatcher {
         let (p, yaw) = (obs.position.truncate(), obs.yaw);
         let (forward, left) = (DVec2::from_angle(yaw), DVec2::from_angle(yaw).perp());
         let plan = self.expert.planned_trajectory();
-        self.plans.push(plan.iter().map(|w| p + forward * w.x + left * w.y).collect());
+        self.plans.push(
+            plan.iter()
+                .map(|w| p + forward * w.x + left * w.y)
+                .collect(),
+        );
         self.poses.push((p, yaw));
         Ok(control)
     }
@@ -83,7 +97,10 @@ fn the_expert_plans_where_it_goes() {
     errors.sort_by(f64::total_cmp);
     let median = errors[errors.len() / 2];
     let p90 = errors[errors.len() * 9 / 10];
-    assert!(median < 0.3 && p90 < 1.0, "plan vs path: median {median:.2} m, p90 {p90:.2} m");
+    assert!(
+        median < 0.3 && p90 < 1.0,
+        "plan vs path: median {median:.2} m, p90 {p90:.2} m"
+    );
 }
 
 #[test]
@@ -94,12 +111,19 @@ fn the_oracle_plan_agent_drives_the_route_with_the_most_turns() {
         .iter()
         .max_by_key(|s| {
             let dense = plan_route(&map, s).unwrap();
-            dense.points.iter().filter(|p| matches!(p.option, RoadOption::Left | RoadOption::Right)).count()
+            dense
+                .points
+                .iter()
+                .filter(|p| matches!(p.option, RoadOption::Left | RoadOption::Right))
+                .count()
         })
         .unwrap();
     let (ds, end) = drive(&map, spec, &mut OraclePlan::new(sim_control_config()));
     assert!(ds > 90.0, "as served, route {}: DS {ds}, {end}", spec.id);
     let (ds, end) = drive(&map, spec, &mut OraclePlan::plan_only(sim_control_config()));
-    assert!(ds > 90.0, "on the plan alone, route {}: DS {ds}, {end}", spec.id);
-
+    assert!(
+        ds > 90.0,
+        "on the plan alone, route {}: DS {ds}, {end}",
+        spec.id
+    );
 }

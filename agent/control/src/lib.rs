@@ -130,10 +130,16 @@ impl ControlConfig {
         self.unstick.validate()?;
         let v = &self.vehicle;
         if !(v.wheelbase > 0.5 && v.wheelbase < 20.0) {
-            return Err(format!("vehicle.wheelbase = {} m is outside 0.5..20", v.wheelbase));
+            return Err(format!(
+                "vehicle.wheelbase = {} m is outside 0.5..20",
+                v.wheelbase
+            ));
         }
         if !(v.rear_axle.abs() < 10.0) {
-            return Err(format!("vehicle.rear_axle = {} m is outside -10..10", v.rear_axle));
+            return Err(format!(
+                "vehicle.rear_axle = {} m is outside -10..10",
+                v.rear_axle
+            ));
         }
         if !(v.max_wheel_angle > 1.0 && v.max_wheel_angle < 89.0) {
             return Err(format!(

@@ -66,7 +66,10 @@ fn point_at_reach(path: &[[f32; 2]], from: [f32; 2], reach: f32) -> Option<[f32;
     // Walk from b along u until the distance from `from` reaches `reach`.
     let f = [b[0] - from[0], b[1] - from[1]];
     let proj = f[0] * u[0] + f[1] * u[1];
-    let t = -proj + (proj * proj - (f[0] * f[0] + f[1] * f[1]) + reach * reach).max(0.0).sqrt();
+    let t = -proj
+        + (proj * proj - (f[0] * f[0] + f[1] * f[1]) + reach * reach)
+            .max(0.0)
+            .sqrt();
     Some([b[0] + t * u[0], b[1] + t * u[1]])
 }
 

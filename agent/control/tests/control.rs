@@ -127,7 +127,10 @@ fn turn_error(car: &Vehicle, config: &ControlConfig, radius: f32, speed: f32) ->
             .map(|k| {
                 let p = path_at(s0 + speed * 0.5 * k as f32);
                 let (dx, dy) = (p[0] - x, p[1] - y);
-                [dx * yaw.cos() + dy * yaw.sin(), -dx * yaw.sin() + dy * yaw.cos()]
+                [
+                    dx * yaw.cos() + dy * yaw.sin(),
+                    -dx * yaw.sin() + dy * yaw.cos(),
+                ]
             })
             .collect();
         let command = follower.control(&plan, plan[5], speed, config).steer;
@@ -150,7 +153,10 @@ fn pure_pursuit_keeps_the_simulated_car_in_its_lane_through_turns() {
     let car = config.vehicle.clone();
     for (radius, speed) in [(12.0, 5.0), (8.0, 4.0), (30.0, 8.0), (60.0, 10.0)] {
         let error = turn_error(&car, &config, radius, speed);
-        assert!(error < 0.55, "R {radius} m at {speed} m/s: {error:.2} m off the lane centre");
+        assert!(
+            error < 0.55,
+            "R {radius} m at {speed} m/s: {error:.2} m off the lane centre"
+        );
     }
     // Told its wheels turn twice as far as they do (CARLA's car), it steers half as much and
     // leaves the lane (3.5 m lane, 2.12 m car: 0.7 m of margin).
@@ -177,7 +183,10 @@ fn a_plan_without_direction_steers_to_the_target_point() {
     // A path shorter than the look-ahead is extended along its last segment.
     let short = [[0.5, 0.0], [1.0, 0.5], [1.5, 1.0], [2.0, 1.5]];
     let c = TrajectoryFollower::new(&config).control(&short, [20.0, 0.0], 1.0, &config);
-    assert!(c.steer < -0.2, "the extension keeps the path's left turn: {c:?}");
+    assert!(
+        c.steer < -0.2,
+        "the extension keeps the path's left turn: {c:?}"
+    );
 }
 
 #[test]
@@ -275,7 +284,6 @@ fn episode_controller_reports_both_sources() {
     );
 }
 
-
 #[test]
 fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     let config = ControlConfig::default();
@@ -291,7 +299,9 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
         decisions.push(controller.act_with_branch(&hold, left_target, 0.0, None));
     }
     assert!(
-        decisions[..wait_ticks - 1].iter().all(|d| !d.unsticking && d.control.brake == 1.0),
+        decisions[..wait_ticks - 1]
+            .iter()
+            .all(|d| !d.unsticking && d.control.brake == 1.0),
         "the controller holds the car until the wait is over"
     );
     let creeping = &decisions[wait_ticks - 1..wait_ticks - 1 + creep_ticks];
@@ -299,10 +309,15 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
         assert!(d.unsticking, "{d:?}");
         assert_eq!(d.control.brake, 0.0);
         assert_eq!(d.control.throttle, rule.creep_throttle);
-        assert!(d.control.steer < 0.0, "towards the target point on the left");
+        assert!(
+            d.control.steer < 0.0,
+            "towards the target point on the left"
+        );
     }
     assert!(
-        decisions[wait_ticks - 1 + creep_ticks..].iter().all(|d| !d.unsticking),
+        decisions[wait_ticks - 1 + creep_ticks..]
+            .iter()
+            .all(|d| !d.unsticking),
         "after the creep the count starts again"
     );
 
@@ -310,11 +325,22 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     let mut controller = EpisodeController::new(config.clone());
     for tick in 0..wait_ticks / 2 + wait_ticks {
         let speed = if tick == wait_ticks / 2 { 1.0 } else { 0.0 };
-        assert!(!controller.act_with_branch(&hold, left_target, speed, None).unsticking);
+        assert!(
+            !controller
+                .act_with_branch(&hold, left_target, speed, None)
+                .unsticking
+        );
     }
-    assert!(controller.act_with_branch(&hold, left_target, 0.0, None).unsticking);
+    assert!(
+        controller
+            .act_with_branch(&hold, left_target, 0.0, None)
+            .unsticking
+    );
     let creep = controller.act_with_branch(&hold, left_target, rule.creep_speed + 0.1, None);
-    assert!(creep.unsticking && creep.control.throttle == 0.0, "{creep:?}");
+    assert!(
+        creep.unsticking && creep.control.throttle == 0.0,
+        "{creep:?}"
+    );
 
     let off = ControlConfig {
         unstick: Unstick {

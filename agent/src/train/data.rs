@@ -46,7 +46,17 @@ pub struct SampleDraw {
 }
 
 /// Where the waypoint labels come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Labels {
     /// The expert's plan from the frame's state (on the route's centre line at the expert's
@@ -295,7 +305,9 @@ impl TrainingData {
                 drop_history,
             } = draw(i);
             let back = self.history_offset as isize;
-            let history = (!drop_history).then(|| self.record(sample, -back)).flatten();
+            let history = (!drop_history)
+                .then(|| self.record(sample, -back))
+                .flatten();
             let deep = history.and_then(|_| self.record(sample, -2 * back));
             let jitter = photometric.as_ref();
             let blank = batch.cameras * 3 * config.image_height * config.image_width;
@@ -319,8 +331,12 @@ impl TrainingData {
                 SampleGeometry::new(grid, heights, rig, motion, speed)
             };
             batch.current_geometry.push(geometry(now, history));
-            batch.context_geometry.push(geometry(history.unwrap_or(now), deep));
-            batch.deep_geometry.push(geometry(deep.unwrap_or(now), None));
+            batch
+                .context_geometry
+                .push(geometry(history.unwrap_or(now), deep));
+            batch
+                .deep_geometry
+                .push(geometry(deep.unwrap_or(now), None));
             future_geometry.push(geometry(future, None));
             batch.speed.push(now.speed as f32);
             batch
@@ -464,8 +480,17 @@ impl Batch {
     /// The B history frames' own history frames, without a previous BEV: their BEVs are the
     /// history of the history frames.
     pub fn deep_input(&self, config: &SsrConfig, device: &Device) -> ModelInput {
-        let zeros = Tensor::zeros([self.size, config.bev.grid.cells(), config.channels], device);
-        self.input(config, &self.deep_images, &self.deep_geometry, zeros, device)
+        let zeros = Tensor::zeros(
+            [self.size, config.bev.grid.cells(), config.channels],
+            device,
+        );
+        self.input(
+            config,
+            &self.deep_images,
+            &self.deep_geometry,
+            zeros,
+            device,
+        )
     }
 
     /// The context frames: the B history frames attending to `deep_bev` `[B, Q, C]` (their
@@ -480,7 +505,10 @@ impl Batch {
     ) -> ModelInput {
         let count = if futures { 2 * self.size } else { self.size };
         let previous = if futures {
-            let zeros = Tensor::zeros([self.size, config.bev.grid.cells(), config.channels], device);
+            let zeros = Tensor::zeros(
+                [self.size, config.bev.grid.cells(), config.channels],
+                device,
+            );
             Tensor::cat(vec![deep_bev, zeros], 0)
         } else {
             deep_bev

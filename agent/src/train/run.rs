@@ -105,7 +105,6 @@ pub struct StepMetrics {
     pub samples_per_s: f64,
 }
 
-
 /// What a finished (or stopped) run reports.
 #[derive(Debug, Clone)]
 pub struct RunSummary {
@@ -486,7 +485,8 @@ fn batch_losses(
 ) -> (Losses, HeadOutput) {
     let b = batch.size;
     let deep = batch.deep_input(&config.model, inner);
-    let deep_bev = context_model.encode_bev(context_model.image_features(deep.images.clone()), &deep);
+    let deep_bev =
+        context_model.encode_bev(context_model.image_features(deep.images.clone()), &deep);
     let context = batch.context_input(&config.model, deep_bev, config.future_bev, inner);
     let context_bev = context_model.encode_bev(
         context_model.image_features(context.images.clone()),
@@ -510,7 +510,6 @@ fn batch_losses(
     )
 }
 
-
 fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
     let value = |t: &Tensor<1>| float_values(t.clone())[0];
     StepMetrics {
@@ -525,9 +524,6 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
         samples_per_s: 0.0,
     }
 }
-
-
-
 
 /// Keeps the metrics lines of steps up to `step` (a resumed run redraws the rest).
 fn keep_metrics_until(path: &Path, step: u64) -> Result<(), TrainError> {

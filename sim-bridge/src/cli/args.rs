@@ -73,12 +73,8 @@ impl RouteArgs {
         let options = MapOptions {
             place_missing_lights: !self.no_placed_lights,
         };
-        let (map, mut specs) = super::load_routes(
-            &self.routes,
-            self.map.as_ref(),
-            self.maps.as_ref(),
-            options,
-        )?;
+        let (map, mut specs) =
+            super::load_routes(&self.routes, self.map.as_ref(), self.maps.as_ref(), options)?;
         if !self.route_ids.is_empty() {
             specs.retain(|s| self.route_ids.contains(&s.id));
             if specs.is_empty() {
@@ -141,7 +137,6 @@ impl WorldArgs {
         }
     }
 }
-
 
 /// The server an `--agent` value names: `grpc://HOST:PORT` (or `http://`), or `local`: a child
 /// `ssr-agent serve` (with a metrics port if `metrics`), alive as long as the returned handle.

@@ -171,7 +171,11 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         rig: rig.clone(),
         rate_hz: args.rate,
         noise: NoiseConfig {
-            rate: if args.driver.is_some() { 0.0 } else { args.noise_rate },
+            rate: if args.driver.is_some() {
+                0.0
+            } else {
+                args.noise_rate
+            },
             duration: args.noise_duration,
             steer: args.noise_steer,
             longitudinal: args.noise_longitudinal,

@@ -24,9 +24,7 @@ use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, RouteEnd, RouteRecord, ScoringConfig, summary_table};
 
-use super::args::{
-    RouteArgs, RoutePlan, WorldArgs, parse_positive, parse_seconds, server_target,
-};
+use super::args::{RouteArgs, RoutePlan, WorldArgs, parse_positive, parse_seconds, server_target};
 
 #[derive(Debug, Args)]
 pub struct EvalArgs {
@@ -334,7 +332,10 @@ fn earlier_records(
 
 /// The server `--agent` names (started here for `local`), or `None` for the expert.
 fn agent_target(args: &EvalArgs) -> anyhow::Result<(Option<String>, Option<LocalServer>)> {
-    if matches!(args.agent.as_str(), "expert" | "oracle-plan" | "oracle-plan-only") {
+    if matches!(
+        args.agent.as_str(),
+        "expert" | "oracle-plan" | "oracle-plan-only"
+    ) {
         return Ok((None, None));
     }
     let (target, server) = server_target(&args.agent, false)?;

@@ -137,7 +137,10 @@ impl<'d> EpisodeRecorder<'d> {
             let [s0, s1] = self.noise.steer;
             let ticks = (self.rng.random_range(d0..=d1.max(d0)) / DT).round() as u64;
             let sign = if self.rng.random_bool(0.5) { 1.0 } else { -1.0 };
-            let kind = if self.rng.random_bool(self.noise.longitudinal.clamp(0.0, 1.0)) {
+            let kind = if self
+                .rng
+                .random_bool(self.noise.longitudinal.clamp(0.0, 1.0))
+            {
                 // Half coast with a light brake (the car falls behind its plan), half press on
                 // (it runs ahead of it).
                 if sign > 0.0 {

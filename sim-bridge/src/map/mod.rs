@@ -350,7 +350,10 @@ fn stitch_link_gaps(lanes: &mut [Lane]) {
         .map(|l| (l.idx, l.points[0], l.pose_at(0.0).yaw))
         .collect();
     let mut joins = Vec::new();
-    for lane in lanes.iter().filter(|l| is_driving(l) && l.successors.is_empty()) {
+    for lane in lanes
+        .iter()
+        .filter(|l| is_driving(l) && l.successors.is_empty())
+    {
         let end = lane.pose_at(lane.length());
         for &(start, at, yaw) in &starts {
             if start != lane.idx

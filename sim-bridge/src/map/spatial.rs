@@ -53,11 +53,16 @@ impl SegmentGrid {
     /// The ring around `centre` beyond which no cell holds a segment.
     fn last_ring(&self, centre: (i32, i32)) -> i32 {
         self.bounds.map_or(-1, |(lo, hi)| {
-            [centre.0 - lo.0, hi.0 - centre.0, centre.1 - lo.1, hi.1 - centre.1]
-                .into_iter()
-                .max()
-                .unwrap_or(0)
-                .max(0)
+            [
+                centre.0 - lo.0,
+                hi.0 - centre.0,
+                centre.1 - lo.1,
+                hi.1 - centre.1,
+            ]
+            .into_iter()
+            .max()
+            .unwrap_or(0)
+            .max(0)
         })
     }
 

@@ -71,10 +71,17 @@ impl DenseRoute {
         if s >= self.length() {
             return last.position.truncate() + last.forward() * (s - self.length());
         }
-        let i = self.cum.partition_point(|&c| c <= s).clamp(1, self.points.len() - 1);
+        let i = self
+            .cum
+            .partition_point(|&c| c <= s)
+            .clamp(1, self.points.len() - 1);
         let (a, b) = (&self.points[i - 1], &self.points[i]);
         let span = self.cum[i] - self.cum[i - 1];
-        let t = if span > 1e-9 { ((s - self.cum[i - 1]) / span).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if span > 1e-9 {
+            ((s - self.cum[i - 1]) / span).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         a.position.truncate().lerp(b.position.truncate(), t)
     }
 

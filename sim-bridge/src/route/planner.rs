@@ -124,7 +124,10 @@ fn snap(map: &Map, k: &Keypoint) -> Option<Vec<LaneSpot>> {
             && (pose.position.z - matched.position.z).abs() < 1.5
             && (pose.position - matched.position).truncate().length() < GOAL_SPREAD
         {
-            spots.push(LaneSpot { lane: other, s: p.s });
+            spots.push(LaneSpot {
+                lane: other,
+                s: p.s,
+            });
         }
     }
     Some(spots)

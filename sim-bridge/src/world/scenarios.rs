@@ -332,7 +332,13 @@ fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(
 fn reaches_driving_lane(map: &Map, obb: &Obb) -> bool {
     let forward = DVec2::from_angle(obb.yaw);
     let left = forward.perp();
-    let corners = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0), (0.0, 0.0)];
+    let corners = [
+        (1.0, 1.0),
+        (1.0, -1.0),
+        (-1.0, 1.0),
+        (-1.0, -1.0),
+        (0.0, 0.0),
+    ];
     corners.iter().any(|(a, b)| {
         let p = obb.centre + forward * (a * obb.half.x) + left * (b * obb.half.y);
         map.lanes_near(p, 4.0, |l| l.kind == LaneKind::Driving)
