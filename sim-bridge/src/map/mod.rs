@@ -5,6 +5,11 @@
 //! Frame: the OpenDRIVE map frame (right-handed, x east, y north, z up, metres). Guarantees:
 //! a loaded [`Map`] has at least one driving lane; a file over [`MAX_MAP_BYTES`] or one that is
 //! not OpenDRIVE is refused with a [`MapError`] that names the file and the problem.
+//!
+//! Baking repairs what real files (CARLA's towns) and the xodr crate leave broken, each at the
+//! mechanism, never per town: lanes of one road meet at lane-section seams
+//! (`close_section_seams`), and a driving lane that dead-ends where another starts, heading the
+//! same way, leads into it (`stitch_link_gaps`: links through roads too short to bake).
 
 pub mod control;
 pub mod lanes;
