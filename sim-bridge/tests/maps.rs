@@ -156,3 +156,23 @@ fn a_keypoint_far_off_the_map_matches_the_nearest_lane() {
         "{end:?}"
     );
 }
+
+/// Parked cars go on parking lanes wide enough to hold them clear of the driving lanes, never
+/// where the car would reach into a driving lane (CARLA's Town03 has parking strips beside
+/// junction connectors, where a parked car blocked every route through).
+#[test]
+fn parked_cars_stay_clear_of_driving_lanes() {
+    use rand::SeedableRng;
+    let xml = include_str!("maps/parking.xodr");
+    let map = Map::from_str("parking", xml, MapOptions::default()).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let cars = sim_bridge::world::scenarios::parked_cars(&map, &mut rng);
+    assert!(cars.len() > 3, "the wide parking lane holds cars: {}", cars.len());
+    for car in &cars {
+        assert!(
+            car.obb.centre.y < 25.0,
+            "a car on the narrow strip beside road 2: {:?}",
+            car.obb.centre
+        );
+    }
+}
