@@ -167,7 +167,11 @@ fn parked_cars_stay_clear_of_driving_lanes() {
     let map = Map::from_str("parking", xml, MapOptions::default()).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let cars = sim_bridge::world::scenarios::parked_cars(&map, &mut rng);
-    assert!(cars.len() > 3, "the wide parking lane holds cars: {}", cars.len());
+    assert!(
+        cars.len() > 3,
+        "the wide parking lane holds cars: {}",
+        cars.len()
+    );
     for car in &cars {
         assert!(
             car.obb.centre.y < 25.0,

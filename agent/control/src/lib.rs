@@ -135,7 +135,7 @@ impl ControlConfig {
                 v.wheelbase
             ));
         }
-        if !(v.rear_axle.abs() < 10.0) {
+        if v.rear_axle.is_nan() || v.rear_axle.abs() >= 10.0 {
             return Err(format!(
                 "vehicle.rear_axle = {} m is outside -10..10",
                 v.rear_axle
@@ -147,9 +147,10 @@ impl ControlConfig {
                 v.max_wheel_angle
             ));
         }
-        if !(self.lookahead_base > 0.0 && self.lookahead_max >= self.lookahead_base)
-            || !(self.lookahead_gain >= 0.0)
-        {
+        let lookahead_ok = self.lookahead_base > 0.0
+            && self.lookahead_max >= self.lookahead_base
+            && self.lookahead_gain >= 0.0;
+        if !lookahead_ok {
             return Err("lookahead_base must be > 0, lookahead_gain >= 0 and lookahead_max >= lookahead_base".into());
         }
         Ok(())

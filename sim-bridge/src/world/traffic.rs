@@ -467,8 +467,7 @@ impl Traffic {
             let target = sides
                 .into_iter()
                 .flatten()
-                .filter(|t| map.lane(*t).kind == LaneKind::Driving && goes_on(t))
-                .next();
+                .find(|t| map.lane(*t).kind == LaneKind::Driving && goes_on(t));
             let Some(target) = target.filter(|t| map.lane(*t).kind == LaneKind::Driving) else {
                 continue;
             };
