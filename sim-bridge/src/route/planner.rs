@@ -4,9 +4,8 @@
 //!
 //! Between consecutive keypoints an A* search runs over (lane, entry arc length) states with two
 //! kinds of edge: driving on into a successor lane, and a lane change into a same-direction
-//! neighbour outside junctions (costed
-//! [`LANE_CHANGE_LENGTH`] + [`LANE_CHANGE_PENALTY`] so that routes change lanes only when they
-//! must). A keypoint's goal is every lane it matches equally well: CARLA's junctions hold
+//! neighbour outside junctions (costed [`LANE_CHANGE_LENGTH`] + [`LANE_CHANGE_PENALTY`] so that
+//! routes change lanes only when they must). A keypoint's goal is every lane it matches equally well: CARLA's junctions hold
 //! connectors that overlap for tens of metres, and a route that reached the keypoint on the
 //! neighbouring connector must not be sent around the block to reach the other. The next search
 //! starts where the previous one arrived. Labels: points on junction connectors get LEFT,
