@@ -180,3 +180,63 @@ fn parked_cars_stay_clear_of_driving_lanes() {
         );
     }
 }
+
+/// Background vehicles merge out of a lane that ends (a lane drop, as on CARLA's Town06
+/// highways) instead of queueing at its end, where they jammed the ego's lane for good.
+#[test]
+fn traffic_merges_out_of_a_lane_that_ends() {
+    use sim_bridge::agent::Control;
+    use sim_bridge::world::{World, WorldConfig};
+    let xml = include_str!("maps/lane_drop.xodr");
+    let map = Map::from_str("lane-drop", xml, MapOptions::default()).unwrap();
+    let dropped = map
+        .lanes
+        .iter()
+        .find(|l| l.road_id == "1" && l.lane_id == -2)
+        .expect("the dropped lane");
+    assert!(dropped.successors.is_empty(), "it ends");
+    // The ego waits on a road of its own, far away.
+    let spec = &sim_bridge::route::xml::parse(
+        "ego",
+        r#"<routes><route id="0" town="lane-drop">
+            <waypoint x="5.0" y="-401.75" z="0.0"/><waypoint x="90.0" y="-401.75" z="0.0"/>
+        </route></routes>"#,
+    )
+    .unwrap()[0];
+    let route = sim_bridge::route::planner::plan_route(&map, spec).unwrap();
+    let hold = Control {
+        steer: 0.0,
+        throttle: 0.0,
+        brake: 1.0,
+    };
+    let (mut merged_in_time, mut stuck_at_end) = (0, 0);
+    for seed in 0..4 {
+        let config = WorldConfig {
+            vehicles: 12,
+            scenarios: false,
+            parked_cars: false,
+            seed,
+            ..WorldConfig::default()
+        };
+        let mut world = World::new(&map, &route, config);
+        for _ in 0..(60.0 / 0.05) as usize {
+            world.step(hold);
+            for v in &world.traffic.vehicles {
+                if v.lane == dropped.idx && dropped.length() - v.s < 12.0 && v.stopped_for > 3.0 {
+                    stuck_at_end += 1;
+                }
+            }
+        }
+        merged_in_time += world
+            .traffic
+            .vehicles
+            .iter()
+            .filter(|v| v.lane != dropped.idx)
+            .count();
+    }
+    assert!(merged_in_time > 0);
+    assert_eq!(
+        stuck_at_end, 0,
+        "vehicle-ticks spent waiting at the lane's end"
+    );
+}
