@@ -152,3 +152,39 @@ fn validation_situations_follow_the_command_and_count_start_ups() {
     );
     assert_eq!(situations(&one_hot(5), 8.0, 0.3), ["change-lane"]);
 }
+
+#[test]
+fn balanced_sampling_favours_starts_slowing_turns_and_recoveries() {
+    use sim_bridge::dataset::FrameRecord;
+    use ssr_agent::train::data::sampling_weight;
+    let frame = |speed: f64, throttle: f64, brake: f64, command: i32, noise: bool| {
+        let mut f: FrameRecord = serde_json::from_str(
+            r#"{"index":0,"tick":0,"time":0,"speed":0,"position":[0,0,0],"yaw":0,"command":4,
+            "target_point":[10,0],"control":{"steer":0,"throttle":0,"brake":0},
+            "executed":{"steer":0,"throttle":0,"brake":0},"noise":false,"brake_reason":null,
+            "waypoints":[],"future_controls":[],"future_complete":true,"images":[]}"#,
+        )
+        .unwrap();
+        f.speed = speed;
+        f.control.throttle = throttle;
+        f.control.brake = brake;
+        f.command = command;
+        f.noise = noise;
+        sampling_weight(&f)
+    };
+    let cruising = frame(8.0, 0.5, 0.0, 4, false);
+    let standing = frame(0.0, 0.0, 1.0, 4, false);
+    let slowing = frame(6.0, 0.0, 0.5, 4, false);
+    let starting = frame(0.5, 0.6, 0.0, 4, false);
+    assert!(standing < cruising, "{standing} vs {cruising}");
+    assert!(cruising < slowing && slowing < starting);
+    assert!(frame(8.0, 0.5, 0.0, 1, false) > cruising, "a turn");
+    assert!(
+        frame(8.0, 0.5, 0.0, 6, false) > frame(8.0, 0.5, 0.0, 1, false),
+        "a lane change"
+    );
+    assert!(
+        frame(8.0, 0.5, 0.0, 4, true) > cruising,
+        "a perturbed frame"
+    );
+}

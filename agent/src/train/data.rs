@@ -368,13 +368,17 @@ impl TrainingData {
 
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying
 /// still) is a fifth of the data and teaches little, so it is drawn a third as often; starting
-/// from standstill, turns, lane changes and perturbed frames (recoveries) are rare and decide
-/// closed-loop driving, so they are drawn more often.
+/// from standstill, slowing down for a light, a sign or a road user, turns, lane changes and
+/// perturbed frames (recoveries) are rare and decide closed-loop driving, so they are drawn more
+/// often.
 pub fn sampling_weight(frame: &FrameRecord) -> f32 {
     let still = frame.speed < 0.1;
     let starting = frame.speed < 1.0 && frame.control.throttle > 0.1;
+    let slowing = !still && frame.control.brake > 0.0;
     let mut weight: f32 = if starting {
         3.0
+    } else if slowing {
+        2.0
     } else if still {
         0.3
     } else {
