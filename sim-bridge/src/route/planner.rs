@@ -29,6 +29,8 @@ pub const RESOLUTION: f64 = 1.0;
 pub const LANE_CHANGE_LENGTH: f64 = 12.0;
 /// Extra cost of a lane change, metres of driving.
 pub const LANE_CHANGE_PENALTY: f64 = 20.0;
+/// Shortest lane change the planner draws to land on a goal, metres.
+const SHORT_CHANGE_MIN: f64 = 3.0;
 /// Search effort cap per keypoint pair (states expanded).
 const MAX_EXPANSIONS: usize = 200_000;
 /// Lanes whose centre lines pass this close to a keypoint (and agree with its heading and
@@ -69,12 +71,14 @@ struct LaneSpot {
 enum Leg {
     /// Drive along `lane` from `from` to `to`.
     Drive { lane: LaneIdx, from: f64, to: f64 },
-    /// Move from `from` at `s0` to `to` at `s1` over [`LANE_CHANGE_LENGTH`].
+    /// Move from `from` at `s0` to `to` at `s1` over `length` metres ([`LANE_CHANGE_LENGTH`],
+    /// or less to land on a goal).
     Change {
         from: LaneIdx,
         s0: f64,
         to: LaneIdx,
         s1: f64,
+        length: f64,
         left: bool,
     },
 }
@@ -235,6 +239,30 @@ fn search(map: &Map, start: LaneSpot, goals: &[LaneSpot]) -> Option<(Vec<Leg>, L
             if map.lane(n).kind != LaneKind::Driving {
                 continue;
             }
+            // A goal on the neighbour that a full-length change would overshoot (a keypoint a
+            // few metres into a lane that only a lane change reaches): a shorter change that
+            // lands on it, costed as the full one plus the penalty again.
+            let beside = map
+                .lane(n)
+                .project(lane.pose_at(spot.s).position.truncate())
+                .s;
+            for goal in goals.iter().filter(|g| g.lane == n) {
+                let length = goal.s - beside;
+                if (SHORT_CHANGE_MIN..LANE_CHANGE_LENGTH).contains(&length)
+                    && spot.s + length <= lane.length()
+                {
+                    let leg = Leg::Change {
+                        from: spot.lane,
+                        s0: spot.s,
+                        to: n,
+                        s1: goal.s,
+                        length,
+                        left,
+                    };
+                    let cost = LANE_CHANGE_LENGTH + 2.0 * LANE_CHANGE_PENALTY;
+                    push(*goal, cost, leg, &mut arena);
+                }
+            }
             // Change as soon as there is room, and only where the target lane goes on after it.
             let s_end = spot.s + LANE_CHANGE_LENGTH;
             if s_end > lane.length() {
@@ -250,6 +278,7 @@ fn search(map: &Map, start: LaneSpot, goals: &[LaneSpot]) -> Option<(Vec<Leg>, L
                 s0: spot.s,
                 to: n,
                 s1: proj.s,
+                length: LANE_CHANGE_LENGTH,
                 left,
             };
             let next = LaneSpot { lane: n, s: proj.s };
@@ -313,6 +342,7 @@ fn densify(map: &Map, legs: &[Leg]) -> Vec<RoutePoint> {
                 s0,
                 to,
                 s1,
+                length,
                 left,
             } => {
                 let (a, b) = (map.lane(from), map.lane(to));
@@ -321,12 +351,12 @@ fn densify(map: &Map, legs: &[Leg]) -> Vec<RoutePoint> {
                 } else {
                     RoadOption::ChangeLaneRight
                 };
-                let n = (LANE_CHANGE_LENGTH / RESOLUTION).round() as usize;
+                let n = (length / RESOLUTION).round().max(2.0) as usize;
                 for i in 0..=n {
                     let t = i as f64 / n as f64;
                     let w = t * t * (3.0 - 2.0 * t);
-                    let pa = a.pose_at(s0 + LANE_CHANGE_LENGTH * t);
-                    let pb = b.pose_at(s1 - LANE_CHANGE_LENGTH * (1.0 - t));
+                    let pa = a.pose_at(s0 + length * t);
+                    let pb = b.pose_at(s1 - length * (1.0 - t));
                     let position: DVec3 = pa.position.lerp(pb.position, w);
                     let lane = if w < 0.5 { from } else { to };
                     let yaw = pa.yaw + angle_diff(pb.yaw, pa.yaw) * w;
