@@ -18,11 +18,23 @@ const CORRIDOR_MARGIN: f64 = 0.6;
 const STOP_LINE_MARGIN: f64 = 1.0;
 /// Comfortable braking used to decide whether to stop at yellow, m/s^2.
 const YELLOW_DECEL: f64 = 6.0;
+/// A vehicle on a lane change's target lane this close along it (centre to centre) is
+/// alongside the ego, m.
+const LANE_CHANGE_ALONGSIDE: f64 = 5.0;
+/// Reaction time and comfortable braking assumed of a car behind on the target lane (s, m/s^2).
+const FOLLOWER_REACTION: f64 = 1.0;
+const FOLLOWER_DECEL: f64 = 3.0;
+/// After waiting this long for a gap, s, the ego noses into a queue moving slower than
+/// [`NOSE_IN_SPEED`] (m/s): traffic brakes for a box on its path.
+const LANE_CHANGE_PATIENCE: f64 = 8.0;
+const NOSE_IN_SPEED: f64 = 3.0;
 
-/// Stop signs already served on this route.
+/// What the scan remembers between ticks: stop signs already served on this route, and since
+/// when it has been waiting for a gap to change lanes.
 #[derive(Debug, Default)]
 pub struct HazardMemory {
     served_signs: Vec<usize>,
+    lane_change_wait: Option<f64>,
 }
 
 /// Why the expert slows or stops: the kind of the nearest obstacle, or the forecast.
@@ -79,13 +91,18 @@ pub fn scan(
     let end = ahead_end(route, index, SCAN_AHEAD);
     let actors = world.actors();
     let corridor = ego.half_extent.y + CORRIDOR_MARGIN;
+    // The path starts at the ego's front: a car touching its flank or rear is a contact, not
+    // something to wait behind (waiting for the car that ran into it would hold it for good).
+    let front = (index..=end)
+        .find(|&j| along(route, index, j) >= ego.half_extent.x)
+        .unwrap_or(end);
     for a in &actors {
         let rel = a.obb.centre - ego.position.truncate();
         if rel.length() > SCAN_AHEAD + 10.0 || (a.z - ego.position.z).abs() > 3.0 {
             continue;
         }
-        if let Some(j) = (index..=end)
-            .find(|&j| distance_to_box(route.points[j].position.truncate(), &a.obb) < corridor)
+        if let Some(j) = (front..=end)
+            .find(|&j| a.obb.distance_to(route.points[j].position.truncate()) < corridor)
         {
             let gap = along(route, index, j) - ego.half_extent.x;
             let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
@@ -107,7 +124,7 @@ pub fn scan(
             view.walker_near = true;
         }
     }
-    lane_change_gap(world, route, index, end, &mut view);
+    lane_change_gap(world, route, index, end, memory, &mut view);
     let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
     stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
@@ -115,12 +132,14 @@ pub fn scan(
 }
 
 /// Before a lane change on the path, wait at its start while a vehicle on the target lane is
-/// alongside or closing in from behind (15 m back to 5 m ahead of the ego).
+/// alongside ([`LANE_CHANGE_ALONGSIDE`] either side of the ego) or closing in from behind
+/// (only a fast one, after [`LANE_CHANGE_PATIENCE`]).
 fn lane_change_gap(
     world: &World<'_>,
     route: &DenseRoute,
     index: usize,
     end: usize,
+    memory: &mut HazardMemory,
     view: &mut HazardView,
 ) {
     let map = world.map;
@@ -128,17 +147,22 @@ fn lane_change_gap(
         let (a, b) = (map.lane(route.points[j - 1].lane), route.points[j].lane);
         a.left == Some(b) || a.right == Some(b)
     }) else {
+        memory.lane_change_wait = None;
         return;
     };
     let start = (index..=switch)
         .find(|&j| route.points[j].option.is_lane_change())
         .unwrap_or(switch);
     if start <= index {
+        memory.lane_change_wait = None;
         return; // already changing: carry on
     }
     let ego = world.ego_state();
     let target = map.lane(route.points[switch].lane);
     let ego_s = target.project(ego.position.truncate()).s;
+    let impatient = memory
+        .lane_change_wait
+        .is_some_and(|since| world.time - since > LANE_CHANGE_PATIENCE);
     let busy = world.traffic.vehicles.iter().any(|v| {
         let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
         let s = if v.lane == target.idx {
@@ -146,9 +170,23 @@ fn lane_change_gap(
         } else {
             v.s - map.lane(v.lane).length()
         };
-        on_target && (ego_s - 15.0..ego_s + 5.0).contains(&s)
+        // Behind, a car blocks the change while it could not stop comfortably (after a
+        // second's reaction) short of the ego; once the ego has waited its patience out, a
+        // slow one whose centre is behind the ego's no longer does: the ego noses in ahead of
+        // it and it brakes for the box on its path, as in a zip merge.
+        let behind = ego_s - s;
+        let stopping = v.speed * FOLLOWER_REACTION + v.speed * v.speed / (2.0 * FOLLOWER_DECEL);
+        let yields = impatient && v.speed < NOSE_IN_SPEED;
+        let alongside = if yields {
+            (-LANE_CHANGE_ALONGSIDE..=0.0).contains(&behind)
+        } else {
+            behind.abs() < LANE_CHANGE_ALONGSIDE
+        };
+        let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping && !yields;
+        on_target && (alongside || closing)
     });
     if busy {
+        memory.lane_change_wait.get_or_insert(world.time);
         let gap = along(route, index, start) - ego.half_extent.x;
         view.obstacle(gap, 0.0, BrakeReason::LaneChange);
     }
@@ -225,14 +263,6 @@ fn stop_lines(
             }
         }
     }
-}
-
-/// Plan distance from a point to a box (0 inside).
-fn distance_to_box(p: DVec2, obb: &Obb) -> f64 {
-    let (f, l) = obb.axes();
-    let d = p - obb.centre;
-    let local = DVec2::new(d.dot(f).abs() - obb.half.x, d.dot(l).abs() - obb.half.y);
-    local.max(DVec2::ZERO).length()
 }
 
 /// Whether the ego, driving its route at a brisk speed, would overlap an actor that moves at

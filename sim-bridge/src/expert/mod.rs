@@ -124,7 +124,15 @@ impl Expert {
         }
         let control = to_pedals(accel, obs.speed, &self.params);
         let holding = obs.speed < 0.1 && control.throttle == 0.0;
-        self.reason = cause.filter(|_| control.brake > 0.0 || holding);
+        let reason = cause.filter(|_| control.brake > 0.0 || holding);
+        if reason != self.reason {
+            tracing::debug!(
+                time = world.time,
+                position = ?ego.position.truncate(),
+                "expert brake reason: {reason:?}"
+            );
+        }
+        self.reason = reason;
         let steer = if control.brake > 0.5 {
             steer * 0.5
         } else {

@@ -257,8 +257,8 @@ impl<'m> World<'m> {
             .map(|(l, p)| (l, p.s));
         let presence = EgoPresence {
             on_lane,
-            position: ego.position.truncate(),
-            half_length: ego.half_extent.x,
+            obb: ego.obb(),
+            z: ego.position.z,
             speed: ego.speed,
         };
         self.time += DT;

@@ -37,6 +37,14 @@ impl Obb {
         true
     }
 
+    /// Plan distance from a point to the box (0 inside).
+    pub fn distance_to(&self, p: DVec2) -> f64 {
+        let (f, l) = self.axes();
+        let d = p - self.centre;
+        let local = DVec2::new(d.dot(f).abs() - self.half.x, d.dot(l).abs() - self.half.y);
+        local.max(DVec2::ZERO).length()
+    }
+
     /// Whether a point is inside.
     pub fn contains(&self, p: DVec2) -> bool {
         let (f, l) = self.axes();

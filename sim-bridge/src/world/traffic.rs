@@ -46,6 +46,12 @@ const LANE_CHANGE_RATE: f64 = 0.01;
 const DIVERGE_LENGTH: f64 = 12.0;
 /// Speed at which a lane change moves across, m/s.
 const LATERAL_SPEED: f64 = 1.0;
+/// How far ahead of its front a vehicle checks its path for the ego's box, m.
+const EGO_WATCH: f64 = 30.0;
+/// Spacing of that check, m.
+const EGO_WATCH_STEP: f64 = 1.0;
+/// Clearance beyond its half width the vehicle keeps from the ego's box, m.
+const EGO_WATCH_MARGIN: f64 = 0.4;
 
 /// One background vehicle.
 #[derive(Debug, Clone)]
@@ -83,12 +89,18 @@ pub struct Vehicle {
 pub struct EgoPresence {
     /// Lane and arc length, when the ego is on a driving lane.
     pub on_lane: Option<(LaneIdx, f64)>,
-    /// Position.
-    pub position: DVec2,
-    /// Half length.
-    pub half_length: f64,
+    /// Ground box.
+    pub obb: Obb,
+    /// Height of the box's ground, m.
+    pub z: f64,
     /// Speed.
     pub speed: f64,
+}
+
+impl EgoPresence {
+    fn position(&self) -> DVec2 {
+        self.obb.centre
+    }
 }
 
 /// The background traffic of a world.
@@ -220,7 +232,10 @@ impl Traffic {
         let grants = self.junction_grants(map, lights, ego);
         let mut accels = Vec::with_capacity(self.vehicles.len());
         for (i, v) in self.vehicles.iter().enumerate() {
-            let gap = self.free_distance(map, lights, &occupancy, i, grants[i]);
+            let mut gap = self.free_distance(map, lights, &occupancy, i, grants[i]);
+            if let Some(ego_gap) = ego_on_path(map, v, ego) {
+                gap = gap.min_by_gap(ego_gap);
+            }
             accels.push(idm(v, gap.0, gap.1, map));
         }
         for (i, a) in accels.into_iter().enumerate() {
@@ -241,7 +256,7 @@ impl Traffic {
         let mut occ: HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> = HashMap::new();
         let ego_entry = ego
             .on_lane
-            .map(|(lane, s)| (lane, s, ego.half_length, ego.speed, 0));
+            .map(|(lane, s)| (lane, s, ego.obb.half.x, ego.speed, 0));
         let entries = self
             .vehicles
             .iter()
@@ -492,17 +507,50 @@ impl Traffic {
     fn respawn_stuck(&mut self, map: &Map, ego: &EgoPresence, rng: &mut impl Rng) {
         for i in 0..self.vehicles.len() {
             let v = &self.vehicles[i];
-            let far = (v.pose(map).0.truncate() - ego.position).length() > RESPAWN_CLEARANCE;
+            let far = (v.pose(map).0.truncate() - ego.position()).length() > RESPAWN_CLEARANCE;
             let at_lane_end = v.next.is_empty() && map.lane(v.lane).successors.is_empty();
             if v.stopped_for < RESPAWN_AFTER_S || !(far || at_lane_end) {
                 continue;
             }
-            if let Some((lane, s)) = self.free_spot(map, ego.position, 80.0, rng) {
+            if let Some((lane, s)) = self.free_spot(map, ego.position(), 80.0, rng) {
                 let id = self.vehicles[i].id;
                 self.vehicles[i] = new_vehicle(map, id, lane, s, rng);
             }
         }
     }
+}
+
+/// Where the ego's box intrudes on the corridor a vehicle's path sweeps ahead of it, whatever
+/// lane the ego is on (mid-junction, cutting a corner, merging in): the free gap to it and the
+/// ego's speed along the path. The lane occupancy above sees the ego only on the lane it is
+/// matched to; this is the traffic manager's geometric check that keeps a follower from
+/// driving into an ego that turns or stops across its path.
+fn ego_on_path(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<(f64, f64)> {
+    let (position, _) = v.pose(map);
+    let near = (position.truncate() - ego.position()).length() < EGO_WATCH + 10.0;
+    if !near || (position.z - ego.z).abs() > 3.0 {
+        return None;
+    }
+    let corridor = v.half.y + EGO_WATCH_MARGIN;
+    let ego_velocity = DVec2::from_angle(ego.obb.yaw) * ego.speed;
+    let mut lanes = std::iter::once(v.lane).chain(v.next.iter().copied());
+    let mut lane = map.lane(lanes.next()?);
+    let mut s = v.s + v.half.x;
+    let mut along = 0.0;
+    while along <= EGO_WATCH {
+        while s > lane.length() {
+            s -= lane.length();
+            lane = map.lane(lanes.next()?);
+        }
+        let pose = lane.pose_at(s);
+        if ego.obb.distance_to(pose.position.truncate()) < corridor {
+            let speed = ego_velocity.dot(DVec2::from_angle(pose.yaw)).max(0.0);
+            return Some((along, speed));
+        }
+        s += EGO_WATCH_STEP;
+        along += EGO_WATCH_STEP;
+    }
+    None
 }
 
 trait MinByGap {

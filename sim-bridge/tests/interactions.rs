@@ -1,0 +1,108 @@
+//! Traffic and the expert at close quarters, on the hand-made two-lane road of
+//! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
+//! and y = -5.25): a follower keeps off an ego that pokes into its lane, and the expert does not
+//! wait for a car that ran into its rear.
+
+use glam::DVec3;
+use sim_bridge::agent::Control;
+use sim_bridge::expert::hazards::{self, HazardMemory};
+use sim_bridge::map::{Map, MapOptions};
+use sim_bridge::route::DenseRoute;
+use sim_bridge::world::ego::{Ego, EgoParams};
+use sim_bridge::world::traffic::Vehicle;
+use sim_bridge::world::{World, WorldConfig};
+
+fn road() -> Map {
+    let xml = include_str!("maps/lane_drop.xodr");
+    Map::from_str("lane-drop", xml, MapOptions::default()).unwrap()
+}
+
+/// A route along road 1's outer lane (y = -5.25).
+fn outer_lane_route(map: &Map) -> DenseRoute {
+    let spec = &sim_bridge::route::xml::parse(
+        "ego",
+        r#"<routes><route id="0" town="lane-drop">
+            <waypoint x="20.0" y="5.25" z="0.0"/><waypoint x="250.0" y="5.25" z="0.0"/>
+        </route></routes>"#,
+    )
+    .unwrap()[0];
+    sim_bridge::route::planner::plan_route(map, spec).unwrap()
+}
+
+/// A world holding exactly one background vehicle, on road 1's lane `lane_id` at `s`.
+fn world_with_one_vehicle<'m>(
+    map: &'m Map,
+    route: &DenseRoute,
+    lane_id: i32,
+    s: f64,
+    speed: f64,
+) -> World<'m> {
+    let config = WorldConfig {
+        vehicles: 1,
+        scenarios: false,
+        parked_cars: false,
+        ..WorldConfig::default()
+    };
+    let mut world = World::new(map, route, config);
+    let lane = map
+        .lanes
+        .iter()
+        .find(|l| l.road_id == "1" && l.lane_id == lane_id)
+        .unwrap();
+    let v: &mut Vehicle = &mut world.traffic.vehicles[0];
+    v.lane = lane.idx;
+    v.s = s;
+    v.lateral = 0.0;
+    v.speed = speed;
+    v.desired_speed = speed;
+    v.next = lane.successors.first().copied().into_iter().collect();
+    world
+}
+
+const HOLD: Control = Control {
+    steer: 0.0,
+    throttle: 0.0,
+    brake: 1.0,
+};
+
+#[test]
+fn a_follower_stops_for_an_ego_that_pokes_into_its_lane() {
+    let map = road();
+    let route = outer_lane_route(&map);
+    let mut world = world_with_one_vehicle(&map, &route, -1, 60.0, 8.0);
+    // The ego stands on the outer lane's inner edge: matched to lane -2, its left side 0.35 m
+    // into lane -1, where the follower comes at 8 m/s.
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(120.0, -3.6, 0.0), 0.0);
+    let id = world.traffic.vehicles[0].id;
+    for _ in 0..(20.0 / 0.05) as usize {
+        let contacts = world.step(HOLD);
+        assert!(
+            contacts.iter().all(|c| c.other_id != id),
+            "the follower ran into the ego at t = {:.2} s",
+            world.time
+        );
+    }
+    let follower = &world.traffic.vehicles[0];
+    assert!(follower.speed < 0.1, "it waits behind the ego");
+}
+
+#[test]
+fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
+    let map = road();
+    let route = outer_lane_route(&map);
+    // The ego at s = 100 on the outer lane; a stopped car that ran 1.5 m into its rear.
+    let mut world = world_with_one_vehicle(&map, &route, -2, 0.0, 0.0);
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(100.0, -5.25, 0.0), 0.0);
+    let ego_half = world.ego_state().half_extent.x;
+    let car = &mut world.traffic.vehicles[0];
+    car.s = 100.0 - ego_half - car.half.x + 1.5;
+    let index = route.advance_index(0, world.ego_state().position.truncate(), route.points.len());
+    let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
+    assert_eq!(view.obstacle, None, "{view:?}");
+    // The same car ahead of the ego is an obstacle.
+    let car = &mut world.traffic.vehicles[0];
+    car.s = 100.0 + ego_half + car.half.x + 3.0;
+    let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
+    let (gap, _) = view.obstacle.expect("the car ahead");
+    assert!(gap > 0.0 && gap <= 3.0, "gap {gap}");
+}
