@@ -157,6 +157,33 @@ fn a_keypoint_far_off_the_map_matches_the_nearest_lane() {
     );
 }
 
+/// A keypoint a few metres into a lane that begins beside another (no predecessor: only a lane
+/// change reaches it) plans with a lane change shorter than the usual 12 m, which would land
+/// past it (CARLA's Town03 and Town06 routes have such keypoints).
+#[test]
+fn a_keypoint_just_into_a_lane_that_begins_plans_with_a_short_change() {
+    let xml = include_str!("maps/lane_add.xodr");
+    let map = Map::from_str("lane-add", xml, MapOptions::default()).unwrap();
+    let routes = sim_bridge::route::xml::parse(
+        "short-change",
+        r#"<routes><route id="0" town="x">
+            <waypoint x="20.0" y="1.75" z="0.0"/>
+            <waypoint x="105.0" y="5.25" z="0.0"/>
+        </route></routes>"#,
+    )
+    .unwrap();
+    let route = sim_bridge::route::planner::plan_route(&map, &routes[0]).unwrap();
+    let end = route.points.last().unwrap().position;
+    assert!(
+        (end.x - 105.0).abs() < 1.0 && (end.y + 5.25).abs() < 0.3,
+        "{end:?}"
+    );
+    assert!(
+        route.points.iter().any(|p| p.option.is_lane_change()),
+        "it changes lanes"
+    );
+}
+
 /// Parked cars go on parking lanes wide enough to hold them clear of the driving lanes, never
 /// where the car would reach into a driving lane (CARLA's Town03 has parking strips beside
 /// junction connectors, where a parked car blocked every route through).
