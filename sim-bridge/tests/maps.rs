@@ -184,6 +184,28 @@ fn a_keypoint_just_into_a_lane_that_begins_plans_with_a_short_change() {
     );
 }
 
+/// A road whose first lane section is too short to bake (5 um, with a lane that shifts its id
+/// across it, as on CARLA's Town03 roundabout connectors) still continues the lanes that lead
+/// into it: every driving lane after it has a predecessor.
+#[test]
+fn a_lane_section_too_short_to_bake_keeps_the_links_through_it() {
+    let xml = include_str!("maps/tiny_section.xodr");
+    let map = Map::from_str("tiny-section", xml, MapOptions::default()).unwrap();
+    let after: Vec<_> = map
+        .lanes
+        .iter()
+        .filter(|l| l.road_id == "2" && l.kind == sim_bridge::map::LaneKind::Driving)
+        .collect();
+    assert_eq!(after.len(), 2, "road 2's baked driving lanes");
+    for lane in after {
+        assert!(
+            !lane.predecessors.is_empty(),
+            "lane {} of road 2 begins from nowhere",
+            lane.lane_id
+        );
+    }
+}
+
 /// Parked cars go on parking lanes wide enough to hold them clear of the driving lanes, never
 /// where the car would reach into a driving lane (CARLA's Town03 has parking strips beside
 /// junction connectors, where a parked car blocked every route through).

@@ -8,8 +8,9 @@
 //!
 //! Baking repairs what real files (CARLA's towns) and the xodr crate leave broken, each at the
 //! mechanism, never per town: lanes of one road meet at lane-section seams
-//! (`close_section_seams`), and a driving lane that dead-ends where another starts, heading the
-//! same way, leads into it (`stitch_link_gaps`: links through roads too short to bake).
+//! (`close_section_seams`), and a driving lane that ends where another begins from nowhere,
+//! heading the same way, leads into it (`stitch_link_gaps`: links through roads and lane
+//! sections too short to bake).
 
 pub mod control;
 pub mod lanes;
@@ -337,16 +338,18 @@ fn close_section_seams(lanes: &mut [Lane]) {
     }
 }
 
-/// How close a dead end must come to another lane's start to be joined to it, metres.
+/// How close a lane's end must come to another lane's start to be joined to it, metres.
 const STITCH_DISTANCE: f64 = 0.5;
 /// And how well their headings must agree, radians.
 const STITCH_HEADING: f64 = 0.5;
 
-/// Joins a driving lane that has no successor to the driving lanes that start where it ends,
-/// heading the same way. OpenDRIVE files hold links into roads too short to carry geometry
-/// (CARLA's Town03 has roads of 1 mm and 1 cm between roundabout connectors and the streets);
-/// such a road has no lanes once baked, so every link through it is lost and the lanes on
-/// either side dead-end, where the geometry runs on without a gap.
+/// Joins the driving lanes that have no predecessor to the driving lanes that end where they
+/// start, heading the same way. OpenDRIVE files hold links into roads and lane sections too
+/// short to carry geometry (CARLA's Town03 has roads of 1 mm and 1 cm between roundabout
+/// connectors and the streets, and connectors whose first section is 5 um long); such a piece
+/// has no lanes once baked, so every link through it is lost: the lanes on either side
+/// dead-end, or a connector lane that widens out of another begins from nowhere, where the
+/// geometry runs on without a gap.
 fn stitch_link_gaps(lanes: &mut [Lane]) {
     let is_driving = |l: &Lane| l.kind == LaneKind::Driving;
     let starts: Vec<(LaneIdx, DVec3, f64)> = lanes
@@ -355,10 +358,7 @@ fn stitch_link_gaps(lanes: &mut [Lane]) {
         .map(|l| (l.idx, l.points[0], l.pose_at(0.0).yaw))
         .collect();
     let mut joins = Vec::new();
-    for lane in lanes
-        .iter()
-        .filter(|l| is_driving(l) && l.successors.is_empty())
-    {
+    for lane in lanes.iter().filter(|l| is_driving(l)) {
         let end = lane.pose_at(lane.length());
         for &(start, at, yaw) in &starts {
             if start != lane.idx
