@@ -60,9 +60,9 @@ fn tcp_training_routes_plan_on_carla_towns() {
 }
 
 /// Every route of every route file in ../shared/carla (TCP's and TransFuser's, each naming its
-/// town) plans on its map. Nine of 1,977 still find no path between their first two keypoints
-/// (Town03 tcp 2, 69, 121, 293 and addition 3, TransFuser Town03 short 4-6, Town06 val 13:
-/// keypoints that match a lane the graph cannot leave or reach); the bound only goes down.
+/// town) plans on its map. Three of 1,977 find no path: TransFuser's Town03 short 4-6 start
+/// 29 m from any driving lane, at a 0.1 m dead-end stub (the file was made on a later Town03
+/// export than ../shared's 2019 one); the bound only goes down.
 #[test]
 fn every_carla_route_file_plans_on_its_town() {
     let Some(dir) = carla_dir() else { return };
@@ -95,7 +95,7 @@ fn every_carla_route_file_plans_on_its_town() {
     );
     assert!(planned > 1900, "{planned} routes planned");
     assert!(
-        failed.len() <= 9,
+        failed.len() <= 3,
         "{} routes failed: {failed:#?}",
         failed.len()
     );
@@ -149,12 +149,12 @@ fn dense_routes_on_carla_towns_never_turn_back() {
 /// The privileged expert drives a fixed sample of TransFuser's long routes on each CARLA town
 /// (the first four of each file, the leaderboard's traffic, seed 0) with a mean DS above a floor
 /// per town: a regression guard for the map, planner, traffic and expert on real maps. The
-/// floors sit below today's means (Town01 100, Town03 44, Town04 80, Town06 84; issue notes
-/// list what still fails on Town03).
+/// floors sit below today's means (Town01, Town03 and Town04 100; Town06 83, where route 40
+/// waits for a gap into a dense queue).
 #[test]
 fn the_expert_drives_a_sample_of_long_routes_on_each_carla_town() {
     let Some(dir) = carla_dir() else { return };
-    for (town, floor) in [("01", 90.0), ("03", 35.0), ("04", 70.0), ("06", 70.0)] {
+    for (town, floor) in [("01", 90.0), ("03", 90.0), ("04", 90.0), ("06", 75.0)] {
         let map =
             Map::load_file(&dir.join(format!("Town{town}.xodr")), MapOptions::default()).unwrap();
         let file = dir.join(format!(
