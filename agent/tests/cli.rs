@@ -88,6 +88,11 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
             .output()
             .expect("runs");
         assert!(!out.status.success());
+        assert_ne!(
+            out.status.code(),
+            Some(101),
+            "a refused setting is not a panic"
+        );
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
     let dir = tempfile::tempdir().unwrap();
@@ -111,6 +116,13 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
     // ...and a flag beats the environment.
     let stderr = serve(&[("SSR_AGENT_MAX_BATCH", "3")], &["--max-batch", "0"]);
     assert!(stderr.contains("max_batch = 0"), "{stderr}");
+    let stderr = serve(&[], &["--idle-timeout-s", "1e308"]);
+    assert!(
+        stderr.contains("idle_timeout_s = 1e308: must be in"),
+        "{stderr}"
+    );
+    let stderr = serve(&[("SSR_AGENT_DRAIN_TIMEOUT_S", "1e308")], &[]);
+    assert!(stderr.contains("drain_timeout_s = 1e308"), "{stderr}");
     let stderr = serve(&[], &["--config", "/no/such/file.toml"]);
     assert!(stderr.contains("/no/such/file.toml"), "{stderr}");
     let stderr = serve(&[("SSR_AGENT_METRICS_LISTEN", "nowhere")], &[]);

@@ -101,6 +101,43 @@ fn config_files_override_defaults_and_bad_values_are_named() {
             .to_string()
             .contains("idle_timeout_s")
     );
+    // Durations too long for the clock are refused, not a panic at start or at SIGTERM.
+    for (field, bad) in [
+        (
+            "idle_timeout_s",
+            ServeConfig {
+                idle_timeout_s: 1e308,
+                ..ServeConfig::default()
+            },
+        ),
+        (
+            "request_timeout_s",
+            ServeConfig {
+                request_timeout_s: 1e308,
+                ..ServeConfig::default()
+            },
+        ),
+        (
+            "drain_grace_s",
+            ServeConfig {
+                drain_grace_s: 1e308,
+                ..ServeConfig::default()
+            },
+        ),
+        (
+            "drain_timeout_s",
+            ServeConfig {
+                drain_timeout_s: 1e308,
+                ..ServeConfig::default()
+            },
+        ),
+    ] {
+        let error = bad.validate().unwrap_err().to_string();
+        assert!(
+            error.starts_with(&format!("{field} = 1e308: must be in")),
+            "{error}"
+        );
+    }
     let missing = ServeConfig::from_file(std::path::Path::new("/no/such/serve.toml"));
     assert!(
         missing

@@ -94,6 +94,13 @@ impl Default for ServeConfig {
     }
 }
 
+/// Longest idle or request timeout, seconds (a week).
+pub const MAX_TIMEOUT_S: f64 = 604_800.0;
+const TIMEOUT_RULE: &str = "must be in (0, 604800] seconds";
+/// Longest drain grace or drain timeout, seconds (an hour).
+pub const MAX_DRAIN_S: f64 = 3_600.0;
+const DRAIN_RULE: &str = "must be in [0, 3600] seconds";
+
 /// Why a config cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ServeConfigError {
@@ -148,21 +155,26 @@ impl ServeConfig {
                 rule,
             })
         }
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        // Durations stay far below what `Duration` and the clock can hold (1e308 s panics).
+        let timeout = |v: f64| v > 0.0 && v <= MAX_TIMEOUT_S;
+        let drain = |v: f64| (0.0..=MAX_DRAIN_S).contains(&v);
         if !(1..=100_000).contains(&self.max_episodes) {
             return invalid("max_episodes", self.max_episodes, "must be in 1..=100000");
         }
-        if !positive(self.idle_timeout_s) {
-            return invalid("idle_timeout_s", self.idle_timeout_s, "must be > 0");
+        if !timeout(self.idle_timeout_s) {
+            return invalid(
+                "idle_timeout_s",
+                format!("{:?}", self.idle_timeout_s),
+                TIMEOUT_RULE,
+            );
         }
         if !(1..=256).contains(&self.max_batch) {
             return invalid("max_batch", self.max_batch, "must be in 1..=256");
         }
-        if !non_negative(self.max_queue_delay_ms) || self.max_queue_delay_ms > 1000.0 {
+        if !(0.0..=1000.0).contains(&self.max_queue_delay_ms) {
             return invalid(
                 "max_queue_delay_ms",
-                self.max_queue_delay_ms,
+                format!("{:?}", self.max_queue_delay_ms),
                 "must be in [0, 1000]",
             );
         }
@@ -172,8 +184,12 @@ impl ServeConfig {
         if !(1..=100_000).contains(&self.max_queue) {
             return invalid("max_queue", self.max_queue, "must be in 1..=100000");
         }
-        if !positive(self.request_timeout_s) {
-            return invalid("request_timeout_s", self.request_timeout_s, "must be > 0");
+        if !timeout(self.request_timeout_s) {
+            return invalid(
+                "request_timeout_s",
+                format!("{:?}", self.request_timeout_s),
+                TIMEOUT_RULE,
+            );
         }
         if !(1..=1024).contains(&self.max_message_mib) {
             return invalid(
@@ -182,11 +198,19 @@ impl ServeConfig {
                 "must be in 1..=1024",
             );
         }
-        if !non_negative(self.drain_grace_s) {
-            return invalid("drain_grace_s", self.drain_grace_s, "must be >= 0");
+        if !drain(self.drain_grace_s) {
+            return invalid(
+                "drain_grace_s",
+                format!("{:?}", self.drain_grace_s),
+                DRAIN_RULE,
+            );
         }
-        if !non_negative(self.drain_timeout_s) {
-            return invalid("drain_timeout_s", self.drain_timeout_s, "must be >= 0");
+        if !drain(self.drain_timeout_s) {
+            return invalid(
+                "drain_timeout_s",
+                format!("{:?}", self.drain_timeout_s),
+                DRAIN_RULE,
+            );
         }
         if self.checkpoint.is_some() && self.untrained_config.is_some() {
             return invalid(
