@@ -11,7 +11,7 @@ use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::ServeConfig;
 use ssr_agent::serve::config::ServeConfigError;
 use ssr_agent::serve::decode::decode_image;
-use ssr_agent::serve::episodes::{EpisodeError, EpisodeTable};
+use ssr_agent::serve::episodes::{Driver, EpisodeError, EpisodeTable};
 use ssrdrive_proto::v1;
 
 fn policy() -> SsrPolicy {
@@ -22,41 +22,87 @@ fn policy() -> SsrPolicy {
 fn a_lease_holds_the_state_until_finished_or_dropped() {
     let policy = policy();
     let table = EpisodeTable::new(2, Duration::from_secs(60));
-    let id = table.open(Rig::tcp_small(), policy.new_episode()).unwrap();
-    let other = table.open(Rig::tcp_small(), policy.new_episode()).unwrap();
+    let id = table
+        .open(Rig::tcp_small(), policy.new_episode(), Driver::Unary)
+        .unwrap();
+    let other = table
+        .open(Rig::tcp_small(), policy.new_episode(), Driver::Unary)
+        .unwrap();
     assert_ne!(id, other);
     assert_eq!(
-        table.open(Rig::tcp_small(), policy.new_episode()),
+        table.open(Rig::tcp_small(), policy.new_episode(), Driver::Unary),
         Err(EpisodeError::TooMany { open: 2 })
     );
 
-    let lease = table.lease(&id, 0).unwrap();
+    let lease = table.lease(&id, 0, Driver::Unary).unwrap();
     assert_eq!(lease.rig(), &Rig::tcp_small());
-    assert!(matches!(table.lease(&id, 1), Err(EpisodeError::Busy(_))));
+    assert!(matches!(
+        table.lease(&id, 1, Driver::Unary),
+        Err(EpisodeError::Busy(_))
+    ));
     // Idle expiry never takes an episode with a step in flight.
     let far_future = Instant::now() + Duration::from_secs(3600);
     assert_eq!(table.expire_idle(far_future), vec![other.clone()]);
     drop(lease);
     // A dropped lease gives the state back without counting the frame.
-    table.lease(&id, 0).unwrap().finish();
+    table.lease(&id, 0, Driver::Unary).unwrap().finish();
     assert!(matches!(
-        table.lease(&id, 0),
+        table.lease(&id, 0, Driver::Unary),
         Err(EpisodeError::OutOfOrder {
             last: 0,
             got: 0,
             ..
         })
     ));
-    table.lease(&id, 5).unwrap().finish();
-    assert_eq!(table.close(&id), Ok(2));
-    assert_eq!(table.close(&id), Err(EpisodeError::NotFound(id.clone())));
+    table.lease(&id, 5, Driver::Unary).unwrap().finish();
+    assert_eq!(table.close(&id, Driver::Unary), Ok(2));
+    assert_eq!(
+        table.close(&id, Driver::Unary),
+        Err(EpisodeError::NotFound(id.clone()))
+    );
 
     // Closing an episode mid-step discards the step's result quietly.
-    let id = table.open(Rig::tcp_small(), policy.new_episode()).unwrap();
-    let lease = table.lease(&id, 0).unwrap();
-    assert_eq!(table.close(&id), Ok(0));
+    let id = table
+        .open(Rig::tcp_small(), policy.new_episode(), Driver::Unary)
+        .unwrap();
+    let lease = table.lease(&id, 0, Driver::Unary).unwrap();
+    assert_eq!(table.close(&id, Driver::Unary), Ok(0));
     lease.finish();
     assert!(table.is_empty());
+}
+
+#[test]
+fn episode_ids_are_unguessable_and_stream_episodes_refuse_unary_calls() {
+    let policy = policy();
+    let table = EpisodeTable::new(8, Duration::from_secs(60));
+    let open = |driver| {
+        table
+            .open(Rig::tcp_small(), policy.new_episode(), driver)
+            .unwrap()
+    };
+    let (a, b) = (open(Driver::Unary), open(Driver::Unary));
+    for id in [&a, &b] {
+        assert_eq!(id.len(), 32, "{id}");
+        assert!(id.chars().all(|c| c.is_ascii_hexdigit()), "{id}");
+    }
+    // Random, not a counter: the two differ in many places.
+    let differing = a.chars().zip(b.chars()).filter(|(x, y)| x != y).count();
+    assert!(differing > 8, "{a} vs {b}");
+
+    let streamed = open(Driver::Stream);
+    let owned = EpisodeError::StreamOwned(streamed.clone());
+    assert_eq!(
+        table.lease(&streamed, 0, Driver::Unary).err(),
+        Some(owned.clone())
+    );
+    assert_eq!(table.close(&streamed, Driver::Unary), Err(owned));
+    table.lease(&streamed, 0, Driver::Stream).unwrap().finish();
+    assert_eq!(table.close(&streamed, Driver::Stream), Ok(1));
+
+    // A huge unknown id comes back clipped.
+    let huge = "x".repeat(20_000);
+    let error = table.lease(&huge, 0, Driver::Unary).err().unwrap();
+    assert!(error.to_string().len() < 200, "{error}");
 }
 
 #[test]

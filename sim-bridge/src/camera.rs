@@ -14,6 +14,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::error_text::clipped;
+
 /// Most cameras a rig may hold (the network keeps one learned embedding per camera slot).
 pub const MAX_CAMERAS: usize = 6;
 /// Largest image side accepted in a rig, pixels.
@@ -92,7 +94,7 @@ impl CameraSpec {
         if !id_ok {
             return Err(format!(
                 "id '{}' must be 1-64 letters, digits, '_' or '-' (it names files and folders)",
-                self.id
+                clipped(&self.id)
             ));
         }
         let numbers = [
@@ -111,6 +113,9 @@ impl CameraSpec {
             return Err(format!(
                 "{name} = {value} m is more than 100 m from the ego"
             ));
+        }
+        if let Some((name, value)) = numbers[3..6].iter().find(|(_, v)| v.abs() > 360.0) {
+            return Err(format!("{name} = {value} degrees is outside -360..360"));
         }
         if !(1.0..=179.0).contains(&self.fov) {
             return Err(format!("fov = {} degrees is outside 1..179", self.fov));
@@ -296,7 +301,7 @@ impl Rig {
         for (index, camera) in self.cameras.iter().enumerate() {
             camera.validate().map_err(|problem| RigError::BadCamera {
                 index,
-                id: camera.id.clone(),
+                id: clipped(&camera.id),
                 problem,
             })?;
             if self.cameras[..index].iter().any(|c| c.id == camera.id) {

@@ -243,6 +243,10 @@ fn malformed_rigs_are_refused_with_the_problem_named() {
             r#"[{"id":"front/../x","x":0,"y":0,"z":2,"roll":0,"pitch":0,"yaw":0,"width":320,"height":96,"fov":90}]"#,
             "letters, digits",
         ),
+        (
+            r#"[{"id":"front","x":0,"y":0,"z":2,"roll":0,"pitch":1e9,"yaw":0,"width":320,"height":96,"fov":90}]"#,
+            "pitch = 1000000000 degrees is outside -360..360",
+        ),
         (r#"{"cameras": []}"#, "at least one camera"),
         (r#"[{"id":"front"}]"#, "missing field"),
     ];

@@ -464,6 +464,67 @@ fn drive_streams_one_episode_per_stream() {
 }
 
 #[test]
+fn a_drive_streams_episode_is_its_own_and_long_ids_come_back_clipped() {
+    let server = Server::start(&[]);
+    runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        let (send, receive) = tokio::sync::mpsc::channel(4);
+        let drive = |message| v1::DriveRequest {
+            message: Some(message),
+        };
+        send.send(drive(Message::Start(v1::StartEpisodeRequest {
+            rig: Some(rig.clone()),
+            ..Default::default()
+        })))
+        .await
+        .unwrap();
+        send.send(drive(Message::Step(step("", 0, &rig))))
+            .await
+            .unwrap();
+        let mut answers = client
+            .drive(tokio_stream::wrappers::ReceiverStream::new(receive))
+            .await
+            .unwrap()
+            .into_inner();
+        let id = answers.message().await.unwrap().unwrap().episode_id;
+        assert_eq!(id.len(), 32, "128 random bits in hex: {id}");
+
+        // Unary calls may not step or end the stream's episode...
+        let status = client.step(step(&id, 1, &rig)).await.unwrap_err();
+        assert_eq!(status.code(), Code::FailedPrecondition);
+        assert!(
+            status.message().contains("Drive stream"),
+            "{}",
+            status.message()
+        );
+        let status = client
+            .end_episode(v1::EndEpisodeRequest {
+                episode_id: id.clone(),
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::FailedPrecondition);
+        // ...which the stream goes on driving.
+        send.send(drive(Message::Step(step("", 1, &rig))))
+            .await
+            .unwrap();
+        let answer = answers.message().await.unwrap().unwrap();
+        assert_eq!(answer.frame_index, 1);
+        drop(send);
+
+        // An id of 20,000 characters is echoed clipped: the client sees the real status, not
+        // RESOURCE_EXHAUSTED from a status header over gRPC's 16 KiB limit.
+        let status = client
+            .step(step(&"x".repeat(20_000), 0, &rig))
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::NotFound);
+        assert!(status.message().len() < 300, "{}", status.message());
+    });
+}
+
+#[test]
 fn health_reflection_and_metrics_answer_and_sigterm_drains() {
     let server = Server::start(&[]);
     runtime().block_on(async {

@@ -7,13 +7,14 @@ use std::time::{Duration, Instant};
 
 use sim_bridge::camera::{CameraSpec, Rig};
 use sim_bridge::client::wire;
+use sim_bridge::error_text::clipped;
 use ssrdrive_proto::v1;
 use tokio::sync::oneshot;
 
 use super::batcher::{BatchSettings, BatchedStep, Batcher, StepJob, SubmitError};
 use super::config::ServeConfig;
 use super::decode;
-use super::episodes::{EpisodeError, EpisodeTable};
+use super::episodes::{Driver, EpisodeError, EpisodeTable};
 use super::metrics::{Metrics, StepPhases};
 use crate::control::Control;
 use crate::model::config::SsrConfig;
@@ -71,6 +72,8 @@ impl From<ServeError> for tonic::Status {
             ServeError::Episode(EpisodeError::TooMany { .. }) => Code::ResourceExhausted,
             ServeError::Episode(EpisodeError::OutOfOrder { .. }) => Code::FailedPrecondition,
             ServeError::Episode(EpisodeError::Busy(_)) => Code::Aborted,
+            ServeError::Episode(EpisodeError::StreamOwned(_)) => Code::FailedPrecondition,
+            ServeError::Episode(EpisodeError::NoRandomness(_)) => Code::Internal,
             ServeError::BadRequest(_) => Code::InvalidArgument,
             ServeError::Submit(SubmitError::QueueFull(_)) => Code::ResourceExhausted,
             ServeError::Submit(SubmitError::Stopped) => Code::Unavailable,
@@ -155,6 +158,7 @@ impl Engine {
     pub fn start_episode(
         &self,
         request: &v1::StartEpisodeRequest,
+        driver: Driver,
     ) -> Result<v1::StartEpisodeResponse, ServeError> {
         let rig = request.rig.as_ref().ok_or_else(|| bad("rig is missing"))?;
         let rig = wire::rig_from_proto(rig).map_err(|e| bad(format!("rig: {e}")))?;
@@ -169,10 +173,10 @@ impl Engine {
         }
         let id = self
             .episodes
-            .open(rig, self.policy.new_episode_with(control))?;
+            .open(rig, self.policy.new_episode_with(control), driver)?;
         tracing::info!(
             episode = %id,
-            client = %request.client,
+            client = %clipped(&request.client),
             seed = ?request.seed,
             "episode started"
         );
@@ -185,8 +189,12 @@ impl Engine {
         })
     }
 
-    pub fn end_episode(&self, episode_id: &str) -> Result<v1::EndEpisodeResponse, ServeError> {
-        let steps = self.episodes.close(episode_id)?;
+    pub fn end_episode(
+        &self,
+        episode_id: &str,
+        driver: Driver,
+    ) -> Result<v1::EndEpisodeResponse, ServeError> {
+        let steps = self.episodes.close(episode_id, driver)?;
         tracing::info!(episode = %episode_id, steps, "episode ended");
         if self.counting() {
             self.metrics.episode_ended(self.episodes.len());
@@ -212,16 +220,19 @@ impl Engine {
     pub async fn warm_up(&self) -> Result<Duration, ServeError> {
         let started = Instant::now();
         let rig = wire::rig_to_proto(&self.info.expected_rig);
-        let episode = self.start_episode(&v1::StartEpisodeRequest {
-            rig: Some(rig.clone()),
-            client: "warm-up".into(),
-            ..Default::default()
-        })?;
+        let episode = self.start_episode(
+            &v1::StartEpisodeRequest {
+                rig: Some(rig.clone()),
+                client: "warm-up".into(),
+                ..Default::default()
+            },
+            Driver::Unary,
+        )?;
         for frame_index in 0..2 {
             let images = wire::rgb_images(&rig, |c| {
                 vec![128; c.width as usize * c.height as usize * 3]
             });
-            self.step(v1::StepRequest {
+            let step = v1::StepRequest {
                 episode_id: episode.episode_id.clone(),
                 frame_index,
                 images,
@@ -229,21 +240,25 @@ impl Engine {
                 command: 4,
                 target_point: Some(v1::EgoPoint { x: 10.0, y: 0.0 }),
                 ..Default::default()
-            })
-            .await?;
+            };
+            self.step(step, Driver::Unary).await?;
         }
-        self.end_episode(&episode.episode_id)?;
+        self.end_episode(&episode.episode_id, Driver::Unary)?;
         self.warming.store(false, Ordering::Relaxed);
         Ok(started.elapsed())
     }
 
     /// One tick of one episode, batched with whatever else is in flight.
-    pub async fn step(&self, request: v1::StepRequest) -> Result<v1::StepResponse, ServeError> {
+    pub async fn step(
+        &self,
+        request: v1::StepRequest,
+        driver: Driver,
+    ) -> Result<v1::StepResponse, ServeError> {
         let received = Instant::now();
         let (episode_id, frame_index) = (request.episode_id.clone(), request.frame_index);
         let lease = self
             .episodes
-            .lease(&request.episode_id, request.frame_index)?;
+            .lease(&request.episode_id, request.frame_index, driver)?;
         let rig = lease.rig().clone();
         let (input, decode_time) = tokio::task::spawn_blocking(move || {
             let started = Instant::now();

@@ -5,11 +5,16 @@
 //! the returned [`StepLease`] puts it back, advanced by [`StepLease::finish`] or unchanged when
 //! the lease is dropped (a refused or abandoned step). So a failed step never corrupts the
 //! episode and a second step of the same episode cannot run while one is in flight.
+//!
+//! Ids are 128 random bits (hex), so no client can guess another's episode; an episode opened
+//! by a `Drive` stream belongs to it, and unary calls on it are refused. Errors repeat a
+//! client's id clipped ([`clipped`]).
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
+
+use sim_bridge::error_text::clipped;
 
 use crate::camera::Rig;
 use crate::policy::EpisodeState;
@@ -25,10 +30,23 @@ pub enum EpisodeError {
     OutOfOrder { id: String, last: u64, got: u64 },
     #[error("episode '{0}': a step is already in flight; send the next one after its answer")]
     Busy(String),
+    #[error("episode '{0}' belongs to the Drive stream that started it; step and end it there")]
+    StreamOwned(String),
+    #[error("no randomness for an episode id: {0}")]
+    NoRandomness(String),
+}
+
+/// Who drives an episode: unary `Step` / `EndEpisode` calls, or the `Drive` stream that
+/// started it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Driver {
+    Unary,
+    Stream,
 }
 
 struct Episode {
     rig: Rig,
+    driver: Driver,
     /// `None` while a step holds the lease.
     state: Option<EpisodeState>,
     last_frame: Option<u64>,
@@ -41,24 +59,21 @@ pub struct EpisodeTable {
     episodes: Mutex<HashMap<String, Episode>>,
     max_episodes: usize,
     idle_timeout: Duration,
-    /// Makes ids unique across server runs.
-    nonce: u64,
-    counter: AtomicU64,
+}
+
+/// 128 bits from the operating system's random source, as 32 hex digits.
+fn random_id() -> Result<String, EpisodeError> {
+    let mut bytes = [0u8; 16];
+    getrandom::fill(&mut bytes).map_err(|e| EpisodeError::NoRandomness(e.to_string()))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 impl EpisodeTable {
     pub fn new(max_episodes: usize, idle_timeout: Duration) -> Arc<Self> {
-        let nonce = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos() as u64)
-            .unwrap_or_default()
-            ^ ((std::process::id() as u64) << 32);
         Arc::new(Self {
             episodes: Mutex::new(HashMap::new()),
             max_episodes,
             idle_timeout,
-            nonce,
-            counter: AtomicU64::new(0),
         })
     }
 
@@ -67,20 +82,25 @@ impl EpisodeTable {
         self.episodes.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Opens an episode and returns its id.
-    pub fn open(&self, rig: Rig, state: EpisodeState) -> Result<String, EpisodeError> {
+    /// Opens an episode driven by `driver` and returns its id.
+    pub fn open(
+        &self,
+        rig: Rig,
+        state: EpisodeState,
+        driver: Driver,
+    ) -> Result<String, EpisodeError> {
+        let id = random_id()?;
         let mut episodes = self.lock();
         if episodes.len() >= self.max_episodes {
             return Err(EpisodeError::TooMany {
                 open: episodes.len(),
             });
         }
-        let n = self.counter.fetch_add(1, Ordering::Relaxed);
-        let id = format!("{:016x}-{n:06}", self.nonce);
         episodes.insert(
             id.clone(),
             Episode {
                 rig,
+                driver,
                 state: Some(state),
                 last_frame: None,
                 last_seen: Instant::now(),
@@ -92,19 +112,22 @@ impl EpisodeTable {
 
     /// Closes an episode (even one with a step in flight; its result is then discarded) and
     /// returns how many steps it ran.
-    pub fn close(&self, id: &str) -> Result<u64, EpisodeError> {
-        self.lock()
-            .remove(id)
-            .map(|e| e.steps)
-            .ok_or_else(|| EpisodeError::NotFound(id.to_string()))
+    pub fn close(&self, id: &str, driver: Driver) -> Result<u64, EpisodeError> {
+        let mut episodes = self.lock();
+        driven_by(&episodes, id, driver)?;
+        Ok(episodes.remove(id).map_or(0, |e| e.steps))
     }
 
     /// Takes the episode's state for the step of `frame_index`.
-    pub fn lease(self: &Arc<Self>, id: &str, frame_index: u64) -> Result<StepLease, EpisodeError> {
+    pub fn lease(
+        self: &Arc<Self>,
+        id: &str,
+        frame_index: u64,
+        driver: Driver,
+    ) -> Result<StepLease, EpisodeError> {
         let mut episodes = self.lock();
-        let episode = episodes
-            .get_mut(id)
-            .ok_or_else(|| EpisodeError::NotFound(id.to_string()))?;
+        driven_by(&episodes, id, driver)?;
+        let episode = episodes.get_mut(id).expect("checked above");
         if let Some(last) = episode.last_frame
             && frame_index <= last
         {
@@ -166,6 +189,19 @@ impl EpisodeTable {
     }
 }
 
+/// Refuses `id` unless it is open and `driver` drives it.
+fn driven_by(
+    episodes: &HashMap<String, Episode>,
+    id: &str,
+    driver: Driver,
+) -> Result<(), EpisodeError> {
+    match episodes.get(id) {
+        None => Err(EpisodeError::NotFound(clipped(id))),
+        Some(episode) if episode.driver != driver => Err(EpisodeError::StreamOwned(clipped(id))),
+        Some(_) => Ok(()),
+    }
+}
+
 /// One step's hold on an episode's state; see the module doc.
 pub struct StepLease {
     table: Arc<EpisodeTable>,
@@ -192,7 +228,7 @@ impl StepLease {
     /// its client must start over (NOT_FOUND from now on).
     pub fn abandon(mut self) {
         self.state = None;
-        let _ = self.table.close(&self.id);
+        self.table.lock().remove(&self.id);
     }
 
     /// Returns the stepped state and records the frame as done.

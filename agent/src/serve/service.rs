@@ -2,8 +2,9 @@
 //! errors into gRPC statuses and counts every answer by method and code.
 //!
 //! `Drive` carries one episode per stream: the first message must be `start`, every later one
-//! a `step` (its `episode_id` may be empty). A failed step ends the stream with its status; the
-//! episode is closed whenever the stream ends.
+//! a `step` (its `episode_id` may be empty). The episode belongs to the stream (unary calls on
+//! it get FAILED_PRECONDITION). A failed step ends the stream with its status; the episode is
+//! closed whenever the stream ends.
 
 use std::pin::Pin;
 use std::sync::Arc;
@@ -17,6 +18,8 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use super::engine::{Engine, ServeError};
+use super::episodes::Driver;
+use sim_bridge::error_text::clipped;
 
 /// The gRPC face of an [`Engine`].
 pub struct AgentServiceImpl {
@@ -64,7 +67,7 @@ impl AgentService for AgentServiceImpl {
         &self,
         request: Request<v1::StartEpisodeRequest>,
     ) -> Result<Response<v1::StartEpisodeResponse>, Status> {
-        let result = self.engine.start_episode(request.get_ref());
+        let result = self.engine.start_episode(request.get_ref(), Driver::Unary);
         answer(&self.engine, "StartEpisode", result).map(Response::new)
     }
 
@@ -72,7 +75,7 @@ impl AgentService for AgentServiceImpl {
         &self,
         request: Request<v1::StepRequest>,
     ) -> Result<Response<v1::StepResponse>, Status> {
-        let result = self.engine.step(request.into_inner()).await;
+        let result = self.engine.step(request.into_inner(), Driver::Unary).await;
         answer(&self.engine, "Step", result).map(Response::new)
     }
 
@@ -95,7 +98,7 @@ impl AgentService for AgentServiceImpl {
         let id = answer(
             &self.engine,
             "Drive",
-            start.and_then(|start| self.engine.start_episode(&start)),
+            start.and_then(|start| self.engine.start_episode(&start, Driver::Stream)),
         )?
         .episode_id;
         let (sender, receiver) = tokio::sync::mpsc::channel(4);
@@ -130,7 +133,7 @@ impl AgentService for AgentServiceImpl {
                     break;
                 }
             }
-            let _ = engine.end_episode(&id);
+            let _ = engine.end_episode(&id, Driver::Stream);
         });
         Ok(Response::new(Box::pin(ReceiverStream::new(receiver))))
     }
@@ -139,7 +142,9 @@ impl AgentService for AgentServiceImpl {
         &self,
         request: Request<v1::EndEpisodeRequest>,
     ) -> Result<Response<v1::EndEpisodeResponse>, Status> {
-        let result = self.engine.end_episode(&request.get_ref().episode_id);
+        let result = self
+            .engine
+            .end_episode(&request.get_ref().episode_id, Driver::Unary);
         answer(&self.engine, "EndEpisode", result).map(Response::new)
     }
 }
@@ -156,7 +161,7 @@ async fn drive_step(
         Some(Message::Step(step)) => {
             return Err(ServeError::BadRequest(format!(
                 "this Drive stream carries episode '{id}', not '{}'",
-                step.episode_id
+                clipped(&step.episode_id)
             )));
         }
         _ => {
@@ -166,7 +171,7 @@ async fn drive_step(
         }
     };
     step.episode_id = id.to_string();
-    tokio::time::timeout(engine.request_timeout(), engine.step(step))
+    tokio::time::timeout(engine.request_timeout(), engine.step(step, Driver::Stream))
         .await
         .map_err(|_| ServeError::DeadlineExceeded(engine.request_timeout()))?
 }
