@@ -722,8 +722,38 @@ fn a_recorded_run_replays_without_drift() {
 
 #[test]
 fn sigterm_ends_open_drive_streams_and_the_server_exits_promptly() {
-    let server = Server::start(&["--drain-timeout-s", "30"]);
-    let (sender, mut answers) = runtime().block_on(async {
+    let server = Server::start(&["--drain-timeout-s", "30", "--request-timeout-s", "60"]);
+    // One runtime for the whole test: its connections stay open while the server drains.
+    let rt = runtime();
+    // Streams that carry no step must not hold the drain: a health watch, a reflection
+    // session and a Drive stream that never sent `start`, each left open.
+    let (_quiet_senders, _watch) = rt.block_on(async {
+        use tonic_health::pb::health_client::HealthClient;
+        use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+        let mut health = HealthClient::new(server.channel().await);
+        let watch = health
+            .watch(tonic_health::pb::HealthCheckRequest {
+                service: String::new(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let (reflection_sender, reflection_requests) = tokio::sync::mpsc::channel(1);
+        let mut reflection = ServerReflectionClient::new(server.channel().await);
+        tokio::spawn(async move {
+            let stream = tokio_stream::wrappers::ReceiverStream::new(reflection_requests);
+            let _ = reflection.server_reflection_info(stream).await;
+        });
+        let (silent_sender, silent_requests) = tokio::sync::mpsc::channel::<v1::DriveRequest>(1);
+        let mut silent = server.client().await;
+        tokio::spawn(async move {
+            let stream = tokio_stream::wrappers::ReceiverStream::new(silent_requests);
+            let _ = silent.drive(stream).await;
+        });
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        ((reflection_sender, silent_sender), watch)
+    });
+    let (sender, mut answers) = rt.block_on(async {
         let mut client = server.client().await;
         let rig = expected_rig(&mut client).await;
         let (sender, requests) = tokio::sync::mpsc::channel(4);
@@ -760,11 +790,11 @@ fn sigterm_ends_open_drive_streams_and_the_server_exits_promptly() {
     assert!(status.success(), "{status}");
     assert!(
         started.elapsed() < Duration::from_secs(10),
-        "the drain waited on the open stream: {:?}",
+        "the drain waited on the open streams: {:?}",
         started.elapsed()
     );
     // The stream has ended (UNAVAILABLE, or the connection closing under it), not hung.
-    let end = runtime().block_on(answers.message());
+    let end = rt.block_on(answers.message());
     assert!(!matches!(end, Ok(Some(_))), "{end:?}");
     drop(sender);
 }

@@ -2,7 +2,7 @@
 //! layer in `service.rs` only converts [`ServeError`]s into status codes and counts requests.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use sim_bridge::camera::{CameraSpec, Rig};
@@ -98,6 +98,24 @@ pub struct Engine {
     config: ServeConfig,
     /// True until the warm-up is done: its episode and steps stay out of the metrics.
     warming: AtomicBool,
+    /// Steps being served now; a drain waits for these, not for idle streams.
+    in_flight: AtomicUsize,
+}
+
+/// Counts a step in [`Engine::steps_in_flight`] for as long as it lives.
+struct InFlight<'a>(&'a AtomicUsize);
+
+impl<'a> InFlight<'a> {
+    fn enter(count: &'a AtomicUsize) -> Self {
+        count.fetch_add(1, Ordering::SeqCst);
+        Self(count)
+    }
+}
+
+impl Drop for InFlight<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 impl Engine {
@@ -126,6 +144,7 @@ impl Engine {
             metrics,
             config: config.clone(),
             warming: AtomicBool::new(true),
+            in_flight: AtomicUsize::new(0),
         })
     }
 
@@ -135,6 +154,11 @@ impl Engine {
 
     pub fn request_timeout(&self) -> Duration {
         self.config.request_timeout()
+    }
+
+    /// Steps being decoded, queued or run now.
+    pub fn steps_in_flight(&self) -> usize {
+        self.in_flight.load(Ordering::SeqCst)
     }
 
     fn counting(&self) -> bool {
@@ -255,6 +279,7 @@ impl Engine {
         driver: Driver,
     ) -> Result<v1::StepResponse, ServeError> {
         let received = Instant::now();
+        let _in_flight = InFlight::enter(&self.in_flight);
         let (episode_id, frame_index) = (request.episode_id.clone(), request.frame_index);
         let lease = self
             .episodes

@@ -48,6 +48,10 @@ pub const STREAM_WINDOW_BYTES: u32 = 4 << 20;
 
 /// Checkpoint metadata key holding the rig the network was trained with (JSON).
 pub const RIG_METADATA_KEY: &str = "rig";
+/// How often a drain checks for steps still in flight.
+const DRAIN_POLL: Duration = Duration::from_millis(10);
+/// How long answers get to go out once no step is in flight, before open streams are cut.
+const DRAIN_FLUSH: Duration = Duration::from_millis(200);
 
 /// Loads the network the config names: a checkpoint file, random weights of a config, or
 /// (with neither) the checkpoint bundled into the binary.
@@ -249,19 +253,31 @@ pub async fn run(
     tracing::info!("shutting down: reporting NOT_SERVING");
     set_health(&reporter, ServingStatus::NotServing).await;
     tokio::time::sleep(Duration::from_secs_f64(config.drain_grace_s)).await;
-    tracing::info!("refusing new connections; draining in-flight requests");
+    tracing::info!("refusing new connections; draining in-flight steps");
     let _ = draining.send(true);
     let _ = stop_server.send(());
-    let drained = tokio::time::timeout(
-        Duration::from_secs_f64(config.drain_timeout_s),
-        &mut server.0,
-    )
+    // Wait for the steps being served, not for streams that carry none (a health watch, a
+    // reflection session, a Drive stream between steps): once no step is in flight and the
+    // answers had a moment to go out, whatever is still open is cut.
+    let steps_done = async {
+        while engine.steps_in_flight() > 0 {
+            tokio::time::sleep(DRAIN_POLL).await;
+        }
+        tokio::time::sleep(DRAIN_FLUSH).await;
+    };
+    let drained = tokio::time::timeout(Duration::from_secs_f64(config.drain_timeout_s), async {
+        tokio::select! {
+            ended = &mut server.0 => Some(ended),
+            () = steps_done => None,
+        }
+    })
     .await;
     let _ = stop_metrics.send(());
     match drained {
-        Ok(ended) => server_ended(ended)?,
+        Ok(Some(ended)) => server_ended(ended)?,
+        Ok(None) => tracing::info!("no step in flight; closing the streams still open"),
         Err(_) => tracing::warn!(
-            "requests still in flight after {} s; exiting anyway",
+            "steps still in flight after {} s; exiting anyway",
             config.drain_timeout_s
         ),
     }

@@ -86,7 +86,15 @@ impl AgentService for AgentServiceImpl {
         request: Request<Streaming<v1::DriveRequest>>,
     ) -> Result<Response<Self::DriveStream>, Status> {
         let mut inbound = request.into_inner();
-        let start = match inbound.message().await {
+        let mut draining = self.draining.clone();
+        // A stream that has not sent `start` carries nothing a drain should wait for.
+        let first = tokio::select! {
+            first = inbound.message() => first,
+            _ = draining.wait_for(|draining| *draining) => {
+                return Err(Status::unavailable("the server is shutting down"));
+            }
+        };
+        let start = match first {
             Ok(Some(v1::DriveRequest {
                 message: Some(Message::Start(start)),
             })) => Ok(start),
@@ -103,7 +111,6 @@ impl AgentService for AgentServiceImpl {
         .episode_id;
         let (sender, receiver) = tokio::sync::mpsc::channel(4);
         let engine = Arc::clone(&self.engine);
-        let mut draining = self.draining.clone();
         tokio::spawn(async move {
             loop {
                 let message = tokio::select! {
