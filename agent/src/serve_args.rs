@@ -54,6 +54,14 @@ pub struct ServeArgs {
     /// Largest request, MiB [default: 64; six 1600x900 RGB frames are 25 MiB].
     #[arg(long, env = "SSR_AGENT_MAX_MESSAGE_MIB")]
     max_message_mib: Option<usize>,
+    /// Most pixels a step may carry over all its cameras; a bigger rig is refused
+    /// [default: 8640000, six 1600x900 cameras].
+    #[arg(long, env = "SSR_AGENT_MAX_PIXELS_PER_STEP")]
+    max_pixels_per_step: Option<u64>,
+    /// Memory for decoded images of all steps in flight, MiB; a step past it is refused
+    /// (RESOURCE_EXHAUSTED, retry) [default: 1024].
+    #[arg(long, env = "SSR_AGENT_MAX_DECODED_MIB")]
+    max_decoded_mib: Option<usize>,
     /// On shutdown, seconds to report NOT_SERVING before refusing connections [default: 0].
     #[arg(long, env = "SSR_AGENT_DRAIN_GRACE_S")]
     drain_grace_s: Option<f64>,
@@ -122,6 +130,8 @@ impl ServeArgs {
         set(&mut config.model_threads, &self.model_threads);
         set(&mut config.request_timeout_s, &self.request_timeout_s);
         set(&mut config.max_message_mib, &self.max_message_mib);
+        set(&mut config.max_pixels_per_step, &self.max_pixels_per_step);
+        set(&mut config.max_decoded_mib, &self.max_decoded_mib);
         set(&mut config.drain_grace_s, &self.drain_grace_s);
         set(&mut config.drain_timeout_s, &self.drain_timeout_s);
         set(&mut config.log_format, &self.log_format);

@@ -147,6 +147,26 @@ fn config_files_override_defaults_and_bad_values_are_named() {
             .to_string()
             .contains("idle_timeout_s")
     );
+    let bad = ServeConfig {
+        max_pixels_per_step: 0,
+        ..ServeConfig::default()
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .starts_with("max_pixels_per_step = 0: must be in")
+    );
+    let bad = ServeConfig {
+        max_decoded_mib: 0,
+        ..ServeConfig::default()
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .starts_with("max_decoded_mib = 0: must be in")
+    );
     // Durations too long for the clock are refused, not a panic at start or at SIGTERM.
     for (field, bad) in [
         (

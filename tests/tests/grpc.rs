@@ -525,6 +525,48 @@ fn a_drive_streams_episode_is_its_own_and_long_ids_come_back_clipped() {
 }
 
 #[test]
+fn image_memory_limits_refuse_big_rigs_and_steps() {
+    let server = Server::start(&["--max-pixels-per-step", "600000", "--max-decoded-mib", "1"]);
+    runtime().block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        let sized = |width: u32, height: u32| {
+            let mut rig = rig.clone();
+            rig.cameras[0].width = width;
+            rig.cameras[0].height = height;
+            rig
+        };
+        // A rig of 1000x1000 pixels is over max_pixels_per_step...
+        let status = client
+            .start_episode(v1::StartEpisodeRequest {
+                rig: Some(sized(1000, 1000)),
+                ..Default::default()
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::ResourceExhausted);
+        assert!(
+            status.message().contains("max_pixels_per_step"),
+            "{}",
+            status.message()
+        );
+        // ...and one of 800x500 (1.6 MB decoded) fits it but not the 1 MiB image budget.
+        let big = sized(800, 500);
+        let id = start(&mut client, &big).await;
+        let status = client.step(step(&id, 0, &big)).await.unwrap_err();
+        assert_eq!(status.code(), Code::ResourceExhausted);
+        assert!(
+            status.message().contains("max_decoded_mib"),
+            "{}",
+            status.message()
+        );
+        // The budget is given back: a small rig steps.
+        let id = start(&mut client, &rig).await;
+        client.step(step(&id, 0, &rig)).await.unwrap();
+    });
+}
+
+#[test]
 fn health_reflection_and_metrics_answer_and_sigterm_drains() {
     let server = Server::start(&[]);
     runtime().block_on(async {

@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use crate::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
 use crate::device::Backend;
 
 /// Largest config file read, bytes.
@@ -54,6 +55,13 @@ pub struct ServeConfig {
     pub request_timeout_s: f64,
     /// Largest request accepted, MiB.
     pub max_message_mib: usize,
+    /// Most pixels one step may carry over all its cameras: a rig over it is refused at
+    /// `StartEpisode` (RESOURCE_EXHAUSTED).
+    pub max_pixels_per_step: u64,
+    /// Memory for the decoded images of every step in flight together, MiB
+    /// ([`DECODED_BYTES_PER_PIXEL`] per pixel): a step that would go past it is refused
+    /// (RESOURCE_EXHAUSTED; retry), so concurrent large rigs cannot take the server's memory.
+    pub max_decoded_mib: usize,
     /// After a shutdown signal: seconds to report NOT_SERVING before refusing new
     /// connections, so load balancers move away.
     pub drain_grace_s: f64,
@@ -85,6 +93,8 @@ impl Default for ServeConfig {
             request_timeout_s: 30.0,
             // Six 1600x900 RGB cameras are 25.9 MB; a 900x256 frame is 0.7 MB.
             max_message_mib: 64,
+            max_pixels_per_step: 6 * 1600 * 900,
+            max_decoded_mib: 1024,
             drain_grace_s: 0.0,
             drain_timeout_s: 30.0,
             log_format: LogFormat::Human,
@@ -93,6 +103,10 @@ impl Default for ServeConfig {
         }
     }
 }
+
+/// Bytes a step's decoded image takes per pixel while it is in flight: RGB8, and a
+/// conversion's scratch.
+pub const DECODED_BYTES_PER_PIXEL: usize = 4;
 
 /// Longest idle or request timeout, seconds (a week).
 pub const MAX_TIMEOUT_S: f64 = 604_800.0;
@@ -198,6 +212,21 @@ impl ServeConfig {
                 "must be in 1..=1024",
             );
         }
+        let most_pixels = MAX_CAMERAS as u64 * MAX_IMAGE_PIXELS;
+        if !(1..=most_pixels).contains(&self.max_pixels_per_step) {
+            return invalid(
+                "max_pixels_per_step",
+                self.max_pixels_per_step,
+                "must be in 1..=100663296 (6 cameras of 16 Mpx)",
+            );
+        }
+        if !(1..=65_536).contains(&self.max_decoded_mib) {
+            return invalid(
+                "max_decoded_mib",
+                self.max_decoded_mib,
+                "must be in 1..=65536",
+            );
+        }
         if !drain(self.drain_grace_s) {
             return invalid(
                 "drain_grace_s",
@@ -236,5 +265,9 @@ impl ServeConfig {
 
     pub fn max_message_bytes(&self) -> usize {
         self.max_message_mib << 20
+    }
+
+    pub fn max_decoded_bytes(&self) -> usize {
+        self.max_decoded_mib << 20
     }
 }

@@ -12,7 +12,7 @@ use ssrdrive_proto::v1;
 use tokio::sync::oneshot;
 
 use super::batcher::{BatchSettings, BatchedStep, Batcher, StepJob, SubmitError};
-use super::config::ServeConfig;
+use super::config::{DECODED_BYTES_PER_PIXEL, ServeConfig};
 use super::decode;
 use super::episodes::{Driver, EpisodeError, EpisodeTable};
 use super::metrics::{Metrics, StepPhases};
@@ -56,6 +56,9 @@ pub enum ServeError {
     /// RESOURCE_EXHAUSTED (queue full) or UNAVAILABLE (the model threads have stopped).
     #[error(transparent)]
     Submit(#[from] SubmitError),
+    /// RESOURCE_EXHAUSTED: a rig or step over the server's image memory limits.
+    #[error("{0}")]
+    OverBudget(String),
     /// DEADLINE_EXCEEDED: a Drive step took longer than the request timeout.
     #[error("the step took longer than the server's request timeout of {0:?}")]
     DeadlineExceeded(Duration),
@@ -75,6 +78,7 @@ impl From<ServeError> for tonic::Status {
             ServeError::Episode(EpisodeError::StreamOwned(_)) => Code::FailedPrecondition,
             ServeError::Episode(EpisodeError::NoRandomness(_)) => Code::Internal,
             ServeError::BadRequest(_) => Code::InvalidArgument,
+            ServeError::OverBudget(_) => Code::ResourceExhausted,
             ServeError::Submit(SubmitError::QueueFull(_)) => Code::ResourceExhausted,
             ServeError::Submit(SubmitError::Stopped) => Code::Unavailable,
             ServeError::DeadlineExceeded(_) => Code::DeadlineExceeded,
@@ -100,21 +104,28 @@ pub struct Engine {
     warming: AtomicBool,
     /// Steps being served now; a drain waits for these, not for idle streams.
     in_flight: AtomicUsize,
+    /// Bytes of decoded images the steps in flight hold (`max_decoded_mib` caps it).
+    decoded_bytes: AtomicUsize,
 }
 
-/// Counts a step in [`Engine::steps_in_flight`] for as long as it lives.
-struct InFlight<'a>(&'a AtomicUsize);
+/// Holds `amount` of a counter for as long as it lives.
+struct Held<'a> {
+    counter: &'a AtomicUsize,
+    amount: usize,
+}
 
-impl<'a> InFlight<'a> {
-    fn enter(count: &'a AtomicUsize) -> Self {
-        count.fetch_add(1, Ordering::SeqCst);
-        Self(count)
+impl<'a> Held<'a> {
+    /// Adds `amount`, unless that takes the counter past `limit`.
+    fn take(counter: &'a AtomicUsize, amount: usize, limit: usize) -> Option<Self> {
+        let total = counter.fetch_add(amount, Ordering::SeqCst) + amount;
+        let held = Self { counter, amount };
+        (total <= limit).then_some(held)
     }
 }
 
-impl Drop for InFlight<'_> {
+impl Drop for Held<'_> {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::SeqCst);
+        self.counter.fetch_sub(self.amount, Ordering::SeqCst);
     }
 }
 
@@ -145,6 +156,7 @@ impl Engine {
             config: config.clone(),
             warming: AtomicBool::new(true),
             in_flight: AtomicUsize::new(0),
+            decoded_bytes: AtomicUsize::new(0),
         })
     }
 
@@ -186,6 +198,14 @@ impl Engine {
     ) -> Result<v1::StartEpisodeResponse, ServeError> {
         let rig = request.rig.as_ref().ok_or_else(|| bad("rig is missing"))?;
         let rig = wire::rig_from_proto(rig).map_err(|e| bad(format!("rig: {e}")))?;
+        let pixels = rig_pixels(&rig);
+        if pixels > self.config.max_pixels_per_step {
+            return Err(ServeError::OverBudget(format!(
+                "the rig's cameras hold {pixels} pixels per step, over this server's \
+                 max_pixels_per_step of {}",
+                self.config.max_pixels_per_step
+            )));
+        }
         let mut control = self.policy.control().clone();
         if let Some(alpha) = request.overrides.as_ref().and_then(|o| o.fusion_alpha) {
             if !(0.0..=1.0).contains(&alpha) {
@@ -279,12 +299,21 @@ impl Engine {
         driver: Driver,
     ) -> Result<v1::StepResponse, ServeError> {
         let received = Instant::now();
-        let _in_flight = InFlight::enter(&self.in_flight);
+        let _in_flight = Held::take(&self.in_flight, 1, usize::MAX);
         let (episode_id, frame_index) = (request.episode_id.clone(), request.frame_index);
         let lease = self
             .episodes
             .lease(&request.episode_id, request.frame_index, driver)?;
         let rig = lease.rig().clone();
+        let decoded = rig_pixels(&rig) as usize * DECODED_BYTES_PER_PIXEL;
+        let limit = self.config.max_decoded_bytes();
+        let _decoded = Held::take(&self.decoded_bytes, decoded, limit).ok_or_else(|| {
+            ServeError::OverBudget(format!(
+                "the steps in flight hold the server's max_decoded_mib of {} MiB of images; \
+                 retry",
+                self.config.max_decoded_mib
+            ))
+        })?;
         let (input, decode_time) = tokio::task::spawn_blocking(move || {
             let started = Instant::now();
             (decode::step_input(&request, &rig), started.elapsed())
@@ -343,6 +372,14 @@ impl Engine {
             }),
         })
     }
+}
+
+/// Pixels of one step of `rig`, all cameras together.
+fn rig_pixels(rig: &Rig) -> u64 {
+    rig.cameras
+        .iter()
+        .map(|c| c.width as u64 * c.height as u64)
+        .sum()
 }
 
 fn millis(time: Duration) -> f64 {
