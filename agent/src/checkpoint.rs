@@ -112,8 +112,14 @@ pub fn inspect(path: &Path) -> Result<CheckpointInfo, CheckpointError> {
         source,
     };
     let file = std::fs::File::open(path).map_err(io)?;
-    let actual = file.metadata().map_err(io)?.len();
-    read_header(file, actual, path)
+    let metadata = file.metadata().map_err(io)?;
+    if metadata.is_dir() {
+        return Err(CheckpointError::NotSafetensors {
+            path: path.to_path_buf(),
+            reason: "is a directory, not a checkpoint file".into(),
+        });
+    }
+    read_header(file, metadata.len(), path)
 }
 
 /// [`inspect`] for a checkpoint in memory; `label` names it in errors.

@@ -68,6 +68,11 @@ fn bad_checkpoints_are_clear_errors() {
         CheckpointError::NotSafetensors { .. }
     ));
 
+    let directory = scratch("a-directory.safetensors");
+    std::fs::create_dir_all(&directory).unwrap();
+    let error = load(&directory, &device).unwrap_err();
+    assert!(error.to_string().contains("is a directory"), "{error}");
+
     let missing = scratch("does-not-exist.safetensors");
     assert!(matches!(
         load(&missing, &device).unwrap_err(),

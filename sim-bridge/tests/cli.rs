@@ -452,3 +452,35 @@ fn eval_finds_maps_by_town_and_scores_unplannable_routes_as_failures() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_road_of_unusable_length_is_named_in_a_warning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let xml = include_str!("maps/lane_drop.xodr").replace(
+        r#"<road name="r3" length="100.0""#,
+        r#"<road name="r3" length="NaN""#,
+    );
+    let map = tmp.path().join("bad-length.xodr");
+    std::fs::write(&map, xml).unwrap();
+    let routes = tmp.path().join("routes.xml");
+    std::fs::write(
+        &routes,
+        r#"<routes><route id="0" town="bad-length">
+            <waypoint x="20.0" y="1.75" z="0.0"/><waypoint x="250.0" y="1.75" z="0.0"/>
+        </route></routes>"#,
+    )
+    .unwrap();
+    let run = sim_bridge(&[
+        "routes",
+        "show",
+        routes.to_str().unwrap(),
+        "--map",
+        map.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(r#"road "3" skipped: no finite length above zero; it is left out"#),
+        "{stderr}"
+    );
+}

@@ -235,6 +235,9 @@ fn every_error_status_is_provoked_and_spares_other_episodes() {
         request.speed_mps = f64::NAN;
         bad_requests.push((request, "speed_mps = NaN"));
         let mut request = step(&victim, 0, &rig);
+        request.speed_mps = 1e300;
+        bad_requests.push((request, "speed_mps = 1e300 is not a finite 32-bit number"));
+        let mut request = step(&victim, 0, &rig);
         request.target_point = Some(v1::EgoPoint {
             x: f64::INFINITY,
             y: 0.0,
@@ -511,6 +514,16 @@ fn a_drive_streams_episode_is_its_own_and_long_ids_come_back_clipped() {
             .unwrap();
         let answer = answers.message().await.unwrap().unwrap();
         assert_eq!(answer.frame_index, 1);
+        // A refused step ends the stream with its status (gRPC ends a stream at its first
+        // error), and the episode with it.
+        let mut bad = step("", 2, &rig);
+        bad.speed_mps = f64::NAN;
+        send.send(drive(Message::Step(bad))).await.unwrap();
+        let status = answers.message().await.unwrap_err();
+        assert_eq!(status.code(), Code::InvalidArgument);
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        let status = client.step(step(&id, 3, &rig)).await.unwrap_err();
+        assert_eq!(status.code(), Code::NotFound, "{}", status.message());
         drop(send);
 
         // An id of 20,000 characters is echoed clipped: the client sees the real status, not

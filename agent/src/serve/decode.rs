@@ -3,6 +3,7 @@
 //! checked for NaN and range. A refusal names the camera or field and what is wrong; nothing is
 //! allocated from a size the rig did not promise.
 
+use sim_bridge::error_text::clipped;
 use ssrdrive_proto::v1;
 
 use crate::camera::{CameraSpec, Rig};
@@ -51,8 +52,11 @@ pub fn step_input(request: &v1::StepRequest, rig: &Rig) -> Result<StepInput, Bad
         ("target_point.x", target.x),
         ("target_point.y", target.y),
     ] {
-        if !value.is_finite() {
-            return Err(bad(format!("{field} = {value} is not a finite number")));
+        // The network reads 32-bit floats: 1e300 is as unusable as infinity.
+        if !value.is_finite() || value.abs() > f32::MAX as f64 {
+            return Err(bad(format!(
+                "{field} = {value:?} is not a finite 32-bit number"
+            )));
         }
     }
     if request.speed_mps < 0.0 {
@@ -78,7 +82,7 @@ pub fn decode_image(image: &v1::Image, camera: &CameraSpec) -> Result<Frame, Bad
     if image.camera_id != camera.id {
         return Err(bad(format!(
             "image for camera '{}' came where the rig has camera '{name}' (send images in rig order)",
-            image.camera_id
+            clipped(&image.camera_id)
         )));
     }
     if (image.width, image.height) != (camera.width, camera.height) {

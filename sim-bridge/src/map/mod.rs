@@ -117,7 +117,9 @@ impl Map {
                 "document is over the {MAX_MAP_BYTES}-byte limit"
             )));
         }
-        let net = xodr::load_str(xml).map_err(|e| invalid(e.to_string()))?;
+        let (net, provenance) =
+            xodr::load_str_with_provenance(xml).map_err(|e| invalid(e.to_string()))?;
+        report_dropped(name, &provenance.warnings);
         Self::from_network(name, &net, options)
     }
 
@@ -196,6 +198,19 @@ impl Map {
             })
             .find(|(idx, proj)| angle_diff(self.lane(*idx).pose_at(proj.s).yaw, yaw).abs() < 1.05)
             .or_else(|| self.nearest_driving(p.truncate()))
+    }
+}
+
+/// Logs what the import dropped: a road that baked nothing (a NaN, negative or absurd length,
+/// no geometry) as a warning naming it, since a road that silently goes missing is a routing
+/// mystery later; the rest (ignored features, links it could not keep) at debug level.
+fn report_dropped(name: &str, warnings: &[xodr::Warning]) {
+    for warning in warnings {
+        if matches!(warning, xodr::Warning::RoadSkipped { .. }) {
+            tracing::warn!("{name}: {warning}; it is left out of the map");
+        } else {
+            tracing::debug!("{name}: {warning}");
+        }
     }
 }
 
