@@ -1,5 +1,6 @@
 //! [`FileError`]: a file that cannot be read or written, naming the path and the problem. The
-//! dataset and step-log readers share it (as `DatasetError` and `LogError`).
+//! dataset and step-log readers share it (as `DatasetError` and `LogError`). And
+//! [`write_atomic`], how every result file is written.
 
 use std::path::{Path, PathBuf};
 
@@ -29,4 +30,16 @@ impl FileError {
             problem: problem.into(),
         }
     }
+}
+
+/// Write `bytes` to `path` through a temporary file beside it and a rename, so a reader (or a
+/// resume) never sees half a file: a full disk or a file-size limit leaves the previous
+/// version whole, and the temporary file is removed.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    if let Err(error) = std::fs::write(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(error);
+    }
+    std::fs::rename(&tmp, path)
 }

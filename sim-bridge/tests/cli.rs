@@ -484,3 +484,153 @@ fn a_road_of_unusable_length_is_named_in_a_warning() {
         "{stderr}"
     );
 }
+
+/// Every file of a dataset's episodes, by path relative to `root`, with its bytes; the
+/// wall-clock time in `episode.json` left out (it differs between runs by nature).
+fn episode_files(root: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut files = std::collections::BTreeMap::new();
+    for episode in std::fs::read_dir(root.join("episodes")).unwrap() {
+        let episode = episode.unwrap().path();
+        let mut stack = vec![episode];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                    continue;
+                }
+                let mut bytes = std::fs::read(&path).unwrap();
+                if path.ends_with("episode.json") {
+                    let mut info: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+                    info["wall_seconds"] = serde_json::Value::Null;
+                    bytes = info.to_string().into_bytes();
+                }
+                let relative = path.strip_prefix(root).unwrap();
+                files.insert(relative.display().to_string(), bytes);
+            }
+        }
+    }
+    files
+}
+
+#[test]
+fn a_collection_killed_mid_episode_resumes_to_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let collect = |out: &std::path::Path| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_sim-bridge"));
+        command
+            .args(["collect", "--routes", "town05-short-style", "--limit", "3"])
+            .args(["--jobs", "1", "--vehicles", "10", "--quiet", "--out"])
+            .arg(out);
+        command
+    };
+    let whole = tmp.path().join("whole");
+    assert!(collect(&whole).output().unwrap().status.success());
+
+    // Killed (SIGKILL: no chance to tidy up) once the first episode is complete, so with the
+    // second one in flight.
+    let killed = tmp.path().join("killed");
+    let mut child = collect(&killed).spawn().unwrap();
+    let episodes = killed.join("episodes");
+    let started = std::time::Instant::now();
+    loop {
+        let complete = std::fs::read_dir(&episodes)
+            .map(|dir| {
+                dir.flatten()
+                    .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+                    .count()
+            })
+            .unwrap_or(0);
+        if complete >= 1 || started.elapsed().as_secs() > 120 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let run = collect(&killed).output().unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (want, got) = (episode_files(&whole), episode_files(&killed));
+    assert_eq!(
+        want.keys().collect::<Vec<_>>(),
+        got.keys().collect::<Vec<_>>()
+    );
+    for (path, bytes) in &want {
+        assert!(&got[path] == bytes, "{path} differs after the resume");
+    }
+}
+
+/// A full disk, as a file-size limit on the process: `eval` stops with an error that names the
+/// results file, the file still holds the runs written before (valid JSON, no temporary file
+/// left), and `--resume` finishes the evaluation once there is room.
+#[test]
+fn a_full_disk_stops_eval_with_the_results_so_far_intact() {
+    use std::os::unix::process::CommandExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let eval = |out: &std::path::Path, limit: &str| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_sim-bridge"));
+        command
+            .args([
+                "eval",
+                "--agent",
+                "expert",
+                "--routes",
+                "town05-short-style",
+            ])
+            .args(["--vehicles", "0", "--quiet", "--limit", limit, "--out"])
+            .arg(out);
+        command
+    };
+    // The size of the results of one run, to set the limit between one run and two.
+    let one = tmp.path().join("one.json");
+    assert!(eval(&one, "1").output().unwrap().status.success());
+    let limit = std::fs::metadata(&one).unwrap().len() + 300;
+
+    let out = tmp.path().join("results.json");
+    let mut command = eval(&out, "3");
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        command.pre_exec(move || {
+            let rlimit = libc::rlimit {
+                rlim_cur: limit,
+                rlim_max: limit,
+            };
+            // A write past the limit then fails with EFBIG instead of killing the process.
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &rlimit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let run = command.output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("writing") && stderr.contains("results.json"),
+        "{stderr}"
+    );
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        results["_checkpoint"]["records"].as_array().unwrap().len(),
+        1
+    );
+    assert!(
+        !tmp.path().join("results.tmp").exists(),
+        "the temporary file is removed"
+    );
+
+    let mut resume = eval(&out, "3");
+    assert!(resume.arg("--resume").output().unwrap().status.success());
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        results["_checkpoint"]["records"].as_array().unwrap().len(),
+        3
+    );
+}

@@ -151,7 +151,7 @@ fn local_agent_starts_its_own_server() {
 }
 
 #[test]
-fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
+fn a_server_lost_mid_route_crashes_the_route_and_resume_finishes_the_run() {
     let server = Server::start(&[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
@@ -178,6 +178,19 @@ fn a_server_lost_mid_route_crashes_the_route_and_keeps_the_results() {
     assert_eq!(records.len(), 2, "both runs are recorded");
     for record in records {
         assert_eq!(record["status"], "Failed - Agent crashed");
+    }
+
+    // With a server back, --resume drives the crashed runs again (short: --timeout is not part
+    // of the plan a resume checks).
+    let server = Server::start(&[]);
+    let agent = format!("grpc://{}", server.address);
+    let resumed = ["--limit", "2", "--timeout", "3", "--resume"];
+    succeeded(eval_command(&agent, &resumed, &out).output().unwrap());
+    let results = read_results(&out);
+    let records = results["_checkpoint"]["records"].as_array().unwrap();
+    assert_eq!(records.len(), 2);
+    for record in records {
+        assert_ne!(record["status"], "Failed - Agent crashed", "{record}");
     }
 }
 
@@ -576,6 +589,47 @@ fn image_memory_limits_refuse_big_rigs_and_steps() {
         // The budget is given back: a small rig steps.
         let id = start(&mut client, &rig).await;
         client.step(step(&id, 0, &rig)).await.unwrap();
+    });
+}
+
+#[test]
+fn a_client_that_stops_reading_its_stream_holds_no_model_thread() {
+    let server = Server::start(&["--model-threads", "1"]);
+    let rt = runtime();
+    rt.block_on(async {
+        let mut client = server.client().await;
+        let rig = expected_rig(&mut client).await;
+        // A Drive stream that sends steps but never reads an answer.
+        let (send, receive) = tokio::sync::mpsc::channel(64);
+        send.send(v1::DriveRequest {
+            message: Some(Message::Start(v1::StartEpisodeRequest {
+                rig: Some(rig.clone()),
+                ..Default::default()
+            })),
+        })
+        .await
+        .unwrap();
+        for frame in 0..32 {
+            send.send(v1::DriveRequest {
+                message: Some(Message::Step(step("", frame, &rig))),
+            })
+            .await
+            .unwrap();
+        }
+        let mut stalled = server.client().await;
+        let _unread = stalled
+            .drive(tokio_stream::wrappers::ReceiverStream::new(receive))
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        // Another episode is served on the one model thread all the while.
+        let id = start(&mut client, &rig).await;
+        for frame in 0..5 {
+            let mut request = tonic::Request::new(step(&id, frame, &rig));
+            request.set_timeout(Duration::from_secs(5));
+            client.step(request).await.unwrap();
+        }
+        drop(send);
     });
 }
 

@@ -150,7 +150,12 @@ impl ServeConfig {
             });
         }
         let text = std::fs::read_to_string(path).map_err(io)?;
-        toml::from_str(&text).map_err(|e| ServeConfigError::Parse {
+        Self::from_toml(&text, path)
+    }
+
+    /// Parses TOML text (`path` names it in errors); fields it leaves out keep their defaults.
+    pub fn from_toml(text: &str, path: &Path) -> Result<Self, ServeConfigError> {
+        toml::from_str(text).map_err(|e| ServeConfigError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),
         })

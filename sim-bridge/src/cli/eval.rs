@@ -20,6 +20,7 @@ use sim_bridge::client::local::LocalServer;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
+use sim_bridge::files::write_atomic;
 use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, RouteEnd, RouteRecord, ScoringConfig, summary_table};
@@ -170,9 +171,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                     });
                     let mut finished = finished.lock().expect("no worker panics holding it");
                     finished.records[index] = Some(record);
-                    let results = Results::new(finished.done(), total, Vec::new());
-                    std::fs::write(&args.out, results.to_json())
-                        .with_context(|| format!("writing {}", args.out.display()))?;
+                    save(&args.out, &finished.done(), total)?;
                     continue;
                 }
             };
@@ -230,9 +229,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 )
             });
             finished.records[index] = Some(run.record);
-            let results = Results::new(finished.done(), total, Vec::new());
-            std::fs::write(&args.out, results.to_json())
-                .with_context(|| format!("writing {}", args.out.display()))?;
+            save(&args.out, &finished.done(), total)?;
         }
     };
     std::thread::scope(|scope| {
@@ -275,6 +272,14 @@ impl Finished {
     fn done(&self) -> Vec<RouteRecord> {
         self.records.iter().flatten().cloned().collect()
     }
+}
+
+/// Writes the results so far to `path` whole or not at all: after a failed write (a full
+/// disk), the file still holds the previous results, which `--resume` reads.
+fn save(path: &Path, records: &[RouteRecord], total: usize) -> anyhow::Result<()> {
+    let results = Results::new(records.to_vec(), total, Vec::new());
+    write_atomic(path, results.to_json().as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The records an earlier evaluation of the same plan wrote to `path`, by run index (none if

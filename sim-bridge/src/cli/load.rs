@@ -181,7 +181,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
                 .map(|(at, bytes)| serde_json::json!({"at_s": at, "bytes": bytes}))
                 .collect::<Vec<_>>(),
         });
-        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+        sim_bridge::files::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())

@@ -16,11 +16,12 @@ use std::time::Instant;
 use super::recorder::EpisodeRecorder;
 use super::{
     Dataset, DatasetError, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FORMAT, FUTURE_COUNT,
-    FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, safe_name, write_atomic,
+    FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, safe_name,
 };
 use crate::agent::Agent;
 use crate::camera::Rig;
 use crate::eval::run_route;
+use crate::files::write_atomic;
 use crate::map::Map;
 use crate::route::DenseRoute;
 use crate::route::xml::RouteSpec;

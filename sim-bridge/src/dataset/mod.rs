@@ -260,31 +260,7 @@ impl Dataset {
     /// of order, is an error naming the line.
     pub fn frames(&self, name: &str) -> Result<Vec<FrameRecord>, DatasetError> {
         let path = self.episode_dir(name).join("measurements.jsonl");
-        let bytes = read_capped(&path, MAX_JSON_BYTES)?;
-        let text = std::str::from_utf8(&bytes)
-            .map_err(|e| DatasetError::invalid(&path, format!("not UTF-8: {e}")))?;
-        let mut out = Vec::new();
-        for (n, line) in text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty())
-        {
-            let record: FrameRecord = serde_json::from_str(line)
-                .map_err(|e| DatasetError::invalid(&path, format!("line {}: {e}", n + 1)))?;
-            if record.index != out.len() {
-                return Err(DatasetError::invalid(
-                    &path,
-                    format!(
-                        "line {}: frame {} where {} was due",
-                        n + 1,
-                        record.index,
-                        out.len()
-                    ),
-                ));
-            }
-            out.push(record);
-        }
-        Ok(out)
+        parse_frames(&read_capped(&path, MAX_JSON_BYTES)?, &path)
     }
 
     /// The images of one frame, in rig order.
@@ -308,6 +284,35 @@ impl Dataset {
     }
 }
 
+/// Frame records from the bytes of a `measurements.jsonl` (`path` names it in errors). A line
+/// that does not parse, or records out of order, is an error naming the line.
+pub fn parse_frames(bytes: &[u8], path: &Path) -> Result<Vec<FrameRecord>, DatasetError> {
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| DatasetError::invalid(path, format!("not UTF-8: {e}")))?;
+    let mut out = Vec::new();
+    for (n, line) in text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
+        let record: FrameRecord = serde_json::from_str(line)
+            .map_err(|e| DatasetError::invalid(path, format!("line {}: {e}", n + 1)))?;
+        if record.index != out.len() {
+            return Err(DatasetError::invalid(
+                path,
+                format!(
+                    "line {}: frame {} where {} was due",
+                    n + 1,
+                    record.index,
+                    out.len()
+                ),
+            ));
+        }
+        out.push(record);
+    }
+    Ok(out)
+}
+
 /// `raw` with every character other than ASCII letters, digits, `_` and `-` replaced by `-`,
 /// so it can name a file or folder and never leave its parent.
 pub fn safe_name(raw: &str) -> String {
@@ -320,11 +325,4 @@ pub fn safe_name(raw: &str) -> String {
             }
         })
         .collect()
-}
-
-/// Write `bytes` to `path` through a temporary file and a rename, so readers never see half.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes)?;
-    std::fs::rename(&tmp, path)
 }

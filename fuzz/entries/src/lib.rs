@@ -1,0 +1,85 @@
+//! What each fuzz target does with its input, in one place for the fuzzer (`fuzz/`) and for the
+//! main build's regression test, which replays every seed and every crash found. Each entry
+//! hands arbitrary bytes to one parser of untrusted input through its public API; an `Err` is
+//! the expected answer to garbage, and any panic, hang or runaway allocation is a bug.
+
+use std::path::Path;
+
+use sim_bridge::camera::{CameraSpec, Rig};
+use sim_bridge::map::{Map, MapOptions};
+use ssrdrive_proto::v1;
+
+/// The fuzz targets, by name: the folders of `fuzz/seeds` and `fuzz/regressions`.
+pub const TARGETS: [(&str, fn(&[u8])); 7] = [
+    ("image_decode", image_decode),
+    ("rig_json", rig_json),
+    ("route_xml", route_xml),
+    ("map_xodr", map_xodr),
+    ("checkpoint", checkpoint),
+    ("dataset_frames", dataset_frames),
+    ("serve_toml", serve_toml),
+];
+
+/// A `Step` image for a camera of the input's choosing: byte 0 picks the encoding (RGB8,
+/// BGRA8, PNG, JPEG), bytes 1-2 the size (1-64 px a side), the rest is the payload.
+pub fn image_decode(data: &[u8]) {
+    let [encoding, width, height, payload @ ..] = data else {
+        return;
+    };
+    let (width, height) = (u32::from(width % 64) + 1, u32::from(height % 64) + 1);
+    let camera = CameraSpec {
+        id: "cam".into(),
+        width,
+        height,
+        ..CameraSpec::tcp_front()
+    };
+    let image = v1::Image {
+        camera_id: camera.id.clone(),
+        width,
+        height,
+        encoding: i32::from(encoding % 5),
+        data: payload.to_vec(),
+    };
+    let _ = ssr_agent::serve::decode::decode_image(&image, &camera);
+}
+
+/// A camera rig file (JSON).
+pub fn rig_json(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = Rig::from_json(text);
+    }
+}
+
+/// A CARLA route file (XML).
+pub fn route_xml(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = sim_bridge::route::xml::parse("fuzz", text);
+    }
+}
+
+/// An OpenDRIVE map, loaded into the lane graph with its lights and signs.
+pub fn map_xodr(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = Map::from_str("fuzz", text, MapOptions::default());
+    }
+}
+
+/// A checkpoint file (safetensors with the network's config in its metadata).
+pub fn checkpoint(data: &[u8]) {
+    let device = Default::default();
+    let _ = ssr_agent::checkpoint::load_bytes(data, Path::new("fuzz"), &device);
+}
+
+/// A dataset episode's `measurements.jsonl`.
+pub fn dataset_frames(data: &[u8]) {
+    let _ = sim_bridge::dataset::parse_frames(data, Path::new("fuzz"));
+}
+
+/// A server config file (TOML), parsed and checked.
+pub fn serve_toml(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data)
+        && let Ok(config) = ssr_agent::serve::ServeConfig::from_toml(text, Path::new("fuzz"))
+    {
+        let _ = config.validate();
+    }
+}
