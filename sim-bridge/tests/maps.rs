@@ -206,6 +206,23 @@ fn a_lane_section_too_short_to_bake_keeps_the_links_through_it() {
     }
 }
 
+/// A lane whose width polynomial runs wild (3.5 m + 5 s^3: 135,000 km wide at 300 m; found by
+/// the map fuzzer, where it took 8 s to load) is left out, not indexed over millions of grid
+/// cells.
+#[test]
+fn a_lane_of_absurd_width_is_left_out() {
+    let xml = include_str!("../../fuzz/regressions/map_xodr/slow-cubic-lane-width-135000-km.xodr");
+    let map = Map::from_str("wild-width", xml, MapOptions::default()).unwrap();
+    assert!(
+        map.lanes.iter().all(|l| l.road_id != "2"),
+        "road 2's lane is left out"
+    );
+    assert!(
+        map.lanes.iter().any(|l| l.road_id == "1"),
+        "the rest of the map loads"
+    );
+}
+
 /// Parked cars go on parking lanes wide enough to hold them clear of the driving lanes, never
 /// where the car would reach into a driving lane (CARLA's Town03 has parking strips beside
 /// junction connectors, where a parked car blocked every route through).

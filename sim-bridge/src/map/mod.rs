@@ -255,6 +255,19 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         if points.len() < 2 || !points.iter().all(|p| p.is_finite()) {
             continue;
         }
+        if let Some(jump) = points
+            .windows(2)
+            .map(|w| (w[1] - w[0]).length())
+            .find(|&step| step > MAX_POINT_STEP)
+        {
+            tracing::warn!(
+                "road '{}' lane {}: its centre line jumps {jump:.0} m between samples (a width \
+                 or offset polynomial out of range?); the lane is left out of the map",
+                road.od_id(),
+                road_lane.od_id
+            );
+            continue;
+        }
         let junction = road.junction().map(|j| {
             *junction_index.entry(j.to_string()).or_insert_with(|| {
                 junction_ids.push(j.to_string());
@@ -352,6 +365,12 @@ fn close_section_seams(lanes: &mut [Lane]) {
         lane.cum = lanes::cumulative_length(&lane.points);
     }
 }
+
+/// Longest step between consecutive centre-line samples of a lane, metres: the importer
+/// samples every few metres, so a longer one is a width or offset polynomial gone wild (a
+/// cubic width of 5 s^3 is 135,000 km wide at 300 m), which would also make the spatial grid
+/// index a lane across millions of cells.
+const MAX_POINT_STEP: f64 = 500.0;
 
 /// How close a lane's end must come to another lane's start to be joined to it, metres.
 const STITCH_DISTANCE: f64 = 0.5;
