@@ -1,11 +1,12 @@
 //! Traffic and the expert at close quarters, on the hand-made two-lane road of
 //! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
 //! and y = -5.25): a follower keeps off an ego that pokes into its lane, and the expert does not
-//! wait for a car that ran into its rear.
+//! wait for a car that ran into its rear. And on `maps/lane_add.xodr` (a lane that begins at
+//! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue.
 
 use glam::DVec3;
 use sim_bridge::agent::Control;
-use sim_bridge::expert::hazards::{self, HazardMemory};
+use sim_bridge::expert::hazards::{self, BrakeReason, HazardMemory};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::world::ego::{Ego, EgoParams};
@@ -105,4 +106,62 @@ fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
     let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
     let (gap, _) = view.obstacle.expect("the car ahead");
     assert!(gap > 0.0 && gap <= 3.0, "gap {gap}");
+}
+
+#[test]
+fn the_expert_waits_for_a_lane_change_gap_then_noses_into_a_slow_queue() {
+    let map = Map::from_str(
+        "lane-add",
+        include_str!("maps/lane_add.xodr"),
+        MapOptions::default(),
+    )
+    .unwrap();
+    let spec = &sim_bridge::route::xml::parse(
+        "change",
+        r#"<routes><route id="0" town="lane-add">
+            <waypoint x="20.0" y="1.75" z="0.0"/><waypoint x="180.0" y="5.25" z="0.0"/>
+        </route></routes>"#,
+    )
+    .unwrap()[0];
+    let route = sim_bridge::route::planner::plan_route(&map, spec).unwrap();
+    let config = WorldConfig {
+        vehicles: 1,
+        scenarios: false,
+        parked_cars: false,
+        ..WorldConfig::default()
+    };
+    let mut world = World::new(&map, &route, config);
+    // The ego stands just short of where the route changes into the new lane; a car crawls
+    // alongside in it.
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(96.0, -1.75, 0.0), 0.0);
+    let new_lane = map
+        .lanes
+        .iter()
+        .find(|l| l.road_id == "2" && l.lane_id == -2)
+        .unwrap();
+    let car: &mut Vehicle = &mut world.traffic.vehicles[0];
+    car.lane = new_lane.idx;
+    car.s = 1.0;
+    car.lateral = 0.0;
+    car.speed = 0.5;
+    car.next.clear();
+    let index = route.advance_index(0, world.ego_state().position.truncate(), route.points.len());
+    let mut memory = HazardMemory::default();
+
+    let view = hazards::scan(&world, &route, index, &mut memory);
+    assert_eq!(
+        view.cause,
+        Some(BrakeReason::LaneChange),
+        "it waits: {view:?}"
+    );
+    assert!(!view.nosing_in);
+    // Past its patience, a queue this slow does not stop it: it noses in.
+    world.time += 9.0;
+    let view = hazards::scan(&world, &route, index, &mut memory);
+    assert!(view.nosing_in, "{view:?}");
+    assert_ne!(view.cause, Some(BrakeReason::LaneChange));
+    // A car that comes fast still does.
+    world.traffic.vehicles[0].speed = 6.0;
+    let view = hazards::scan(&world, &route, index, &mut memory);
+    assert_eq!(view.cause, Some(BrakeReason::LaneChange), "{view:?}");
 }

@@ -25,7 +25,7 @@ const LANE_CHANGE_ALONGSIDE: f64 = 5.0;
 const FOLLOWER_REACTION: f64 = 1.0;
 const FOLLOWER_DECEL: f64 = 3.0;
 /// After waiting this long for a gap, s, the ego noses into a queue moving slower than
-/// [`NOSE_IN_SPEED`] (m/s): traffic brakes for a box on its path.
+/// [`NOSE_IN_SPEED`] (m/s), at walking pace: traffic brakes for a box on its path.
 const LANE_CHANGE_PATIENCE: f64 = 8.0;
 const NOSE_IN_SPEED: f64 = 3.0;
 
@@ -66,6 +66,8 @@ pub struct HazardView {
     pub cause: Option<BrakeReason>,
     /// A walker or cyclist is near the path ahead.
     pub walker_near: bool,
+    /// Changing lanes into a slow queue, nosing in at walking pace.
+    pub nosing_in: bool,
     /// The forecast predicts a collision.
     pub collision_predicted: bool,
 }
@@ -132,8 +134,8 @@ pub fn scan(
 }
 
 /// Before a lane change on the path, wait at its start while a vehicle on the target lane is
-/// alongside ([`LANE_CHANGE_ALONGSIDE`] either side of the ego) or closing in from behind
-/// (only a fast one, after [`LANE_CHANGE_PATIENCE`]).
+/// alongside ([`LANE_CHANGE_ALONGSIDE`] either side of the ego) or closing in from behind;
+/// after [`LANE_CHANGE_PATIENCE`], nose into a queue slower than [`NOSE_IN_SPEED`].
 fn lane_change_gap(
     world: &World<'_>,
     route: &DenseRoute,
@@ -163,7 +165,7 @@ fn lane_change_gap(
     let impatient = memory
         .lane_change_wait
         .is_some_and(|since| world.time - since > LANE_CHANGE_PATIENCE);
-    let busy = world.traffic.vehicles.iter().any(|v| {
+    let mut blockers = world.traffic.vehicles.iter().filter(|v| {
         let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
         let s = if v.lane == target.idx {
             v.s
@@ -171,25 +173,27 @@ fn lane_change_gap(
             v.s - map.lane(v.lane).length()
         };
         // Behind, a car blocks the change while it could not stop comfortably (after a
-        // second's reaction) short of the ego; once the ego has waited its patience out, a
-        // slow one whose centre is behind the ego's no longer does: the ego noses in ahead of
-        // it and it brakes for the box on its path, as in a zip merge.
+        // second's reaction) short of the ego.
         let behind = ego_s - s;
         let stopping = v.speed * FOLLOWER_REACTION + v.speed * v.speed / (2.0 * FOLLOWER_DECEL);
-        let yields = impatient && v.speed < NOSE_IN_SPEED;
-        let alongside = if yields {
-            (-LANE_CHANGE_ALONGSIDE..=0.0).contains(&behind)
-        } else {
-            behind.abs() < LANE_CHANGE_ALONGSIDE
-        };
-        let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping && !yields;
+        let alongside = behind.abs() < LANE_CHANGE_ALONGSIDE;
+        let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping;
         on_target && (alongside || closing)
     });
-    if busy {
-        memory.lane_change_wait.get_or_insert(world.time);
-        let gap = along(route, index, start) - ego.half_extent.x;
-        view.obstacle(gap, 0.0, BrakeReason::LaneChange);
+    let Some(first) = blockers.next() else {
+        return;
+    };
+    memory.lane_change_wait.get_or_insert(world.time);
+    let slow = first.speed < NOSE_IN_SPEED && blockers.all(|v| v.speed < NOSE_IN_SPEED);
+    if impatient && slow {
+        // A queue this slow never opens a gap by itself: nose in at walking pace, as in a zip
+        // merge. The cars behind brake for the box on their path, and the scan along the
+        // ego's path keeps it off the one ahead.
+        view.nosing_in = true;
+        return;
     }
+    let gap = along(route, index, start) - ego.half_extent.x;
+    view.obstacle(gap, 0.0, BrakeReason::LaneChange);
 }
 
 /// Index of the last route point within `distance` of `index`.

@@ -3,7 +3,8 @@
 //!
 //! - Lateral: pure pursuit on the dense route, look-ahead 4-10 m growing with speed.
 //! - Speed targets: [`ROAD_SPEED`] on road, [`JUNCTION_SPEED`] in and just before junctions,
-//!   [`WALKER_SPEED`] near walkers and cyclists, capped by the curvature ahead.
+//!   [`WALKER_SPEED`] near walkers and cyclists and when nosing into a slow queue, capped by
+//!   the curvature ahead.
 //! - Longitudinal: IDM towards the nearest obstacle on the path ahead ([`hazards`]): a lead
 //!   actor, the stop line of a red or yellow light (yellow only when it can still stop), a
 //!   stop sign it has not yet stopped at.
@@ -106,7 +107,7 @@ impl Expert {
         let steer = pure_pursuit(route, self.index, &ego, &self.params);
 
         let view = hazards::scan(world, route, self.index, &mut self.hazards);
-        let target = target_speed(map, route, self.index, view.walker_near);
+        let target = target_speed(map, route, self.index, &view);
         self.plan = plan::plan(&plan::PlanStart {
             map,
             route,
@@ -144,12 +145,17 @@ impl Expert {
 
 /// The speed the expert aims for at route point `index`: cruise, capped by the curvature ahead,
 /// in and just before junctions, and near walkers.
-fn target_speed(map: &crate::map::Map, route: &DenseRoute, index: usize, walker_near: bool) -> f64 {
+fn target_speed(
+    map: &crate::map::Map,
+    route: &DenseRoute,
+    index: usize,
+    view: &hazards::HazardView,
+) -> f64 {
     let mut target = ROAD_SPEED.min(curve_speed(route, index));
     if near_junction(map, route, index) {
         target = target.min(JUNCTION_SPEED);
     }
-    if walker_near {
+    if view.walker_near || view.nosing_in {
         target = target.min(WALKER_SPEED);
     }
     target

@@ -54,7 +54,7 @@ pub(crate) fn plan(start: &PlanStart<'_>) -> Vec<DVec2> {
         let accel = if start.view.collision_predicted {
             -start.max_brake
         } else {
-            let target = target_speed(map, route, index, start.view.walker_near);
+            let target = target_speed(map, route, index, start.view);
             let obstacle = start
                 .view
                 .obstacle
