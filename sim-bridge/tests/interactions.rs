@@ -13,28 +13,37 @@ use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::traffic::Vehicle;
 use sim_bridge::world::{World, WorldConfig};
 
+fn load(name: &str, xml: &str) -> Map {
+    Map::from_str(name, xml, MapOptions::default()).unwrap()
+}
+
 fn road() -> Map {
-    let xml = include_str!("maps/lane_drop.xodr");
-    Map::from_str("lane-drop", xml, MapOptions::default()).unwrap()
+    load("lane-drop", include_str!("maps/lane_drop.xodr"))
+}
+
+/// The route between two keypoints, given in the map frame (x east, y north).
+fn route(map: &Map, from: (f64, f64), to: (f64, f64)) -> DenseRoute {
+    // Route files use CARLA's frame: y flipped.
+    let xml = format!(
+        r#"<routes><route id="0" town="x">
+            <waypoint x="{}" y="{}" z="0.0"/><waypoint x="{}" y="{}" z="0.0"/>
+        </route></routes>"#,
+        from.0, -from.1, to.0, -to.1
+    );
+    let spec = &sim_bridge::route::xml::parse("test", &xml).unwrap()[0];
+    sim_bridge::route::planner::plan_route(map, spec).unwrap()
 }
 
 /// A route along road 1's outer lane (y = -5.25).
 fn outer_lane_route(map: &Map) -> DenseRoute {
-    let spec = &sim_bridge::route::xml::parse(
-        "ego",
-        r#"<routes><route id="0" town="lane-drop">
-            <waypoint x="20.0" y="5.25" z="0.0"/><waypoint x="250.0" y="5.25" z="0.0"/>
-        </route></routes>"#,
-    )
-    .unwrap()[0];
-    sim_bridge::route::planner::plan_route(map, spec).unwrap()
+    route(map, (20.0, -5.25), (250.0, -5.25))
 }
 
-/// A world holding exactly one background vehicle, on road 1's lane `lane_id` at `s`.
+/// A world holding exactly one background vehicle, on lane `lane_id` of road `road` at `s`.
 fn world_with_one_vehicle<'m>(
     map: &'m Map,
     route: &DenseRoute,
-    lane_id: i32,
+    (road, lane_id): (&str, i32),
     s: f64,
     speed: f64,
 ) -> World<'m> {
@@ -48,7 +57,7 @@ fn world_with_one_vehicle<'m>(
     let lane = map
         .lanes
         .iter()
-        .find(|l| l.road_id == "1" && l.lane_id == lane_id)
+        .find(|l| l.road_id == road && l.lane_id == lane_id)
         .unwrap();
     let v: &mut Vehicle = &mut world.traffic.vehicles[0];
     v.lane = lane.idx;
@@ -58,6 +67,11 @@ fn world_with_one_vehicle<'m>(
     v.desired_speed = speed;
     v.next = lane.successors.first().copied().into_iter().collect();
     world
+}
+
+/// The ego's index on `route`.
+fn ego_index(world: &World<'_>, route: &DenseRoute) -> usize {
+    route.advance_index(0, world.ego_state().position.truncate(), route.points.len())
 }
 
 const HOLD: Control = Control {
@@ -70,7 +84,7 @@ const HOLD: Control = Control {
 fn a_follower_stops_for_an_ego_that_pokes_into_its_lane() {
     let map = road();
     let route = outer_lane_route(&map);
-    let mut world = world_with_one_vehicle(&map, &route, -1, 60.0, 8.0);
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), 60.0, 8.0);
     // The ego stands on the outer lane's inner edge: matched to lane -2, its left side 0.35 m
     // into lane -1, where the follower comes at 8 m/s.
     world.ego = Ego::new(EgoParams::default(), DVec3::new(120.0, -3.6, 0.0), 0.0);
@@ -92,12 +106,12 @@ fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
     let map = road();
     let route = outer_lane_route(&map);
     // The ego at s = 100 on the outer lane; a stopped car that ran 1.5 m into its rear.
-    let mut world = world_with_one_vehicle(&map, &route, -2, 0.0, 0.0);
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -2), 0.0, 0.0);
     world.ego = Ego::new(EgoParams::default(), DVec3::new(100.0, -5.25, 0.0), 0.0);
     let ego_half = world.ego_state().half_extent.x;
     let car = &mut world.traffic.vehicles[0];
     car.s = 100.0 - ego_half - car.half.x + 1.5;
-    let index = route.advance_index(0, world.ego_state().position.truncate(), route.points.len());
+    let index = ego_index(&world, &route);
     let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
     assert_eq!(view.obstacle, None, "{view:?}");
     // The same car ahead of the ego is an obstacle.
@@ -110,42 +124,13 @@ fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
 
 #[test]
 fn the_expert_waits_for_a_lane_change_gap_then_noses_into_a_slow_queue() {
-    let map = Map::from_str(
-        "lane-add",
-        include_str!("maps/lane_add.xodr"),
-        MapOptions::default(),
-    )
-    .unwrap();
-    let spec = &sim_bridge::route::xml::parse(
-        "change",
-        r#"<routes><route id="0" town="lane-add">
-            <waypoint x="20.0" y="1.75" z="0.0"/><waypoint x="180.0" y="5.25" z="0.0"/>
-        </route></routes>"#,
-    )
-    .unwrap()[0];
-    let route = sim_bridge::route::planner::plan_route(&map, spec).unwrap();
-    let config = WorldConfig {
-        vehicles: 1,
-        scenarios: false,
-        parked_cars: false,
-        ..WorldConfig::default()
-    };
-    let mut world = World::new(&map, &route, config);
+    let map = load("lane-add", include_str!("maps/lane_add.xodr"));
+    let route = route(&map, (20.0, -1.75), (180.0, -5.25));
     // The ego stands just short of where the route changes into the new lane; a car crawls
     // alongside in it.
+    let mut world = world_with_one_vehicle(&map, &route, ("2", -2), 1.0, 0.5);
     world.ego = Ego::new(EgoParams::default(), DVec3::new(96.0, -1.75, 0.0), 0.0);
-    let new_lane = map
-        .lanes
-        .iter()
-        .find(|l| l.road_id == "2" && l.lane_id == -2)
-        .unwrap();
-    let car: &mut Vehicle = &mut world.traffic.vehicles[0];
-    car.lane = new_lane.idx;
-    car.s = 1.0;
-    car.lateral = 0.0;
-    car.speed = 0.5;
-    car.next.clear();
-    let index = route.advance_index(0, world.ego_state().position.truncate(), route.points.len());
+    let index = ego_index(&world, &route);
     let mut memory = HazardMemory::default();
 
     let view = hazards::scan(&world, &route, index, &mut memory);
