@@ -9,8 +9,11 @@ use sim_bridge::camera::{CameraSpec, Rig};
 use sim_bridge::map::{Map, MapOptions};
 use ssrdrive_proto::v1;
 
+/// What a fuzz target does with one input.
+pub type Entry = fn(&[u8]);
+
 /// The fuzz targets, by name: the folders of `fuzz/seeds` and `fuzz/regressions`.
-pub const TARGETS: [(&str, fn(&[u8])); 7] = [
+pub const TARGETS: [(&str, Entry); 7] = [
     ("image_decode", image_decode),
     ("rig_json", rig_json),
     ("route_xml", route_xml),
