@@ -59,6 +59,7 @@ fn config(out: &Path, noise: f64) -> CollectConfig {
             ..NoiseConfig::default()
         },
         driver: None,
+        tag: None,
         jobs: 2,
     }
 }
@@ -315,4 +316,17 @@ fn a_driver_drives_while_the_expert_labels_its_states() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("driver"), "{err}");
+    // A tagged round goes beside the untagged episodes in the same folder.
+    let mut round = dagger.clone();
+    round.tag = Some("round 2".into());
+    collect(&round, &tasks, Some(&factory), |_| {}).unwrap();
+    let names: Vec<String> = Dataset::open(&out)
+        .unwrap()
+        .manifest
+        .episode_list
+        .iter()
+        .map(|e| e.name.clone())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+    assert!(names[1].ends_with("__round-2"), "{names:?}");
 }

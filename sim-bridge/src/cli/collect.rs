@@ -56,6 +56,10 @@ pub struct CollectArgs {
     /// reached; noise injection is off.
     #[arg(long)]
     driver: Option<String>,
+    /// Added to every episode's folder name, so several collections share one dataset folder:
+    /// a DAgger round beside the expert's episodes (`--driver local --tag dagger1`).
+    #[arg(long)]
+    tag: Option<String>,
     /// Worker threads (one route run each).
     #[arg(long, default_value_t = default_jobs(), value_parser = clap::value_parser!(u64).range(1..=256))]
     jobs: u64,
@@ -181,6 +185,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             longitudinal: args.noise_longitudinal,
         },
         driver: args.driver.clone(),
+        tag: args.tag.clone(),
         jobs: args.jobs as usize,
     };
     let bar = if args.quiet {

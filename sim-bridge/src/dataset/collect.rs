@@ -40,6 +40,9 @@ pub struct CollectConfig {
     /// Who drives, when not the expert (DAgger), as recorded in each episode: the learner's
     /// server, for example.
     pub driver: Option<String>,
+    /// Added to every episode's folder name, so several collections (DAgger rounds, say)
+    /// share one dataset folder.
+    pub tag: Option<String>,
     /// Worker threads.
     pub jobs: usize,
 }
@@ -58,12 +61,17 @@ pub struct EpisodeTask<'m> {
 }
 
 impl EpisodeTask<'_> {
-    /// Folder name: town, set, route and repetition, in file-name-safe characters.
-    pub fn name(&self) -> String {
-        safe_name(&format!(
+    /// Folder name: town, set, route, repetition and the collection's tag, if any, in
+    /// file-name-safe characters.
+    pub fn name(&self, tag: Option<&str>) -> String {
+        let name = format!(
             "{}__{}__{}__r{}",
             self.map.name, self.route_set, self.spec.id, self.repetition
-        ))
+        );
+        safe_name(&match tag {
+            Some(tag) => format!("{name}__{tag}"),
+            None => name,
+        })
     }
 }
 
@@ -108,7 +116,8 @@ pub fn collect(
         .rig
         .validate()
         .map_err(|e| DatasetError::invalid(&config.out, format!("rig: {e}")))?;
-    let mut names: Vec<String> = tasks.iter().map(EpisodeTask::name).collect();
+    let tag = config.tag.as_deref();
+    let mut names: Vec<String> = tasks.iter().map(|t| t.name(tag)).collect();
     names.sort();
     if let Some(pair) = names.windows(2).find(|w| w[0] == w[1]) {
         return Err(DatasetError::invalid(
@@ -193,7 +202,7 @@ fn collect_one(
     ticks_per_frame: u64,
     driver: Option<&mut (dyn Agent + 'static)>,
 ) -> Result<EpisodeDone, DatasetError> {
-    let name = task.name();
+    let name = task.name(config.tag.as_deref());
     let episodes = config.out.join("episodes");
     let dir = episodes.join(&name);
     let info_path = dir.join("episode.json");
