@@ -165,26 +165,31 @@ fn lane_change_gap(
     let impatient = memory
         .lane_change_wait
         .is_some_and(|since| world.time - since > LANE_CHANGE_PATIENCE);
-    let mut blockers = world.traffic.vehicles.iter().filter(|v| {
-        let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
-        let s = if v.lane == target.idx {
-            v.s
-        } else {
-            v.s - map.lane(v.lane).length()
-        };
-        // Behind, a car blocks the change while it could not stop comfortably (after a
-        // second's reaction) short of the ego.
-        let behind = ego_s - s;
-        let stopping = v.speed * FOLLOWER_REACTION + v.speed * v.speed / (2.0 * FOLLOWER_DECEL);
-        let alongside = behind.abs() < LANE_CHANGE_ALONGSIDE;
-        let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping;
-        on_target && (alongside || closing)
-    });
-    let Some(first) = blockers.next() else {
+    let blockers: Vec<_> = world
+        .traffic
+        .vehicles
+        .iter()
+        .filter(|v| {
+            let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
+            let s = if v.lane == target.idx {
+                v.s
+            } else {
+                v.s - map.lane(v.lane).length()
+            };
+            // Behind, a car blocks the change while it could not stop comfortably (after a
+            // second's reaction) short of the ego.
+            let behind = ego_s - s;
+            let stopping = v.speed * FOLLOWER_REACTION + v.speed * v.speed / (2.0 * FOLLOWER_DECEL);
+            let alongside = behind.abs() < LANE_CHANGE_ALONGSIDE;
+            let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping;
+            on_target && (alongside || closing)
+        })
+        .collect();
+    if blockers.is_empty() {
         return;
-    };
+    }
     memory.lane_change_wait.get_or_insert(world.time);
-    let slow = first.speed < NOSE_IN_SPEED && blockers.all(|v| v.speed < NOSE_IN_SPEED);
+    let slow = blockers.iter().all(|v| v.speed < NOSE_IN_SPEED);
     if impatient && slow {
         // A queue this slow never opens a gap by itself: nose in at walking pace, as in a zip
         // merge. The cars behind brake for the box on their path, and the scan along the
