@@ -7,7 +7,9 @@
 //! conflicting connector is occupied (by a vehicle or the ego) and no conflicting vehicle that
 //! arrived earlier is waiting to enter; otherwise it holds at the stop line. A vehicle whose path
 //! runs into a lane that ends (a lane drop, as on CARLA's Town06 highways) merges into a
-//! neighbour that goes on, as CARLA's traffic manager does. Vehicles stuck for
+//! neighbour that goes on, as CARLA's traffic manager does. A vehicle near the ego also checks
+//! the corridor its path sweeps ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego
+//! is on, and stops short of it. Vehicles stuck for
 //! [`RESPAWN_AFTER_S`] out of the ego's sight (more than [`RESPAWN_CLEARANCE`] away), or at such a
 //! lane end anywhere, are moved to a free place elsewhere, as a stand-in for CARLA's traffic
 //! manager clearing jams.
