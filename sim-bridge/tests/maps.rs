@@ -223,6 +223,32 @@ fn a_lane_of_absurd_width_is_left_out() {
     );
 }
 
+/// Two connectors that end in the same lane conflict (traffic takes turns entering them) even
+/// when one reaches that lane through a further piece of the junction: CARLA cuts some
+/// connectors at section seams, and the pieces hid merges, so traffic piled into each other
+/// inside Town03's junctions.
+#[test]
+fn connectors_that_merge_through_a_split_piece_conflict() {
+    let xml = include_str!("maps/split_connector.xodr");
+    let map = Map::from_str("split-connector", xml, MapOptions::default()).unwrap();
+    let lane_of = |road: &str| {
+        map.lanes
+            .iter()
+            .find(|l| l.road_id == road && l.kind == sim_bridge::map::LaneKind::Driving)
+            .unwrap_or_else(|| panic!("road {road}"))
+            .idx
+    };
+    let (first_piece, second_piece, turn) = (lane_of("10"), lane_of("11"), lane_of("12"));
+    let conflicts = sim_bridge::world::traffic::conflicts(&map);
+    let of = |lane| conflicts.get(&lane).cloned().unwrap_or_default();
+    assert!(of(first_piece).contains(&turn), "{:?}", of(first_piece));
+    assert!(of(second_piece).contains(&turn), "{:?}", of(second_piece));
+    assert!(
+        !of(first_piece).contains(&second_piece),
+        "the two pieces of one connector do not conflict"
+    );
+}
+
 /// Parked cars go on parking lanes wide enough to hold them clear of the driving lanes, never
 /// where the car would reach into a driving lane (CARLA's Town03 has parking strips beside
 /// junction connectors, where a parked car blocked every route through).

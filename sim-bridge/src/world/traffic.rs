@@ -3,7 +3,7 @@
 //! stop signs, give way inside junctions, and now and then change lanes.
 //!
 //! Junction rule: a connector lane conflicts with another if their centre lines cross or they
-//! end in the same lane. A vehicle within [`REQUEST_DISTANCE`] of a junction may enter when no
+//! end in the same lane (through any further pieces of the junction). A vehicle within [`REQUEST_DISTANCE`] of a junction may enter when no
 //! conflicting connector is occupied (by a vehicle or the ego) and no conflicting vehicle that
 //! arrived earlier is waiting to enter; otherwise it holds at the stop line. A vehicle whose path
 //! runs into a lane that ends (a lane drop, as on CARLA's Town06 highways) merges into a
@@ -48,6 +48,8 @@ const LANE_CHANGE_RATE: f64 = 0.01;
 const DIVERGE_LENGTH: f64 = 12.0;
 /// Speed at which a lane change moves across, m/s.
 const LATERAL_SPEED: f64 = 1.0;
+/// Most pieces a junction connector is followed through when looking for where it leads.
+const MAX_CONNECTOR_PIECES: usize = 4;
 /// How far ahead of its front a vehicle checks its path for the ego's box, m.
 const EGO_WATCH: f64 = 30.0;
 /// Spacing of that check, m.
@@ -646,12 +648,18 @@ fn curve_limited_speed(map: &Map, v: &Vehicle) -> f64 {
 pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
     let mut out: BTreeMap<LaneIdx, Vec<LaneIdx>> = BTreeMap::new();
     for j in &map.junctions {
+        let exits: HashMap<LaneIdx, Vec<LaneIdx>> =
+            j.lanes.iter().map(|&l| (l, exits(map, l))).collect();
         for (a_i, &a) in j.lanes.iter().enumerate() {
             for &b in &j.lanes[a_i + 1..] {
                 let (la, lb) = (map.lane(a), map.lane(b));
+                let (ea, eb) = (&exits[&a], &exits[&b]);
+                // One path cut into pieces (a connector whose lane id changes at a section
+                // seam) does not conflict with itself.
+                let chained = ea.contains(&b) || eb.contains(&a);
                 let same_start = la.predecessors.iter().any(|p| lb.predecessors.contains(p));
-                let merge = la.successors.iter().any(|s| lb.successors.contains(s));
-                if merge || (!same_start && polylines_cross(&la.points, &lb.points)) {
+                let merge = !chained && ea.iter().any(|e| eb.contains(e));
+                if merge || (!chained && !same_start && polylines_cross(&la.points, &lb.points)) {
                     out.entry(a).or_default().push(b);
                     out.entry(b).or_default().push(a);
                 }
@@ -659,6 +667,30 @@ pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
         }
     }
     out.into_iter().collect()
+}
+
+/// The lanes a junction lane leads into, through any further pieces of the same junction
+/// (CARLA's files cut some connectors at section seams, down to pieces of half a metre): those
+/// pieces themselves, then the first lanes beyond the junction. Two connectors whose paths end
+/// in the same lane merge there even when one reaches it through such a piece.
+fn exits(map: &Map, lane: LaneIdx) -> Vec<LaneIdx> {
+    let junction = map.lane(lane).junction;
+    let mut out = Vec::new();
+    let mut frontier = map.lane(lane).successors.clone();
+    for _ in 0..MAX_CONNECTOR_PIECES {
+        let mut next = Vec::new();
+        for l in frontier {
+            if out.contains(&l) {
+                continue;
+            }
+            out.push(l);
+            if map.lane(l).junction == junction && junction.is_some() {
+                next.extend(map.lane(l).successors.iter().copied());
+            }
+        }
+        frontier = next;
+    }
+    out
 }
 
 fn polylines_cross(a: &[DVec3], b: &[DVec3]) -> bool {
