@@ -10,6 +10,23 @@ use sim_bridge::route::{planner, xml};
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::{WorldConfig, leaderboard_vehicles};
 
+/// The expert's driving score on one route (run `index` of its evaluation).
+fn expert_ds(map: &Map, spec: &xml::RouteSpec, world: WorldConfig, index: usize) -> f64 {
+    let dense = planner::plan_route(map, spec).unwrap();
+    let run = run_route(
+        map,
+        spec,
+        &dense,
+        &mut Expert::new(),
+        world,
+        ScoringConfig::default(),
+        index,
+        0,
+        |_| {},
+    );
+    run.record.scores.score_composed
+}
+
 #[test]
 fn tcp_training_routes_plan_on_carla_towns() {
     let Some(dir) = carla_dir() else { return };
@@ -170,21 +187,7 @@ fn the_expert_drives_a_sample_of_long_routes_on_each_carla_town() {
         let scores: Vec<f64> = specs
             .iter()
             .enumerate()
-            .map(|(index, spec)| {
-                let dense = planner::plan_route(&map, spec).unwrap();
-                let run = run_route(
-                    &map,
-                    spec,
-                    &dense,
-                    &mut Expert::new(),
-                    world,
-                    ScoringConfig::default(),
-                    index,
-                    0,
-                    |_| {},
-                );
-                run.record.scores.score_composed
-            })
+            .map(|(index, spec)| expert_ds(&map, spec, world, index))
             .collect();
         let mean = scores.iter().sum::<f64>() / scores.len() as f64;
         eprintln!("Town{town}: DS {scores:?}, mean {mean:.1}");
@@ -239,19 +242,7 @@ fn the_expert_drives_routes_on_a_town_it_was_never_tuned_on() {
             waypoint(b)
         );
         let spec = &xml::parse("town02", &xml).unwrap()[0];
-        let dense = planner::plan_route(&map, spec).unwrap();
-        let run = run_route(
-            &map,
-            spec,
-            &dense,
-            &mut Expert::new(),
-            world,
-            ScoringConfig::default(),
-            k,
-            0,
-            |_| {},
-        );
-        scores.push(run.record.scores.score_composed);
+        scores.push(expert_ds(&map, spec, world, k));
     }
     let mean = scores.iter().sum::<f64>() / scores.len() as f64;
     eprintln!("Town02: DS {scores:?}, mean {mean:.1}");
