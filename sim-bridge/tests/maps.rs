@@ -1,7 +1,20 @@
 //! Map loading errors and the bundled towns' traffic control, through the public API.
 
 use sim_bridge::map::{Map, MapError, MapOptions};
+use sim_bridge::route::DenseRoute;
 use sim_bridge::towngen::{self, TownStyle};
+
+/// The route from `from` to `to`, keypoints in a route file's (CARLA's) frame: y flipped.
+fn plan(map: &Map, from: (f64, f64), to: (f64, f64)) -> DenseRoute {
+    let xml = format!(
+        r#"<routes><route id="0" town="x">
+            <waypoint x="{}" y="{}" z="0.0"/><waypoint x="{}" y="{}" z="0.0"/>
+        </route></routes>"#,
+        from.0, from.1, to.0, to.1
+    );
+    let spec = &sim_bridge::route::xml::parse("test", &xml).unwrap()[0];
+    sim_bridge::route::planner::plan_route(map, spec).unwrap()
+}
 
 #[test]
 fn malformed_opendrive_is_a_clear_error() {
@@ -141,15 +154,7 @@ fn a_road_too_short_for_geometry_still_links_its_neighbours() {
 fn a_keypoint_far_off_the_map_matches_the_nearest_lane() {
     let xml = include_str!("maps/degenerate_road.xodr");
     let map = Map::from_str("degenerate-road", xml, MapOptions::default()).unwrap();
-    let routes = sim_bridge::route::xml::parse(
-        "far",
-        r#"<routes><route id="0" town="x">
-            <waypoint x="2.0" y="1.75" z="0.0"/>
-            <waypoint x="55.0" y="-90.0" z="0.0"/>
-        </route></routes>"#,
-    )
-    .unwrap();
-    let route = sim_bridge::route::planner::plan_route(&map, &routes[0]).unwrap();
+    let route = plan(&map, (2.0, 1.75), (55.0, -90.0));
     let end = route.points.last().unwrap().position;
     assert!(
         (end.x - 55.0).abs() < 1.0 && (end.y + 1.75).abs() < 0.5,
@@ -164,15 +169,7 @@ fn a_keypoint_far_off_the_map_matches_the_nearest_lane() {
 fn a_keypoint_just_into_a_lane_that_begins_plans_with_a_short_change() {
     let xml = include_str!("maps/lane_add.xodr");
     let map = Map::from_str("lane-add", xml, MapOptions::default()).unwrap();
-    let routes = sim_bridge::route::xml::parse(
-        "short-change",
-        r#"<routes><route id="0" town="x">
-            <waypoint x="20.0" y="1.75" z="0.0"/>
-            <waypoint x="105.0" y="5.25" z="0.0"/>
-        </route></routes>"#,
-    )
-    .unwrap();
-    let route = sim_bridge::route::planner::plan_route(&map, &routes[0]).unwrap();
+    let route = plan(&map, (20.0, 1.75), (105.0, 5.25));
     let end = route.points.last().unwrap().position;
     assert!(
         (end.x - 105.0).abs() < 1.0 && (end.y + 5.25).abs() < 0.3,
@@ -288,14 +285,7 @@ fn traffic_merges_out_of_a_lane_that_ends() {
         .expect("the dropped lane");
     assert!(dropped.successors.is_empty(), "it ends");
     // The ego waits on a road of its own, far away.
-    let spec = &sim_bridge::route::xml::parse(
-        "ego",
-        r#"<routes><route id="0" town="lane-drop">
-            <waypoint x="5.0" y="-401.75" z="0.0"/><waypoint x="90.0" y="-401.75" z="0.0"/>
-        </route></routes>"#,
-    )
-    .unwrap()[0];
-    let route = sim_bridge::route::planner::plan_route(&map, spec).unwrap();
+    let route = plan(&map, (5.0, -401.75), (90.0, -401.75));
     let hold = Control {
         steer: 0.0,
         throttle: 0.0,

@@ -5,10 +5,11 @@
 //! Between consecutive keypoints an A* search runs over (lane, entry arc length) states with two
 //! kinds of edge: driving on into a successor lane, and a lane change into a same-direction
 //! neighbour outside junctions (costed [`LANE_CHANGE_LENGTH`] + [`LANE_CHANGE_PENALTY`] so that
-//! routes change lanes only when they must). A keypoint's goal is every lane it matches equally well: CARLA's junctions hold
-//! connectors that overlap for tens of metres, and a route that reached the keypoint on the
-//! neighbouring connector must not be sent around the block to reach the other. The next search
-//! starts where the previous one arrived. Labels: points on junction connectors get LEFT,
+//! routes change lanes only when they must; shorter, and costlier, to land on a goal a full
+//! change would overshoot). A keypoint's goal is every lane it matches equally well: CARLA's
+//! junctions hold connectors that overlap for tens of metres, and a route that reached the
+//! keypoint on the neighbouring connector must not be sent around the block to reach the other.
+//! The next search starts where the previous one arrived. Labels: points on junction connectors get LEFT,
 //! RIGHT or STRAIGHT from the heading change over the whole junction (|change| < 33 degrees is
 //! STRAIGHT, as CARLA's `_turn_decision`); points of a lane change get CHANGELANELEFT/RIGHT;
 //! everything else is LANEFOLLOW. A lane change is drawn as a smooth lateral transition over
@@ -242,12 +243,14 @@ fn search(map: &Map, start: LaneSpot, goals: &[LaneSpot]) -> Option<(Vec<Leg>, L
             // A goal on the neighbour that a full-length change would overshoot (a keypoint a
             // few metres into a lane that only a lane change reaches): a shorter change that
             // lands on it, costed as the full one plus the penalty again.
-            let beside = map
-                .lane(n)
-                .project(lane.pose_at(spot.s).position.truncate())
-                .s;
+            // (Projected only when a goal is on the neighbour: this is the search's inner loop.)
+            let beside = || {
+                map.lane(n)
+                    .project(lane.pose_at(spot.s).position.truncate())
+                    .s
+            };
             for goal in goals.iter().filter(|g| g.lane == n) {
-                let length = goal.s - beside;
+                let length = goal.s - beside();
                 if (SHORT_CHANGE_MIN..LANE_CHANGE_LENGTH).contains(&length)
                     && spot.s + length <= lane.length()
                 {

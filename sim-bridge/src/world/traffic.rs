@@ -3,16 +3,16 @@
 //! stop signs, give way inside junctions, and now and then change lanes.
 //!
 //! Junction rule: a connector lane conflicts with another if their centre lines cross or they
-//! end in the same lane (through any further pieces of the junction). A vehicle within [`REQUEST_DISTANCE`] of a junction may enter when no
-//! conflicting connector is occupied (by a vehicle or the ego) and no conflicting vehicle that
-//! arrived earlier is waiting to enter; otherwise it holds at the stop line. A vehicle whose path
-//! runs into a lane that ends (a lane drop, as on CARLA's Town06 highways) merges into a
-//! neighbour that goes on, as CARLA's traffic manager does. A vehicle near the ego also checks
-//! the corridor its path sweeps ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego
-//! is on, and stops short of it. Vehicles stuck for
-//! [`RESPAWN_AFTER_S`] out of the ego's sight (more than [`RESPAWN_CLEARANCE`] away), or at such a
-//! lane end anywhere, are moved to a free place elsewhere, as a stand-in for CARLA's traffic
-//! manager clearing jams.
+//! end in the same lane (through any further pieces of the junction). A vehicle within
+//! [`REQUEST_DISTANCE`] of a junction may enter when no conflicting connector is occupied (by a
+//! vehicle or the ego) and no conflicting vehicle that arrived earlier is waiting to enter;
+//! otherwise it holds at the stop line. A vehicle whose path runs into a lane that ends (a lane
+//! drop, as on CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic
+//! manager does. A vehicle near the ego also checks the corridor its path sweeps
+//! ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego is on, and stops short of
+//! it. Vehicles stuck for [`RESPAWN_AFTER_S`] out of the ego's sight (more than
+//! [`RESPAWN_CLEARANCE`] away), or at such a lane end anywhere, are moved to a free place
+//! elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -487,7 +487,7 @@ impl Traffic {
                 .into_iter()
                 .flatten()
                 .find(|t| map.lane(*t).kind == LaneKind::Driving && goes_on(t));
-            let Some(target) = target.filter(|t| map.lane(*t).kind == LaneKind::Driving) else {
+            let Some(target) = target else {
                 continue;
             };
             let (pos, _) = v.pose(map);
