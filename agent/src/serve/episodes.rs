@@ -115,7 +115,7 @@ impl EpisodeTable {
     pub fn close(&self, id: &str, driver: Driver) -> Result<u64, EpisodeError> {
         let mut episodes = self.lock();
         driven_by(&episodes, id, driver)?;
-        Ok(episodes.remove(id).map_or(0, |e| e.steps))
+        Ok(episodes.remove(id).expect("checked above").steps)
     }
 
     /// Takes the episode's state for the step of `frame_index`.
