@@ -8,17 +8,17 @@ use anyhow::Context as _;
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
-
-use ssr_agent::camera::{CameraSpec, Rig};
 use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
 use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::stl::COMMANDS;
 use ssr_agent::model::{ModelInput, SsrModel, float_tensor};
-use ssr_agent::policy::{Frame, SsrPolicy, StepInput};
+use ssr_agent::policy::{SsrPolicy, StepInput};
 use ssr_agent::pose::{EgoMotion, Pose2};
 use ssr_agent::train::loss::{BetaTargets, ImitationTargets, LossWeights, losses};
+use ssrdrive_proto::camera::{CameraSpec, Rig};
+use ssrdrive_proto::command::{COMMANDS, RoadOption};
+use ssrdrive_proto::image::RgbImage;
 
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
@@ -87,10 +87,9 @@ fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput 
             )
         })
         .collect();
-    let mut command = vec![0.0; batch * COMMANDS];
-    for b in 0..batch {
-        command[b * COMMANDS + 3] = 1.0;
-    }
+    let command: Vec<f32> = (0..batch)
+        .flat_map(|_| RoadOption::LaneFollow.one_hot())
+        .collect();
     ModelInput {
         images: Tensor::random(
             [batch, 3, config.image_height, config.image_width],
@@ -209,7 +208,7 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
             device.clone(),
         );
         let camera = CameraSpec::tcp_front();
-        let frame = Frame {
+        let frame = RgbImage {
             width: camera.width,
             height: camera.height,
             rgb: (0..camera.width * camera.height * 3)
@@ -225,7 +224,7 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
                 rig: Rig::tcp(),
                 pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
                 speed: 6.0,
-                command: 4,
+                command: RoadOption::LaneFollow,
                 target_point: [12.0, 1.0],
                 debug: false,
             };

@@ -14,12 +14,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use sim_bridge::client::wire;
 use ssr_agent::device::Backend;
 use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::{self, ModelInfo, ServeConfig, decode};
+use ssrdrive_proto::command::RoadOption;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use ssrdrive_proto::wire;
 use tonic::transport::Channel;
 
 #[derive(clap::Args, Debug)]
@@ -86,7 +87,7 @@ fn step_request(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRe
             x: frame_index as f64 * 0.3,
             ..Default::default()
         }),
-        command: 4,
+        command: RoadOption::LaneFollow.value(),
         target_point: Some(v1::EgoPoint { x: 15.0, y: 1.0 }),
         debug: false,
     }

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Device;
+use ssrdrive_proto::camera::Rig;
 
 use crate::control::ControlConfig;
 use crate::model::SsrModel;
@@ -21,6 +22,11 @@ pub const CONFIG_KEY: &str = "ssr_config";
 /// Metadata key of the controller settings JSON (the vehicle the network was trained to drive,
 /// look-ahead, PID gains, fusion); a checkpoint without it gets [`ControlConfig::default`].
 pub const CONTROL_KEY: &str = "control";
+/// Metadata key of the rig the network was trained with (JSON); a checkpoint without it gets
+/// the config's default rig.
+pub const RIG_KEY: &str = "rig";
+/// Metadata key of the training notes (JSON: config, step, data, validation).
+pub const TRAINING_KEY: &str = "training";
 /// Largest safetensors header accepted.
 pub const MAX_HEADER_BYTES: u64 = 16 << 20;
 
@@ -103,6 +109,14 @@ pub fn control_config(info: &CheckpointInfo) -> Result<ControlConfig, String> {
         .validate()
         .map_err(|e| format!("its '{CONTROL_KEY}' metadata: {e}"))?;
     Ok(config)
+}
+
+/// The rig a checkpoint carries (checked), if any.
+pub fn rig(info: &CheckpointInfo) -> Result<Option<Rig>, String> {
+    info.metadata
+        .get(RIG_KEY)
+        .map(|json| Rig::from_json(json).map_err(|e| format!("its '{RIG_KEY}' metadata: {e}")))
+        .transpose()
 }
 
 /// Reads and checks a checkpoint's header: config, metadata, and that the file is complete.

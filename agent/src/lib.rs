@@ -1,8 +1,6 @@
 //! ssr-agent: the SSR end-to-end driving network in Burn, the controllers that turn its outputs
 //! into vehicle control, and the per-episode inference API the gRPC server uses.
 //!
-//! - [`camera`]: camera rigs in CARLA's sensor description and their projection (owned by
-//!   `sim-bridge`, which renders and records through the same rigs; re-exported here).
 //! - [`pose`]: ego poses and the ego motion between ticks.
 //! - [`model`]: the network (backbone, BEV encoder, Scenes TokenLearner, TCP head, FFP).
 //! - [`control`]: pure pursuit, speed PID, Beta rules and fusion (crate `ssr-control`).
@@ -14,9 +12,10 @@
 //!
 //! Conventions: world frame = OpenDRIVE map frame (x east, y north, z up, m); ego frame = x
 //! forward, y left, z up, origin at the centre of the vehicle box on the ground; control in
-//! CARLA's convention (steer +1 = full right).
+//! CARLA's convention (steer +1 = full right). What the agent shares with the simulator (camera
+//! rigs, controls, commands, the dataset format, wire conversions) is the contract crate
+//! `ssrdrive_proto`; this crate does not depend on the simulator.
 
-pub use sim_bridge::camera;
 pub mod checkpoint;
 pub use ssr_control as control;
 pub mod device;

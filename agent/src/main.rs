@@ -11,7 +11,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-
 use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::serve::{self, LogFormat};
@@ -57,15 +56,7 @@ enum Command {
 }
 
 fn init_logs(format: LogFormat) {
-    let filter =
-        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
-    let logs = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    match format {
-        LogFormat::Human => logs.init(),
-        LogFormat::Json => logs.json().init(),
-    }
+    ssrdrive_proto::logging::init("info", format == LogFormat::Json);
 }
 
 fn main() -> ExitCode {
@@ -81,7 +72,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            eprintln!("error: {}", sim_bridge::error_text::error_text(&error));
+            eprintln!("error: {}", ssrdrive_proto::error_text::error_text(&error));
             ExitCode::FAILURE
         }
     }

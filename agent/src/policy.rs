@@ -10,13 +10,14 @@ use std::collections::VecDeque;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
+use ssrdrive_proto::camera::{Rig, RigError};
+use ssrdrive_proto::command::{COMMANDS, RoadOption};
+use ssrdrive_proto::image::RgbImage;
 
-use crate::camera::{Rig, RigError};
 use crate::control::{ControlConfig, ControlDecision, EpisodeController};
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use crate::model::config::SsrConfig;
-use crate::model::stl::COMMANDS;
 use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
 use crate::pose::{EgoMotion, Pose2};
 
@@ -25,26 +26,18 @@ const MAX_TARGET_DISTANCE: f32 = 1000.0;
 /// Largest speed accepted, m/s.
 const MAX_SPEED: f32 = 100.0;
 
-/// One camera image, RGB8, row-major, `width * height * 3` bytes.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Frame {
-    pub width: u32,
-    pub height: u32,
-    pub rgb: Vec<u8>,
-}
-
 /// Everything the network needs at one tick of one episode.
 #[derive(Debug, Clone)]
 pub struct StepInput {
     /// One frame per rig camera, in rig order.
-    pub frames: Vec<Frame>,
+    pub frames: Vec<RgbImage>,
     pub rig: Rig,
     /// Ego pose in the world frame; consecutive poses give the ego motion.
     pub pose: Pose2,
     /// m/s.
     pub speed: f32,
-    /// CARLA RoadOption value: -1 (VOID, read as LANEFOLLOW) or 1..=6.
-    pub command: i32,
+    /// The route's command (VOID is read as LANEFOLLOW).
+    pub command: RoadOption,
     /// Ego frame (x forward, y left), metres.
     pub target_point: [f32; 2],
     /// Return token attention maps and both control sources.
@@ -76,8 +69,6 @@ pub enum InputError {
     },
     #[error("{field} = {value} is not a finite number in range")]
     BadNumber { field: &'static str, value: f32 },
-    #[error("command {command} is not a RoadOption (-1 or 1..=6)")]
-    BadCommand { command: i32 },
 }
 
 /// Why a (batched) step was refused before anything ran.
@@ -155,15 +146,6 @@ pub struct SsrPolicy {
     device: Device,
 }
 
-/// The RoadOption's one-hot index, or `None` for values that are not RoadOptions.
-pub fn command_index(command: i32) -> Option<usize> {
-    match command {
-        -1 => Some(3),
-        1..=6 => Some(command as usize - 1),
-        _ => None,
-    }
-}
-
 fn check_input(input: &StepInput) -> Result<(), InputError> {
     input.rig.validate()?;
     if input.frames.len() != input.rig.cameras.len() {
@@ -205,11 +187,6 @@ fn check_input(input: &StepInput) -> Result<(), InputError> {
         if !value.is_finite() || value.abs() > limit {
             return Err(InputError::BadNumber { field, value });
         }
-    }
-    if command_index(input.command).is_none() {
-        return Err(InputError::BadCommand {
-            command: input.command,
-        });
     }
     Ok(())
 }
@@ -318,7 +295,7 @@ impl SsrPolicy {
     /// Images `[B * cameras, 3, H, W]` at the network's input size, normalised.
     fn images(&self, inputs: &[&StepInput]) -> Tensor<4> {
         let (width, height) = (self.config.image_width, self.config.image_height);
-        let frames: Vec<&Frame> = inputs.iter().flat_map(|input| &input.frames).collect();
+        let frames: Vec<&RgbImage> = inputs.iter().flat_map(|input| &input.frames).collect();
         let values = frames
             .iter()
             .flat_map(|f| {
@@ -363,10 +340,7 @@ impl SsrPolicy {
                 .collect(),
             0,
         );
-        let mut command = vec![0f32; b * COMMANDS];
-        for (i, input) in inputs.iter().enumerate() {
-            command[i * COMMANDS + command_index(input.command).expect("checked")] = 1.0;
-        }
+        let command: Vec<f32> = inputs.iter().flat_map(|i| i.command.one_hot()).collect();
         let model_input = ModelInput {
             images: self.images(inputs),
             cameras,

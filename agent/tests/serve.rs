@@ -5,13 +5,13 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use ssr_agent::camera::{CameraSpec, Rig};
 use ssr_agent::device::Backend;
 use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::ServeConfig;
 use ssr_agent::serve::config::ServeConfigError;
 use ssr_agent::serve::decode::decode_image;
 use ssr_agent::serve::episodes::{Driver, EpisodeError, EpisodeTable};
+use ssrdrive_proto::camera::{CameraSpec, Rig};
 use ssrdrive_proto::v1;
 
 fn policy() -> SsrPolicy {
@@ -215,7 +215,7 @@ fn images_decode_from_every_encoding_to_the_same_rgb() {
     let frame = decode_image(&image(v1::ImageEncoding::Bgra8, w, h, bgra), &spec).unwrap();
     assert_eq!(frame.rgb, rgb);
 
-    let png = sim_bridge::image::encode_png(w, h, &rgb).unwrap();
+    let png = ssrdrive_proto::image::encode_png(w, h, &rgb).unwrap();
     let frame = decode_image(&image(v1::ImageEncoding::Png, w, h, png.clone()), &spec).unwrap();
     assert_eq!(frame.rgb, rgb);
 

@@ -6,7 +6,6 @@ mod common;
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
-
 use common::{model_input, tiny_config};
 use ssr_agent::model::tcp_head::SPEED_SCALE;
 use ssr_agent::model::{SsrModel, float_values};
@@ -155,9 +154,9 @@ fn validation_situations_follow_the_command_and_count_start_ups() {
 
 #[test]
 fn balanced_sampling_favours_starts_slowing_turns_and_recoveries() {
-    use sim_bridge::dataset::FrameRecord;
     use ssr_agent::train::data::sampling_weight;
-    let frame = |speed: f64, throttle: f64, brake: f64, command: i32, noise: bool| {
+    use ssrdrive_proto::dataset::FrameRecord;
+    let frame = |speed: f64, throttle: f32, brake: f32, command: i32, noise: bool| {
         let mut f: FrameRecord = serde_json::from_str(
             r#"{"index":0,"tick":0,"time":0,"speed":0,"position":[0,0,0],"yaw":0,"command":4,
             "target_point":[10,0],"control":{"steer":0,"throttle":0,"brake":0},

@@ -10,7 +10,6 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
-use sim_bridge::world::ego::Control;
 use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::{SsrModel, float_values};
@@ -18,6 +17,7 @@ use ssr_agent::train::augment::Photometric;
 use ssr_agent::train::config::{Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, SampleDraw, TrainingData, action_of};
 use ssr_agent::train::run::{MetricsLine, StepMetrics, TrainError, TrainOptions, train};
+use ssrdrive_proto::control::Control;
 
 /// Held by every test that seeds the device or draws initial weights. `train` seeds the
 /// device's random generator, which is global to the process, and then initialises the model

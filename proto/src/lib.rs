@@ -1,7 +1,26 @@
-//! Rust bindings of the ssrdrive agent service, generated at build time from
-//! `proto/ssrdrive/v1/agent.proto` (the one source of truth; read it for every field's unit and
-//! frame). Both the server (`ssr-agent serve`) and the simulator-side client (`sim-bridge`) use
-//! these types.
+//! The contract between the simulator and the agent, and nothing else: both `sim-bridge` and
+//! `ssr-agent` depend on this crate and never on each other.
+//!
+//! - [`v1`]: Rust bindings of the `ssrdrive.v1` service, generated at build time from
+//!   `proto/ssrdrive/v1/*.proto` (the one source of truth; read it for every field's unit and
+//!   frame), and [`wire`], the conversions between the types below and those messages.
+//! - [`camera`]: camera rigs in CARLA's sensor description and their projection.
+//! - [`control`]: the vehicle [`control::Control`]; [`command`]: CARLA's RoadOption and its
+//!   one-hot encoding.
+//! - [`dataset`]: the on-disk format of driving datasets and its reader; [`image`]: RGB8
+//!   images in and out of PNG.
+//! - [`files`]: capped reads and atomic writes; [`error_text`]: how errors are printed;
+//!   [`logging`]: how both binaries log.
+
+pub mod camera;
+pub mod command;
+pub mod control;
+pub mod dataset;
+pub mod error_text;
+pub mod files;
+pub mod image;
+pub mod logging;
+pub mod wire;
 
 /// Package `ssrdrive.v1`: messages, `agent_service_client` and `agent_service_server`.
 pub mod v1 {

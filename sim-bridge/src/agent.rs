@@ -7,13 +7,15 @@
 //! right (CARLA); commands are CARLA RoadOption values.
 
 use glam::{DVec2, DVec3};
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::command::RoadOption;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::v1;
 
-use crate::camera::Rig;
 use crate::map::Map;
+use crate::route::DenseRoute;
 use crate::route::plan::PlanNode;
-use crate::route::{DenseRoute, RoadOption};
 use crate::world::World;
-pub use crate::world::ego::Control;
 
 /// One camera image, rendered through the agent's rig.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -26,6 +28,19 @@ pub struct CameraFrame {
     pub height: u32,
     /// Row-major RGB8 pixels.
     pub rgb: Vec<u8>,
+}
+
+impl CameraFrame {
+    /// The frame on the wire, as an uncompressed RGB8 image.
+    pub fn to_proto(&self) -> v1::Image {
+        v1::Image {
+            camera_id: self.camera.clone(),
+            width: self.width,
+            height: self.height,
+            encoding: v1::ImageEncoding::Rgb8 as i32,
+            data: self.rgb.clone(),
+        }
+    }
 }
 
 /// What an agent is told each tick.
@@ -56,6 +71,29 @@ impl Observation {
     /// CARLA's compass for a world-frame yaw.
     pub fn compass_of(yaw: f64) -> f64 {
         (std::f64::consts::FRAC_PI_2 - yaw).rem_euclid(std::f64::consts::TAU)
+    }
+
+    /// The observation as a step request on the wire (its frames in rig order, uncompressed).
+    pub fn step_request(&self, episode_id: &str) -> v1::StepRequest {
+        v1::StepRequest {
+            episode_id: episode_id.to_string(),
+            frame_index: self.frame,
+            timestamp_s: self.time,
+            images: self.frames.iter().map(CameraFrame::to_proto).collect(),
+            speed_mps: self.speed,
+            pose: Some(v1::Pose {
+                x: self.position.x,
+                y: self.position.y,
+                z: self.position.z,
+                yaw: self.yaw,
+            }),
+            command: self.command.value(),
+            target_point: Some(v1::EgoPoint {
+                x: self.target_point.x,
+                y: self.target_point.y,
+            }),
+            debug: false,
+        }
     }
 }
 

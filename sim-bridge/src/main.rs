@@ -11,7 +11,7 @@ fn main() -> std::process::ExitCode {
     match cli::run(args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", sim_bridge::error_text::error_text(&e));
+            eprintln!("error: {}", ssrdrive_proto::error_text::error_text(&e));
             std::process::ExitCode::FAILURE
         }
     }

@@ -1,6 +1,6 @@
 //! Camera rigs: projection with roll, pitch and yaw, and rejection of malformed rigs.
 
-use sim_bridge::camera::{CameraSpec, Rig, RigError};
+use ssrdrive_proto::camera::{CameraSpec, Rig, RigError};
 
 fn close(a: [f32; 2], b: [f32; 2]) -> bool {
     (a[0] - b[0]).abs() < 1e-2 && (a[1] - b[1]).abs() < 1e-2

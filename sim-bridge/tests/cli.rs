@@ -221,7 +221,7 @@ fn render_writes_camera_frames_and_an_animation() {
     assert_eq!(names.len(), 6, "{names:?}");
     assert_eq!(names[0], "000000_rgb_front.png");
     let frame = std::fs::read(route.join(&names[1])).unwrap();
-    let image = sim_bridge::image::decode_png(&frame).unwrap();
+    let image = ssrdrive_proto::image::decode_png(&frame).unwrap();
     assert_eq!((image.width, image.height), (320, 96));
     let animation = std::fs::read(route.join("run.png")).unwrap();
     assert!(

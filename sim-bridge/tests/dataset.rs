@@ -3,10 +3,8 @@
 
 use std::path::Path;
 
-use sim_bridge::agent::{Agent, AgentError, CameraFrame, Control, Observation, RouteContext};
-use sim_bridge::camera::Rig;
+use sim_bridge::agent::{Agent, AgentError, CameraFrame, Observation, RouteContext};
 use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect};
-use sim_bridge::dataset::{Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{Map, MapOptions};
@@ -16,6 +14,9 @@ use sim_bridge::route::xml;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::towngen::bundled;
 use sim_bridge::world::{World, WorldConfig};
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::{Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
 
 fn small_town() -> (Map, RouteSet) {
     let set = RouteSet::find("train-small").expect("bundled set");

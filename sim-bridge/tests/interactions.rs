@@ -5,13 +5,14 @@
 //! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue.
 
 use glam::DVec3;
-use sim_bridge::agent::Control;
-use sim_bridge::expert::hazards::{self, BrakeReason, HazardMemory};
+use sim_bridge::expert::hazards::{self, HazardMemory};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::traffic::Vehicle;
 use sim_bridge::world::{World, WorldConfig};
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::BrakeReason;
 
 fn load(name: &str, xml: &str) -> Map {
     Map::from_str(name, xml, MapOptions::default()).unwrap()

@@ -274,8 +274,8 @@ fn parked_cars_stay_clear_of_driving_lanes() {
 /// highways) instead of queueing at its end, where they jammed the ego's lane for good.
 #[test]
 fn traffic_merges_out_of_a_lane_that_ends() {
-    use sim_bridge::agent::Control;
     use sim_bridge::world::{World, WorldConfig};
+    use ssrdrive_proto::control::Control;
     let xml = include_str!("maps/lane_drop.xodr");
     let map = Map::from_str("lane-drop", xml, MapOptions::default()).unwrap();
     let dropped = map

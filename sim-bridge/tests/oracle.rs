@@ -3,18 +3,19 @@
 //! expert does (the controller's own tests check the geometry on a simulated car).
 
 use glam::DVec2;
-use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
 use sim_bridge::map::{Map, MapOptions};
-use sim_bridge::route::RoadOption;
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::RouteSet;
 use sim_bridge::route::xml::{self, RouteSpec};
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::towngen::bundled;
 use sim_bridge::world::{World, WorldConfig};
+use ssrdrive_proto::command::RoadOption;
+use ssrdrive_proto::control::Control;
 
 fn town05_short() -> (Map, Vec<RouteSpec>) {
     let set = RouteSet::find("town05-short-style").expect("bundled set");

@@ -2,12 +2,12 @@
 //! order, traffic-light colours in the pixels, and determinism.
 
 use glam::{DVec2, DVec3};
-use sim_bridge::camera::{CameraSpec, Rig};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::render::{Appearance, CameraRenderer, SceneState};
 use sim_bridge::towngen::{TownStyle, bundled};
 use sim_bridge::world::ActorView;
 use sim_bridge::world::state::{ActorKind, EgoState, LightState, Obb};
+use ssrdrive_proto::camera::{CameraSpec, Rig};
 
 fn town() -> Map {
     let style = TownStyle::SmallTJunctions;

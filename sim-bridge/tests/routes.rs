@@ -3,12 +3,12 @@
 
 use glam::{DVec2, DVec3};
 use sim_bridge::map::{LaneKind, Map, MapOptions, angle_diff};
-use sim_bridge::route::RoadOption;
 use sim_bridge::route::plan::{PlanNode, RouteFollower, downsample, global_plan, to_ego_frame};
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::{RouteSet, SETS};
 use sim_bridge::route::xml::{self, Keypoint, RouteFileError, RouteSpec};
 use sim_bridge::towngen::{self, TownStyle};
+use ssrdrive_proto::command::RoadOption;
 
 fn town05() -> Map {
     Map::from_str(

@@ -6,11 +6,12 @@ mod scoring {
 
     use glam::{DVec2, DVec3};
     use sim_bridge::map::{LaneIdx, LaneKind, Map, MapOptions};
-    use sim_bridge::route::{DenseRoute, RoadOption, RoutePoint};
+    use sim_bridge::route::{DenseRoute, RoutePoint};
     use sim_bridge::scoring::{
         InfractionKind, RouteEnd, RouteRecord, RouteScorer, ScoringConfig, route_timeout,
     };
     use sim_bridge::world::state::{CollisionClass, CollisionEvent, EgoState, LightState};
+    use ssrdrive_proto::command::RoadOption;
 
     const DT: f64 = 0.05;
 

@@ -1,7 +1,7 @@
 //! Closed loop through the public API: agents drive bundled routes in the simulator and the
 //! scorer judges them, the way `sim-bridge eval` does.
 
-use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{Map, MapOptions};
@@ -10,6 +10,7 @@ use sim_bridge::route::sets::RouteSet;
 use sim_bridge::route::xml;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::{World, WorldConfig};
+use ssrdrive_proto::control::Control;
 
 fn short_routes() -> (Map, Vec<xml::RouteSpec>) {
     let set = RouteSet::find("town05-short-style").unwrap();

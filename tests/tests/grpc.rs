@@ -5,10 +5,10 @@
 use std::process::Command;
 use std::time::Duration;
 
-use sim_bridge::client::wire;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use ssrdrive_proto::v1::drive_request::Message;
+use ssrdrive_proto::wire;
 use ssrdrive_tests::{Server, binary, runtime};
 use tonic::Code;
 use tonic::transport::Channel;

@@ -1,7 +1,7 @@
 //! TCP's rules for acting on Beta(alpha, beta) distributions over [acceleration, steer], both
 //! mapped from [0, 1] to [-1, 1].
 
-use super::Control;
+use ssrdrive_proto::control::Control;
 
 /// The value TCP acts on: the mode when both parameters exceed 1; 0 or 1 when only one does
 /// (the density piles up at that end); the mean when neither does. Returned in [0, 1].

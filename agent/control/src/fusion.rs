@@ -5,7 +5,9 @@
 
 use std::collections::VecDeque;
 
-use super::{Control, ControlConfig};
+use ssrdrive_proto::control::Control;
+
+use super::ControlConfig;
 
 #[derive(Debug, Clone)]
 pub struct Fusion {

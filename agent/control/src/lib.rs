@@ -5,7 +5,8 @@
 //! state all of them keep ([`EpisodeController`]).
 //!
 //! A crate of its own so that the agent server and the simulator's oracle-plan agent (which
-//! feeds it the expert's plan) drive through the same code; it depends on nothing but serde.
+//! feeds it the expert's plan) drive through the same code; it depends on the contract crate
+//! (for [`Control`]) and serde.
 //!
 //! Control follows CARLA: steer in [-1, 1] with +1 full right, throttle and brake in [0, 1].
 //! Waypoints and target points are in the ego frame: x forward, y left, metres, origin at the
@@ -17,20 +18,12 @@ pub mod pid;
 pub mod trajectory;
 pub mod unstick;
 
-use serde::{Deserialize, Serialize};
-
 use fusion::Fusion;
+use serde::{Deserialize, Serialize};
+use ssrdrive_proto::control::Control;
 use trajectory::TrajectoryFollower;
 pub use unstick::Unstick;
 use unstick::UnstickState;
-
-/// A control command (CARLA convention).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Control {
-    pub steer: f32,
-    pub throttle: f32,
-    pub brake: f32,
-}
 
 /// The geometry of the vehicle being steered: what pure pursuit needs to turn a path into a
 /// steer value. Defaults are sim-bridge's sedan; CARLA's Lincoln MKZ 2017 has a 2.87 m wheelbase

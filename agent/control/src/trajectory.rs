@@ -20,8 +20,10 @@
 //! waypoint extends the last segment. A plan shorter than [`MIN_PATH`] (a stopped or stopping
 //! car) says nothing about direction, so the target point is followed instead.
 
+use ssrdrive_proto::control::Control;
+
 use super::pid::Pid;
-use super::{Control, ControlConfig, Vehicle};
+use super::{ControlConfig, Vehicle};
 
 /// Waypoints (0.5 s apart) that set the desired speed: the first second of the plan.
 const SPEED_WAYPOINTS: usize = 2;

@@ -12,8 +12,7 @@
 //! follows the plan (or the target point when the plan gives no direction).
 
 use serde::{Deserialize, Serialize};
-
-use super::Control;
+use ssrdrive_proto::control::Control;
 
 /// Below this speed (m/s) the car counts as stopped (the leaderboard's "blocked" speed).
 pub const STOPPED_SPEED: f32 = 0.1;

@@ -5,7 +5,8 @@ use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
 use ssr_control::fusion::Fusion;
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
-use ssr_control::{Control, ControlConfig, EpisodeController, Unstick, Vehicle};
+use ssr_control::{ControlConfig, EpisodeController, Unstick, Vehicle};
+use ssrdrive_proto::control::Control;
 
 fn near(a: f32, b: f32) -> bool {
     (a - b).abs() < 1e-4

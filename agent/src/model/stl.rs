@@ -11,6 +11,7 @@ use burn::module::Module;
 use burn::nn::{GroupNorm, GroupNormConfig, Linear};
 use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
+use ssrdrive_proto::command::COMMANDS;
 
 use super::config::SsrConfig;
 use super::cpu_kernels::{self, Activation};
@@ -18,8 +19,6 @@ use super::init::xavier_linear;
 use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
 
-/// RoadOption classes after mapping VOID to LANEFOLLOW (one-hot index = value - 1).
-pub const COMMANDS: usize = 6;
 /// Target points enter the gate divided by this many metres.
 pub const TARGET_SCALE: f32 = 25.0;
 

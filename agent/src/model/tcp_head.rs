@@ -14,10 +14,10 @@ use burn::module::Module;
 use burn::nn::{Gru, GruConfig, Linear};
 use burn::tensor::activation::{relu, softmax, softplus};
 use burn::tensor::{Device, Tensor};
+use ssrdrive_proto::command::COMMANDS;
 
 use super::config::SsrConfig;
 use super::init::xavier_linear;
-use super::stl::COMMANDS;
 
 /// Speed is divided by this (m/s) where it enters the network, as TCP does.
 pub const SPEED_SCALE: f32 = 12.0;

@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
+use ssrdrive_proto::files::{CappedReadError, read_capped_text};
 
-use crate::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
 use crate::device::Backend;
 
 /// Largest config file read, bytes.
@@ -121,10 +122,8 @@ pub enum ServeConfigError {
     #[error("reading {path}: {source}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        source: CappedReadError,
     },
-    #[error("{path} is {bytes} bytes; a server config is at most {MAX_CONFIG_BYTES}")]
-    TooLarge { path: PathBuf, bytes: u64 },
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
     #[error("{field} = {value}: {rule}")]
@@ -138,18 +137,11 @@ pub enum ServeConfigError {
 impl ServeConfig {
     /// Reads a TOML file; fields it leaves out keep their defaults.
     pub fn from_file(path: &Path) -> Result<Self, ServeConfigError> {
-        let io = |source| ServeConfigError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
-        let bytes = std::fs::metadata(path).map_err(io)?.len();
-        if bytes > MAX_CONFIG_BYTES {
-            return Err(ServeConfigError::TooLarge {
+        let text =
+            read_capped_text(path, MAX_CONFIG_BYTES).map_err(|source| ServeConfigError::Io {
                 path: path.to_path_buf(),
-                bytes,
-            });
-        }
-        let text = std::fs::read_to_string(path).map_err(io)?;
+                source,
+            })?;
         Self::from_toml(&text, path)
     }
 

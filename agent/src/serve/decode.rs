@@ -3,11 +3,13 @@
 //! checked for NaN and range. A refusal names the camera or field and what is wrong; nothing is
 //! allocated from a size the rig did not promise.
 
-use sim_bridge::error_text::clipped;
+use ssrdrive_proto::camera::{CameraSpec, Rig};
+use ssrdrive_proto::command::RoadOption;
+use ssrdrive_proto::error_text::clipped;
+use ssrdrive_proto::image::RgbImage;
 use ssrdrive_proto::v1;
 
-use crate::camera::{CameraSpec, Rig};
-use crate::policy::{Frame, StepInput};
+use crate::policy::StepInput;
 use crate::pose::Pose2;
 
 /// A request field that cannot be used; becomes INVALID_ARGUMENT.
@@ -65,19 +67,25 @@ pub fn step_input(request: &v1::StepRequest, rig: &Rig) -> Result<StepInput, Bad
             request.speed_mps
         )));
     }
+    let command = RoadOption::from_value(request.command).ok_or_else(|| {
+        bad(format!(
+            "command {} is not a RoadOption (-1 or 1..=6)",
+            request.command
+        ))
+    })?;
     Ok(StepInput {
         frames,
         rig: rig.clone(),
         pose: Pose2::new(pose.x as f32, pose.y as f32, pose.yaw as f32),
         speed: request.speed_mps as f32,
-        command: request.command,
+        command,
         target_point: [target.x as f32, target.y as f32],
         debug: request.debug,
     })
 }
 
 /// One image as RGB8, checked against its camera.
-pub fn decode_image(image: &v1::Image, camera: &CameraSpec) -> Result<Frame, BadRequest> {
+pub fn decode_image(image: &v1::Image, camera: &CameraSpec) -> Result<RgbImage, BadRequest> {
     let name = &camera.id;
     if image.camera_id != camera.id {
         return Err(bad(format!(
@@ -118,7 +126,7 @@ pub fn decode_image(image: &v1::Image, camera: &CameraSpec) -> Result<Frame, Bad
                 .collect()
         }
         Ok(v1::ImageEncoding::Png) => {
-            sim_bridge::image::decode_png_sized(&image.data, width, height)
+            ssrdrive_proto::image::decode_png_sized(&image.data, width, height)
                 .map_err(|e| bad(format!("camera '{name}': {e}")))?
                 .rgb
         }
@@ -131,7 +139,7 @@ pub fn decode_image(image: &v1::Image, camera: &CameraSpec) -> Result<Frame, Bad
             )));
         }
     };
-    Ok(Frame { width, height, rgb })
+    Ok(RgbImage { width, height, rgb })
 }
 
 /// A baseline or progressive JPEG (RGB or greyscale) of exactly `width` x `height`.

@@ -5,10 +5,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use sim_bridge::camera::{CameraSpec, Rig};
-use sim_bridge::client::wire;
-use sim_bridge::error_text::clipped;
+use ssrdrive_proto::camera::{CameraSpec, Rig};
+use ssrdrive_proto::command::RoadOption;
+use ssrdrive_proto::error_text::clipped;
 use ssrdrive_proto::v1;
+use ssrdrive_proto::wire;
 use tokio::sync::oneshot;
 
 use super::batcher::{BatchSettings, BatchedStep, Batcher, StepJob, SubmitError};
@@ -16,7 +17,6 @@ use super::config::{DECODED_BYTES_PER_PIXEL, ServeConfig};
 use super::decode;
 use super::episodes::{Driver, EpisodeError, EpisodeTable};
 use super::metrics::{Metrics, StepPhases};
-use crate::control::Control;
 use crate::model::config::SsrConfig;
 use crate::policy::{SsrPolicy, StepOutput};
 
@@ -281,7 +281,7 @@ impl Engine {
                 frame_index,
                 images,
                 pose: Some(v1::Pose::default()),
-                command: 4,
+                command: RoadOption::LaneFollow.value(),
                 target_point: Some(v1::EgoPoint { x: 10.0, y: 0.0 }),
                 ..Default::default()
             };
@@ -352,7 +352,7 @@ impl Engine {
         Ok(v1::StepResponse {
             episode_id,
             frame_index,
-            control: Some(control_to_proto(output.decision.control)),
+            control: Some(wire::control_to_proto(output.decision.control)),
             trajectory: output
                 .waypoints
                 .iter()
@@ -386,14 +386,6 @@ fn millis(time: Duration) -> f64 {
     time.as_secs_f64() * 1000.0
 }
 
-fn control_to_proto(control: Control) -> v1::Control {
-    v1::Control {
-        steer: control.steer.into(),
-        throttle: control.throttle.into(),
-        brake: control.brake.into(),
-    }
-}
-
 fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
     let debug = output.debug.as_ref()?;
     Some(v1::Debug {
@@ -406,8 +398,8 @@ fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
                 weights: weights.clone(),
             })
             .collect(),
-        trajectory_control: Some(control_to_proto(output.decision.trajectory)),
-        branch_control: Some(control_to_proto(output.decision.branch)),
+        trajectory_control: Some(wire::control_to_proto(output.decision.trajectory)),
+        branch_control: Some(wire::control_to_proto(output.decision.branch)),
         beta_params: vec![debug.alpha[0], debug.beta[0], debug.alpha[1], debug.beta[1]],
         predicted_speed_mps: debug.predicted_speed.into(),
     })

@@ -14,9 +14,9 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use sim_bridge::error_text::clipped;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::error_text::clipped;
 
-use crate::camera::Rig;
 use crate::policy::EpisodeState;
 
 /// Why an episode operation was refused.

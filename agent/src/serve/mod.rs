@@ -27,27 +27,24 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use burn::tensor::Device;
+pub use config::{LogFormat, ServeConfig};
+pub use engine::{Engine, ModelInfo};
+use service::AgentServiceImpl;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_server::AgentServiceServer;
 use tokio::net::TcpListener;
 use tonic::transport::server::TcpIncoming;
 use tonic_health::ServingStatus;
 
-pub use config::{LogFormat, ServeConfig};
-pub use engine::{Engine, ModelInfo};
-
 use crate::checkpoint;
 use crate::control::ControlConfig;
 use crate::model::SsrModel;
 use crate::model::config::SsrConfig;
 use crate::policy::SsrPolicy;
-use service::AgentServiceImpl;
 
 /// HTTP/2 flow-control window per stream, bytes (a whole 900x256 RGB frame and then some).
 pub const STREAM_WINDOW_BYTES: u32 = 4 << 20;
 
-/// Checkpoint metadata key holding the rig the network was trained with (JSON).
-pub const RIG_METADATA_KEY: &str = "rig";
 /// How often a drain checks for steps still in flight.
 const DRAIN_POLL: Duration = Duration::from_millis(10);
 /// How long answers get to go out once no step is in flight, before open streams are cut.
@@ -60,12 +57,7 @@ pub fn load_policy(
     device: &Device,
 ) -> anyhow::Result<(SsrPolicy, ModelInfo)> {
     let trained = |(model, info): (SsrModel, checkpoint::CheckpointInfo), name: String| {
-        let rig = info
-            .metadata
-            .get(RIG_METADATA_KEY)
-            .map(|json| sim_bridge::camera::Rig::from_json(json))
-            .transpose()
-            .with_context(|| format!("checkpoint {name}: its rig"))?;
+        let rig = checkpoint::rig(&info).map_err(|e| anyhow::anyhow!("checkpoint {name}: {e}"))?;
         let control = checkpoint::control_config(&info)
             .map_err(|e| anyhow::anyhow!("checkpoint {name}: {e}"))?;
         anyhow::Ok((model, info.config, name, rig, control))

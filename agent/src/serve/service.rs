@@ -9,6 +9,7 @@
 use std::pin::Pin;
 use std::sync::Arc;
 
+use ssrdrive_proto::error_text::clipped;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_server::AgentService;
 use ssrdrive_proto::v1::drive_request::Message;
@@ -19,7 +20,6 @@ use tonic::{Request, Response, Status, Streaming};
 
 use super::engine::{Engine, ServeError};
 use super::episodes::Driver;
-use sim_bridge::error_text::clipped;
 
 /// The gRPC face of an [`Engine`].
 pub struct AgentServiceImpl {

@@ -20,18 +20,17 @@
 use std::path::Path;
 
 use burn::tensor::{Device, Tensor};
-use sim_bridge::dataset::{Dataset, DatasetError, FUTURE_STEP, FrameRecord};
-use sim_bridge::world::ego::Control;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::command::{COMMANDS, RoadOption};
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::{Dataset, DatasetError, FUTURE_STEP, FrameRecord};
 
 use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
-use crate::camera::Rig;
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
 use crate::model::config::SsrConfig;
-use crate::model::stl::COMMANDS;
 use crate::model::{ModelInput, float_tensor};
-use crate::policy::command_index;
 use crate::pose::{EgoMotion, Pose2};
 
 /// Seconds from a frame to the future frame whose BEV the FFP predicts (SSR's code: 1.5 s).
@@ -239,7 +238,7 @@ impl TrainingData {
     }
 
     /// The manifest: towns, routes and counts, for the model card.
-    pub fn manifest(&self) -> &sim_bridge::dataset::Manifest {
+    pub fn manifest(&self) -> &ssrdrive_proto::dataset::Manifest {
         &self.dataset.manifest
     }
 
@@ -345,9 +344,8 @@ impl TrainingData {
             batch
                 .target_point
                 .extend(now.target_point.map(|v| v as f32));
-            let mut command = [0f32; COMMANDS];
-            command[command_index(now.command).unwrap_or(3)] = 1.0;
-            batch.command.extend(command);
+            let command = RoadOption::from_value(now.command).unwrap_or(RoadOption::LaneFollow);
+            batch.command.extend(command.one_hot());
             let labels = match self.labels {
                 Labels::Plan => &now.plan,
                 Labels::Driven => &now.waypoints,

@@ -10,11 +10,11 @@ use std::thread::JoinHandle;
 use rand::seq::SliceRandom;
 use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use ssrdrive_proto::dataset::DatasetError;
 
 use super::augment::Photometric;
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, SampleRef, TrainingData, fnv1a};
-use sim_bridge::dataset::DatasetError;
 
 /// Batches prepared ahead of the optimiser.
 const PREFETCH: usize = 3;

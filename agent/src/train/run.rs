@@ -27,6 +27,7 @@ use burn::optim::{
 use burn::store::{BurnpackStore, ModuleSnapshot};
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::dataset::DatasetError;
 
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
@@ -38,11 +39,7 @@ use crate::control::ControlConfig;
 use crate::model::config::SsrConfig;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
-use crate::serve::RIG_METADATA_KEY;
-use sim_bridge::dataset::DatasetError;
 
-/// Checkpoint metadata key of the training notes (JSON: config, step, data, validation).
-pub const TRAINING_METADATA_KEY: &str = "training";
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
     #[error("dataset: {0}")]
@@ -423,13 +420,13 @@ impl Trainer {
             &self.model().valid(),
             &self.config.model,
             &[
-                (RIG_METADATA_KEY, rig),
+                (checkpoint::RIG_KEY, rig),
                 (
                     checkpoint::CONTROL_KEY,
                     serde_json::to_string(&ControlConfig::default()).expect("configs serialise"),
                 ),
                 (
-                    TRAINING_METADATA_KEY,
+                    checkpoint::TRAINING_KEY,
                     serde_json::to_string(&notes).expect("notes serialise"),
                 ),
             ],

@@ -64,7 +64,7 @@ impl ValidationMetrics {
 /// The situations a validation sample counts in: its command (`left`, `right`, `straight`,
 /// `follow`, `change-lane`) and `start` when the car stands (below 1 m/s) and the expert
 /// accelerates.
-pub fn situations(command: &[f32], speed: f32, expert_throttle: f64) -> Vec<&'static str> {
+pub fn situations(command: &[f32], speed: f32, expert_throttle: f32) -> Vec<&'static str> {
     let index = command
         .iter()
         .position(|&v| v > 0.5)
@@ -95,7 +95,7 @@ pub fn spread(samples: &[SampleRef], limit: usize) -> Vec<SampleRef> {
 /// Waypoints up to `horizon_s` (waypoints are 0.5 s apart): the horizon's waypoint is the
 /// one before this index.
 pub fn waypoints_until(horizon_s: f64) -> usize {
-    (horizon_s / sim_bridge::dataset::FUTURE_STEP).round() as usize
+    (horizon_s / ssrdrive_proto::dataset::FUTURE_STEP).round() as usize
 }
 
 /// Running sums of one group's errors.
@@ -172,9 +172,9 @@ impl ValidationSums {
                 [beta[2 * i], beta[2 * i + 1]],
             );
             let expert = &batch.expert[i];
-            one.steer = (control.steer as f64 - expert.steer).abs();
-            one.throttle = (control.throttle as f64 - expert.throttle).abs();
-            one.brake = (control.brake as f64 - expert.brake).abs();
+            one.steer = f64::from((control.steer - expert.steer).abs());
+            one.throttle = f64::from((control.throttle - expert.throttle).abs());
+            one.brake = f64::from((control.brake - expert.brake).abs());
             self.all.accumulate(&one);
             for group in situations(commands[i], batch.speed_label(i), expert.throttle) {
                 self.by_situation.entry(group).or_default().accumulate(&one);

@@ -5,9 +5,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use sim_bridge::dataset::{EpisodeEntry, FrameRecord, Manifest, TownCount, safe_name};
-use sim_bridge::image::encode_png;
-use sim_bridge::world::ego::Control;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::{EpisodeEntry, FrameRecord, Manifest, TownCount, safe_name};
+use ssrdrive_proto::image::encode_png;
 
 use super::rig;
 
@@ -25,9 +25,9 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
         let dir = root.join("episodes").join(safe_name(&name));
         std::fs::create_dir_all(dir.join("cam0")).unwrap();
         let speed = 2.0 + route as f64;
-        let throttle = 0.2 + 0.08 * route as f64;
+        let throttle = 0.2 + 0.08 * route as f32;
         let control = Control {
-            steer: 0.05 * route as f64 - 0.2,
+            steer: 0.05 * route as f32 - 0.2,
             throttle,
             brake: 0.0,
         };
@@ -75,8 +75,8 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
     }
     let frames = FIXTURE_ROUTES * FIXTURE_FRAMES;
     let manifest = Manifest {
-        format: sim_bridge::dataset::FORMAT.into(),
-        version: sim_bridge::dataset::VERSION,
+        format: ssrdrive_proto::dataset::FORMAT.into(),
+        version: ssrdrive_proto::dataset::VERSION,
         rig: camera_rig,
         rate_hz: 2.0,
         future_step_s: 0.5,

@@ -4,14 +4,14 @@
 pub mod fixture;
 
 use burn::tensor::{Device, Distribution, Tensor};
-
-use ssr_agent::camera::{CameraSpec, Rig};
 use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::stl::COMMANDS;
 use ssr_agent::model::{ModelInput, float_tensor};
-use ssr_agent::policy::{Frame, StepInput};
+use ssr_agent::policy::StepInput;
 use ssr_agent::pose::{EgoMotion, Pose2};
+use ssrdrive_proto::camera::{CameraSpec, Rig};
+use ssrdrive_proto::command::{COMMANDS, RoadOption};
+use ssrdrive_proto::image::RgbImage;
 
 /// A deliberately tiny config that keeps every part of the architecture (fast tests).
 pub fn tiny_config() -> SsrConfig {
@@ -88,10 +88,17 @@ pub fn model_input(
     let geometry: Vec<SampleGeometry> = (0..batch)
         .map(|_| SampleGeometry::new(&grid, &config.bev.pillar_heights, &rig, motion, Some(5.0)))
         .collect();
-    let mut command = vec![0.0; batch * COMMANDS];
-    for b in 0..batch {
-        command[b * COMMANDS + (b % COMMANDS)] = 1.0;
-    }
+    let commands = [
+        RoadOption::Left,
+        RoadOption::Right,
+        RoadOption::Straight,
+        RoadOption::LaneFollow,
+        RoadOption::ChangeLaneLeft,
+        RoadOption::ChangeLaneRight,
+    ];
+    let command: Vec<f32> = (0..batch)
+        .flat_map(|b| commands[b % commands.len()].one_hot())
+        .collect();
     ModelInput {
         images: Tensor::random(
             [batch * cameras, 3, config.image_height, config.image_width],
@@ -121,7 +128,7 @@ pub fn step_input(rig: &Rig, tick: u32, seed: u32) -> StepInput {
         frames: rig
             .cameras
             .iter()
-            .map(|c| Frame {
+            .map(|c| RgbImage {
                 width: c.width,
                 height: c.height,
                 rgb: (0..c.width * c.height * 3)
@@ -132,7 +139,7 @@ pub fn step_input(rig: &Rig, tick: u32, seed: u32) -> StepInput {
         rig: rig.clone(),
         pose: Pose2::new(0.4 * tick as f32, 0.0, 0.01 * tick as f32),
         speed: 5.0,
-        command: 4,
+        command: RoadOption::LaneFollow,
         target_point: [15.0, -1.0],
         debug: true,
     }

@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use sim_bridge::camera::{CameraSpec, Rig};
 use sim_bridge::map::{Map, MapOptions};
+use ssrdrive_proto::camera::{CameraSpec, Rig};
 use ssrdrive_proto::v1;
 
 /// What a fuzz target does with one input.
@@ -75,7 +75,7 @@ pub fn checkpoint(data: &[u8]) {
 
 /// A dataset episode's `measurements.jsonl`.
 pub fn dataset_frames(data: &[u8]) {
-    let _ = sim_bridge::dataset::parse_frames(data, Path::new("fuzz"));
+    let _ = ssrdrive_proto::dataset::parse_frames(data, Path::new("fuzz"));
 }
 
 /// A server config file (TOML), parsed and checked.

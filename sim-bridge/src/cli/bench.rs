@@ -3,18 +3,19 @@
 use std::time::Instant;
 
 use clap::Subcommand;
-use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
-use sim_bridge::camera::Rig;
+use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::MapOptions;
-use sim_bridge::render::{CameraRenderer, SceneState};
+use sim_bridge::render::{Appearance, CameraRenderer, SceneState};
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::RouteSet;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::ActorView;
 use sim_bridge::world::state::{EgoState, LightState};
 use sim_bridge::world::{DT, World, WorldConfig};
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -133,7 +134,7 @@ fn bench_render(rig: &str, frames: u64, every: u64, vehicles: usize) -> anyhow::
         |_| {},
     );
     let baked = Instant::now();
-    let mut renderer = CameraRenderer::new(&map, config.appearance());
+    let mut renderer = CameraRenderer::new(&map, Appearance::of_world(&config));
     let bake_ms = baked.elapsed().as_secs_f64() * 1e3;
     let mut times = Vec::with_capacity(capture.states.len());
     for (k, (ego, actors, lights)) in capture.states.iter().enumerate() {

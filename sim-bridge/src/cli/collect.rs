@@ -7,14 +7,14 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use sim_bridge::camera::Rig;
-use sim_bridge::dataset::NoiseConfig;
-use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
-use sim_bridge::map::Map;
-
-use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
 use sim_bridge::agent::Agent;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
+use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
+use sim_bridge::map::Map;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::dataset::NoiseConfig;
+
+use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
 
 #[derive(Debug, Args)]
 pub struct CollectArgs {
@@ -214,7 +214,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         bar.inc(1);
     })?;
     bar.finish_and_clear();
-    let manifest = sim_bridge::dataset::Dataset::open(&args.out)?.manifest;
+    let manifest = ssrdrive_proto::dataset::Dataset::open(&args.out)?.manifest;
     println!(
         "collected {} episodes ({} frames) in {:.1} s: {:.0} frames/s; skipped {} already complete",
         summary.recorded,

@@ -14,16 +14,16 @@ use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use sim_bridge::agent::Agent;
-use sim_bridge::camera::Rig;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::local::LocalServer;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
-use sim_bridge::files::write_atomic;
 use sim_bridge::render::topdown::write_run_png;
 use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::scoring::{Results, RouteEnd, RouteRecord, ScoringConfig, summary_table};
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::files::write_atomic;
 
 use super::args::{RouteArgs, RoutePlan, WorldArgs, parse_positive, parse_seconds, server_target};
 

@@ -12,17 +12,18 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
-use sim_bridge::camera::Rig;
+use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::load::{LoadConfig, LoadProgress, LoadReport, run_load};
-use sim_bridge::client::wire;
-use sim_bridge::dataset::Dataset;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::World;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::Dataset;
 use ssrdrive_proto::v1;
+use ssrdrive_proto::wire;
 
 use super::args::{RouteArgs, WorldArgs, parse_positive, parse_seconds, server_target};
 
@@ -181,7 +182,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
                 .map(|(at, bytes)| serde_json::json!({"at_s": at, "bytes": bytes}))
                 .collect::<Vec<_>>(),
         });
-        sim_bridge::files::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())
+        ssrdrive_proto::files::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
@@ -298,12 +299,12 @@ fn dataset_templates(dataset: &Dataset, wanted: usize) -> anyhow::Result<Vec<v1:
                 position: record.position.into(),
                 yaw: record.yaw,
                 compass: Observation::compass_of(record.yaw),
-                command: sim_bridge::route::RoadOption::from_value(record.command)
-                    .unwrap_or(sim_bridge::route::RoadOption::LaneFollow),
+                command: ssrdrive_proto::command::RoadOption::from_value(record.command)
+                    .unwrap_or(ssrdrive_proto::command::RoadOption::LaneFollow),
                 target_point: record.target_point.into(),
                 frames,
             };
-            templates.push(wire::step_request("", &observation));
+            templates.push(observation.step_request(""));
             if templates.len() == wanted {
                 return Ok(templates);
             }
@@ -377,7 +378,7 @@ impl Agent for Capture {
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         if !obs.frames.is_empty() {
-            self.templates.push(wire::step_request("", obs));
+            self.templates.push(obs.step_request(""));
         }
         self.expert.run_step(obs, world)
     }

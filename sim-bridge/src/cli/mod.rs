@@ -61,19 +61,14 @@ enum Command {
     Bench(bench::BenchCommand),
 }
 
-/// Logging to stderr; `RUST_LOG` overrides the level.
+/// Logging to stderr at warn, info (`-v`) or debug (`-vv`); `RUST_LOG` overrides the level.
 pub fn init_logging(verbose: u8) {
     let level = match verbose {
         0 => "warn",
         1 => "info",
         _ => "debug",
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
+    ssrdrive_proto::logging::init(level, false);
 }
 
 /// Run a parsed command line.

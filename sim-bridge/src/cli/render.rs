@@ -6,16 +6,17 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use sim_bridge::agent::{Agent, AgentError, Control, Observation, RouteContext};
-use sim_bridge::camera::Rig;
-use sim_bridge::dataset::safe_name;
+use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
-use sim_bridge::image::{RgbImage, encode_png, write_apng};
 use sim_bridge::render::topdown::local_view;
 use sim_bridge::route::DenseRoute;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::{DT, World};
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::safe_name;
+use ssrdrive_proto::image::{RgbImage, encode_png, write_apng};
 
 use super::args::{PlannedRoute, RouteArgs, WorldArgs};
 

@@ -103,8 +103,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         reports.push(report);
     }
     if let Some(out) = &args.out {
-        sim_bridge::files::write_atomic(out, serde_json::to_string_pretty(&reports)?.as_bytes())
-            .with_context(|| format!("writing {}", out.display()))?;
+        ssrdrive_proto::files::write_atomic(
+            out,
+            serde_json::to_string_pretty(&reports)?.as_bytes(),
+        )
+        .with_context(|| format!("writing {}", out.display()))?;
     }
     Ok(())
 }

@@ -4,10 +4,11 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 use sim_bridge::map::MapOptions;
+use sim_bridge::route::DenseRoute;
 use sim_bridge::route::plan::global_plan;
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::{self, SETS};
-use sim_bridge::route::{DenseRoute, RoadOption};
+use ssrdrive_proto::command::RoadOption;
 
 #[derive(Debug, Subcommand)]
 pub enum RoutesCommand {

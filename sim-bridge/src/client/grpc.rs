@@ -6,16 +6,15 @@
 use std::time::Duration;
 
 use glam::DVec2;
-
-use ssrdrive_proto::v1;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use ssrdrive_proto::{v1, wire};
 use tonic::transport::{Channel, Endpoint};
 use tonic_health::pb::health_check_response::ServingStatus;
 use tonic_health::pb::health_client::HealthClient;
 
-use super::wire;
-use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
-use crate::camera::Rig;
+use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
 
 /// Connection settings.
@@ -204,7 +203,7 @@ impl Agent for GrpcAgent {
             .episode
             .as_deref()
             .ok_or_else(|| AgentError("run_step before start_route".into()))?;
-        let request = self.timed(wire::step_request(episode, obs));
+        let request = self.timed(obs.step_request(episode));
         let reply = self
             .runtime
             .block_on(self.client.step(request))

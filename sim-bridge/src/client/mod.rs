@@ -1,6 +1,5 @@
 //! Talking to an agent server over gRPC (`ssrdrive.v1`).
 //!
-//! - [`wire`]: conversions between simulator types and wire messages (shared with the server).
 //! - [`grpc`]: [`grpc::GrpcAgent`], an [`crate::agent::Agent`] backed by a remote server.
 //! - [`load`]: a fixed-rate load generator (no coordinated omission).
 //! - [`local`]: [`local::LocalServer`], an `ssr-agent serve` child process on loopback.
@@ -8,4 +7,3 @@
 pub mod grpc;
 pub mod load;
 pub mod local;
-pub mod wire;

@@ -13,15 +13,16 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
-use super::recorder::EpisodeRecorder;
-use super::{
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::dataset::{
     Dataset, DatasetError, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FORMAT, FUTURE_COUNT,
     FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, safe_name,
 };
+use ssrdrive_proto::files::write_atomic;
+
+use super::recorder::EpisodeRecorder;
 use crate::agent::Agent;
-use crate::camera::Rig;
 use crate::eval::run_route;
-use crate::files::write_atomic;
 use crate::map::Map;
 use crate::route::DenseRoute;
 use crate::route::xml::RouteSpec;

@@ -17,12 +17,13 @@ use std::path::{Path, PathBuf};
 use glam::DVec2;
 use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::{FUTURE_COUNT, FUTURE_STEP, FrameRecord, NoiseConfig};
+use ssrdrive_proto::image::encode_png;
 
-use super::{FUTURE_COUNT, FUTURE_STEP, FrameRecord, NoiseConfig};
-use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
-use crate::camera::Rig;
+use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::expert::Expert;
-use crate::image::encode_png;
 use crate::route::plan::to_ego_frame;
 use crate::world::{DT, World};
 
@@ -164,12 +165,12 @@ impl<'d> EpisodeRecorder<'d> {
                 self.perturbation = (left > 1).then_some((left - 1, kind));
                 let executed = match kind {
                     Perturbation::Steer(offset) => Control {
-                        steer: (label.steer + offset).clamp(-1.0, 1.0),
+                        steer: (f64::from(label.steer) + offset).clamp(-1.0, 1.0) as f32,
                         ..label
                     },
                     Perturbation::Pedals { throttle, brake } => Control {
-                        throttle,
-                        brake,
+                        throttle: throttle as f32,
+                        brake: brake as f32,
                         ..label
                     },
                 };

@@ -11,7 +11,7 @@ use glam::DVec3;
 
 use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::map::Map;
-use crate::render::{CameraRenderer, SceneState};
+use crate::render::{Appearance, CameraRenderer, SceneState};
 use crate::route::DenseRoute;
 use crate::route::plan::{RouteFollower, global_plan, to_ego_frame};
 use crate::route::xml::RouteSpec;
@@ -74,7 +74,12 @@ pub fn run_route(
         && let Some(rig) = agent.sensors()
     {
         match rig.validate() {
-            Ok(()) => cameras = Some((rig, CameraRenderer::new(map, world_config.appearance()))),
+            Ok(()) => {
+                cameras = Some((
+                    rig,
+                    CameraRenderer::new(map, Appearance::of_world(&world_config)),
+                ))
+            }
             Err(e) => agent_error = Some(AgentError(format!("its camera rig is unusable: {e}"))),
         }
     }

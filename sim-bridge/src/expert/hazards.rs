@@ -3,6 +3,7 @@
 //! constant-velocity collision forecast.
 
 use glam::DVec2;
+use ssrdrive_proto::dataset::BrakeReason;
 
 use super::{along, route_dir};
 use crate::map::LaneIdx;
@@ -35,26 +36,6 @@ const NOSE_IN_SPEED: f64 = 3.0;
 pub struct HazardMemory {
     served_signs: Vec<usize>,
     lane_change_wait: Option<f64>,
-}
-
-/// Why the expert slows or stops: the kind of the nearest obstacle, or the forecast.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum BrakeReason {
-    /// A vehicle or cyclist on the path.
-    Vehicle,
-    /// A walker on the path.
-    Walker,
-    /// A static obstacle or parked car on the path.
-    Obstacle,
-    /// A red light, or a yellow one it can still stop for.
-    TrafficLight,
-    /// A stop sign it has not yet stopped at.
-    StopSign,
-    /// Traffic on the lane it must change into.
-    LaneChange,
-    /// The collision forecast.
-    PredictedCollision,
 }
 
 /// The result of a scan.
@@ -265,7 +246,7 @@ fn stop_lines(
             if memory.served_signs.contains(&sign.id) {
                 continue;
             }
-            if ego.speed < 0.1 && gap < super::IDM_GAP + 1.5 {
+            if ego.speed < 0.1 && gap < super::IDM.min_gap + 1.5 {
                 memory.served_signs.push(sign.id);
             } else {
                 view.obstacle(gap.max(0.0), 0.0, BrakeReason::StopSign);

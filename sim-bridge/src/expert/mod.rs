@@ -16,15 +16,16 @@ pub mod hazards;
 pub mod oracle;
 pub mod plan;
 
-pub use hazards::BrakeReason;
-
 use glam::DVec2;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::BrakeReason;
 
-use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
+use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::map::angle_diff;
 use crate::route::DenseRoute;
 use crate::world::World;
 use crate::world::ego::EgoParams;
+use crate::world::idm::Idm;
 
 /// Cruise speed on road, m/s.
 pub const ROAD_SPEED: f64 = 8.0;
@@ -32,14 +33,15 @@ pub const ROAD_SPEED: f64 = 8.0;
 pub const JUNCTION_SPEED: f64 = 5.0;
 /// Speed near walkers and cyclists, m/s.
 pub const WALKER_SPEED: f64 = 2.0;
-/// Lateral acceleration allowed in curves, m/s^2.
-const LATERAL_ACCEL: f64 = 2.0;
-/// IDM parameters: comfortable acceleration and deceleration (m/s^2), standstill gap (m),
-/// time headway (s).
-const IDM_ACCEL: f64 = 2.0;
-const IDM_DECEL: f64 = 3.5;
-pub(crate) const IDM_GAP: f64 = 4.0;
-const IDM_HEADWAY: f64 = 0.8;
+/// How the expert follows: a shorter headway and harder comfortable braking than traffic, a
+/// longer standstill gap, and 2 m/s^2 of lateral acceleration in curves.
+pub(crate) const IDM: Idm = Idm {
+    accel: 2.0,
+    decel: 3.5,
+    min_gap: 4.0,
+    headway: 0.8,
+    lateral_accel: 2.0,
+};
 
 /// The expert.
 #[derive(Debug, Default)]
@@ -116,8 +118,8 @@ impl Expert {
             view: &view,
             max_brake: self.params.max_brake,
         });
-        let free = idm(obs.speed, target, None);
-        let mut accel = idm(obs.speed, target, view.obstacle);
+        let free = IDM.acceleration(obs.speed, target, None);
+        let mut accel = IDM.acceleration(obs.speed, target, view.obstacle);
         let mut cause = view.cause.filter(|_| accel < free - 0.1);
         if view.collision_predicted {
             accel = -self.params.max_brake;
@@ -139,7 +141,10 @@ impl Expert {
         } else {
             steer
         };
-        Control { steer, ..control }
+        Control {
+            steer: steer as f32,
+            ..control
+        }
     }
 }
 
@@ -161,18 +166,6 @@ fn target_speed(
     target
 }
 
-/// IDM acceleration towards `target` speed with an obstacle (gap, its speed) ahead.
-fn idm(speed: f64, target: f64, obstacle: Option<(f64, f64)>) -> f64 {
-    let free = 1.0 - (speed / target.max(0.1)).powi(4);
-    let interaction = obstacle.map_or(0.0, |(gap, lead)| {
-        let dv = speed - lead;
-        let s_star = IDM_GAP
-            + (speed * IDM_HEADWAY + speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
-        (s_star / gap.max(0.05)).powi(2)
-    });
-    IDM_ACCEL * (free - interaction)
-}
-
 /// Throttle and brake that produce acceleration `accel` at `speed`.
 fn to_pedals(accel: f64, speed: f64, p: &EgoParams) -> Control {
     let resist = if speed > 0.0 {
@@ -184,7 +177,7 @@ fn to_pedals(accel: f64, speed: f64, p: &EgoParams) -> Control {
         let drive = p.max_accel * (1.0 - speed / p.top_speed).max(0.05);
         Control {
             steer: 0.0,
-            throttle: ((accel + resist) / drive).clamp(0.0, 0.75),
+            throttle: ((accel + resist) / drive).clamp(0.0, 0.75) as f32,
             brake: 0.0,
         }
     } else if accel > -resist - 0.3 {
@@ -193,7 +186,7 @@ fn to_pedals(accel: f64, speed: f64, p: &EgoParams) -> Control {
         Control {
             steer: 0.0,
             throttle: 0.0,
-            brake: ((-accel - resist) / p.max_brake).clamp(0.0, 1.0),
+            brake: ((-accel - resist) / p.max_brake).clamp(0.0, 1.0) as f32,
         }
     }
 }
@@ -227,7 +220,7 @@ fn curve_speed(route: &DenseRoute, index: usize) -> f64 {
         let turn = angle_diff(route.points[i + 3].yaw, route.points[i].yaw).abs();
         let len = route.cum[i + 3] - route.cum[i];
         if turn > 1e-3 && len > 0.5 {
-            limit = limit.min((LATERAL_ACCEL * len / turn).sqrt());
+            limit = limit.min(IDM.curve_speed(len / turn));
         }
     }
     limit

@@ -5,9 +5,10 @@
 
 use glam::DVec2;
 use ssr_control::{ControlConfig, EpisodeController, Vehicle};
+use ssrdrive_proto::control::Control;
 
 use super::Expert;
-use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
+use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
 use crate::world::ego::EgoParams;
 
@@ -81,7 +82,7 @@ impl Agent for OraclePlan {
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         let expert = self.expert.run_step(obs, world)?;
         let waypoints: Vec<[f32; 2]> = self.expert.plan.iter().copied().map(to_f32).collect();
-        let branch = self.with_branch.then_some(ssr_control::Control {
+        let branch = self.with_branch.then_some(Control {
             steer: expert.steer as f32,
             throttle: expert.throttle as f32,
             brake: expert.brake as f32,

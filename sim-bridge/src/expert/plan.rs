@@ -12,7 +12,7 @@
 use glam::DVec2;
 
 use super::hazards::HazardView;
-use super::{idm, target_speed};
+use super::{IDM, target_speed};
 use crate::map::Map;
 use crate::route::DenseRoute;
 use crate::world::state::EgoState;
@@ -59,7 +59,7 @@ pub(crate) fn plan(start: &PlanStart<'_>) -> Vec<DVec2> {
                 .view
                 .obstacle
                 .map(|(gap, lead)| (gap + lead * t - s, lead));
-            idm(v, target, obstacle).max(-start.max_brake)
+            IDM.acceleration(v, target, obstacle).max(-start.max_brake)
         };
         let v1 = (v + accel * DT).max(0.0);
         s += 0.5 * (v + v1) * DT;

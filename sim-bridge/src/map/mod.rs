@@ -16,15 +16,16 @@ pub mod control;
 pub mod lanes;
 pub mod spatial;
 pub mod surface;
+pub mod waypoint;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use glam::{DVec2, DVec3};
-
 pub use control::{Approach, Junction, StopLine, StopSign, TrafficLight};
+use glam::{DVec2, DVec3};
 pub use lanes::{JunctionIdx, Lane, LaneIdx, LaneKind, LanePose, Projection};
 use spatial::SegmentGrid;
+use ssrdrive_proto::files::{CappedReadError, read_capped_text};
 pub use surface::Surface;
 
 /// The largest OpenDRIVE file accepted (CARLA's largest towns are under 20 MB).
@@ -33,15 +34,12 @@ pub const MAX_MAP_BYTES: u64 = 64 * 1024 * 1024;
 /// Why a map could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum MapError {
-    /// The file could not be read.
+    /// The file could not be read, or is larger than [`MAX_MAP_BYTES`].
     #[error("cannot read map {path}: {source}")]
     Io {
         path: String,
-        source: std::io::Error,
+        source: CappedReadError,
     },
-    /// The file is larger than [`MAX_MAP_BYTES`].
-    #[error("map {path} is {bytes} bytes, over the {MAX_MAP_BYTES}-byte limit")]
-    TooLarge { path: String, bytes: u64 },
     /// The OpenDRIVE importer refused the document.
     #[error("map {origin} is not valid OpenDRIVE: {message}")]
     Invalid { origin: String, message: String },
@@ -90,15 +88,10 @@ impl Map {
     /// Load an OpenDRIVE file.
     pub fn load_file(path: &Path, options: MapOptions) -> Result<Self, MapError> {
         let shown = path.display().to_string();
-        let io = |source| MapError::Io {
+        let text = read_capped_text(path, MAX_MAP_BYTES).map_err(|source| MapError::Io {
             path: shown.clone(),
             source,
-        };
-        let bytes = std::fs::metadata(path).map_err(io)?.len();
-        if bytes > MAX_MAP_BYTES {
-            return Err(MapError::TooLarge { path: shown, bytes });
-        }
-        let text = std::fs::read_to_string(path).map_err(io)?;
+        })?;
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())

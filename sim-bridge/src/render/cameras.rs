@@ -8,6 +8,7 @@
 //! comes last. The projection is exactly [`CameraSpec::project`]'s.
 
 use glam::{DVec3, Vec3};
+use ssrdrive_proto::camera::{CameraSpec, Rig};
 
 use super::actors::{push_actor, push_lamps};
 use super::raster::{Target, View};
@@ -15,7 +16,6 @@ use super::scene::StaticScene;
 use super::shapes::Tri;
 use super::style::{Appearance, pack};
 use crate::agent::CameraFrame;
-use crate::camera::{CameraSpec, Rig};
 use crate::map::Map;
 use crate::world::ActorView;
 use crate::world::state::{EgoState, LightState};

@@ -8,6 +8,7 @@ use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::map::surface::{Material, Paint};
+use crate::world::WorldConfig;
 
 /// An RGB colour with components in 0..=1.
 pub type Rgb = Vec3;
@@ -77,6 +78,16 @@ impl Default for Appearance {
 }
 
 impl Appearance {
+    /// The look camera frames of a world are drawn in: randomised from its seed when it asks
+    /// for that, else the canonical one.
+    pub fn of_world(config: &WorldConfig) -> Self {
+        if config.randomise_appearance {
+            Self::randomised(config.seed)
+        } else {
+            Self::default()
+        }
+    }
+
     /// A varied look drawn from `seed`: material colours and the road tint jittered, the sun
     /// anywhere above 20 degrees, exposure 0.75..1.2, sensor noise 0..6.
     pub fn randomised(seed: u64) -> Self {

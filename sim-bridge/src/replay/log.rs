@@ -19,7 +19,7 @@ pub const LOG_VERSION: u32 = 1;
 const MAX_RECORD_BYTES: u64 = 128 << 20;
 
 /// Why a log cannot be read or written.
-pub type LogError = crate::files::FileError;
+pub type LogError = ssrdrive_proto::files::FileError;
 
 /// A log being written.
 pub struct LogWriter {

@@ -7,12 +7,12 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use ssrdrive_proto::v1;
+use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::{v1, wire};
 
 use super::log::{LOG_FORMAT, LOG_VERSION, LogWriter};
-use crate::agent::{Agent, AgentError, Control, Observation, RouteContext};
-use crate::camera::Rig;
-use crate::client::wire;
+use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
 use crate::world::state::ActorKind;
 
@@ -53,7 +53,7 @@ fn kind_name(kind: ActorKind) -> &'static str {
     }
 }
 
-fn png_images(obs: &Observation) -> Result<Vec<v1::Image>, crate::image::ImageError> {
+fn png_images(obs: &Observation) -> Result<Vec<v1::Image>, ssrdrive_proto::image::ImageError> {
     obs.frames
         .iter()
         .map(|frame| {
@@ -62,7 +62,7 @@ fn png_images(obs: &Observation) -> Result<Vec<v1::Image>, crate::image::ImageEr
                 width: frame.width,
                 height: frame.height,
                 encoding: v1::ImageEncoding::Png as i32,
-                data: crate::image::encode_png(frame.width, frame.height, &frame.rgb)?,
+                data: ssrdrive_proto::image::encode_png(frame.width, frame.height, &frame.rgb)?,
             })
         })
         .collect()
@@ -77,8 +77,8 @@ impl Agent for LoggingAgent {
         self.inner.start_route(ctx)?;
         let name = format!(
             "{}__route_{}__rep{}.ssrlog",
-            crate::dataset::safe_name(&ctx.map.name),
-            crate::dataset::safe_name(ctx.route_id),
+            ssrdrive_proto::dataset::safe_name(&ctx.map.name),
+            ssrdrive_proto::dataset::safe_name(ctx.route_id),
             ctx.repetition
         );
         let header = v1::LogHeader {
@@ -124,7 +124,7 @@ impl Agent for LoggingAgent {
         let started = Instant::now();
         let control = self.inner.run_step(obs, world)?;
         let agent_ms = started.elapsed().as_secs_f64() * 1e3;
-        let mut request = wire::step_request("", obs);
+        let mut request = obs.step_request("");
         request.images = png_images(obs).map_err(fail)?;
         let ego = world.ego_state();
         let actors = world

@@ -1,18 +1,17 @@
 //! Routes: CARLA route files ([`xml`]), the dense 1 m route over the lane graph with a
-//! [`RoadOption`] per point ([`planner`]), the leaderboard's downsampled global plan and the
+//! RoadOption per point ([`planner`]), the leaderboard's downsampled global plan and the
 //! TCP-style route follower that yields the target point and command every tick ([`plan`]), and
 //! the bundled route sets ([`sets`]).
 
-pub mod option;
 pub mod plan;
 pub mod planner;
 pub mod sets;
 pub mod xml;
 
 use glam::{DVec2, DVec3};
+use ssrdrive_proto::command::RoadOption;
 
 use crate::map::LaneIdx;
-pub use option::RoadOption;
 
 /// One point of a dense route.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,8 +6,9 @@
 use std::collections::VecDeque;
 
 use glam::{DVec2, DVec3};
+use ssrdrive_proto::command::RoadOption;
 
-use super::{DenseRoute, RoadOption};
+use super::DenseRoute;
 
 /// Longest stretch between plan nodes in LB1.0, metres.
 pub const PLAN_SPACING: f64 = 50.0;

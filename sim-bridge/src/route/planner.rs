@@ -19,9 +19,10 @@ use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 
 use glam::DVec3;
+use ssrdrive_proto::command::RoadOption;
 
 use super::xml::{Keypoint, RouteSpec};
-use super::{DenseRoute, RoadOption, RoutePoint};
+use super::{DenseRoute, RoutePoint};
 use crate::map::{LaneIdx, LaneKind, Map, angle_diff};
 
 /// Spacing of dense route points, metres (the GlobalRoutePlanner's hop resolution).

@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use glam::DVec3;
+use ssrdrive_proto::files::{CappedReadError, read_capped_text};
 
 /// Largest route file accepted.
 pub const MAX_ROUTE_FILE_BYTES: u64 = 32 * 1024 * 1024;
@@ -51,11 +52,11 @@ impl RouteSpec {
 /// Why a route file could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum RouteFileError {
-    /// The file could not be read.
+    /// The file could not be read, or is larger than [`MAX_ROUTE_FILE_BYTES`].
     #[error("cannot read route file {path}: {source}")]
     Io {
         path: String,
-        source: std::io::Error,
+        source: CappedReadError,
     },
     /// Over a cap on untrusted input.
     #[error("route file {origin}: {what}")]
@@ -71,19 +72,11 @@ pub enum RouteFileError {
 /// Read a route file.
 pub fn read_file(path: &Path) -> Result<Vec<RouteSpec>, RouteFileError> {
     let shown = path.display().to_string();
-    let io = |source| RouteFileError::Io {
-        path: shown.clone(),
-        source,
-    };
-    let bytes = std::fs::metadata(path).map_err(io)?.len();
-    if bytes > MAX_ROUTE_FILE_BYTES {
-        let what = format!("{bytes} bytes is over the {MAX_ROUTE_FILE_BYTES}-byte limit");
-        return Err(RouteFileError::TooLarge {
-            origin: shown,
-            what,
-        });
-    }
-    let text = std::fs::read_to_string(path).map_err(io)?;
+    let text =
+        read_capped_text(path, MAX_ROUTE_FILE_BYTES).map_err(|source| RouteFileError::Io {
+            path: shown.clone(),
+            source,
+        })?;
     parse(&shown, &text)
 }
 

@@ -18,14 +18,13 @@
 
 use glam::DVec3;
 
+use crate::map::waypoint::{FAR_RADIUS, Waypoint};
 use crate::map::{LaneKind, Map, angle_diff};
 use crate::route::DenseRoute;
 use crate::world::state::EgoState;
 
 use super::completion::passed;
-use super::{
-    FAR_RADIUS, Infraction, InfractionKind, ScoringConfig, Waypoint, py_round, waypoint_within,
-};
+use super::{Infraction, InfractionKind, ScoringConfig, py_round};
 
 /// State of the outside-route-lanes criterion.
 #[derive(Debug, Clone)]
@@ -102,7 +101,7 @@ impl OutsideRouteLanes {
         // is at most its 3-D distance, so searching within `d_drive` in plan finds it.
         let parking = if self.has_parking {
             let radius = d_drive.min(FAR_RADIUS);
-            waypoint_within(map, p, radius, |l| l.kind == LaneKind::Parking)
+            map.waypoint_within(p, radius, |l| l.kind == LaneKind::Parking)
         } else {
             None
         };

@@ -31,7 +31,8 @@ use glam::{DVec2, DVec3};
 use crate::map::{Map, StopLine, TrafficLight};
 use crate::world::state::{EgoState, LightState, Obb};
 
-use super::{Infraction, InfractionKind, ScoringConfig, Waypoint, fmt_location};
+use super::{Infraction, InfractionKind, ScoringConfig, fmt_location};
+use crate::map::waypoint::Waypoint;
 
 /// State of the red-light criterion.
 #[derive(Debug, Clone, Default)]

@@ -16,8 +16,9 @@
 //! Where we differ from the leaderboard (the simulator has no CARLA server to ask):
 //! - Locations are in the OpenDRIVE map frame, messages included (CARLA prints its own
 //!   left-handed frame, whose y is the negated OpenDRIVE y).
-//! - CARLA's `map.get_waypoint(location, lane_type)` is the nearest lane centre line of that kind
-//!   (nearest in 3-D among lanes within 10 m in plan, so bridges resolve to the right level).
+//! - CARLA's `map.get_waypoint(location, lane_type)` is [`Map::waypoint`]: the nearest lane
+//!   centre line of that kind (nearest in 3-D among lanes within 10 m in plan, so bridges
+//!   resolve to the right level).
 //! - Pass tests (a dot product against a route point's forward vector) and the red-light distance
 //!   use the plan (2-D) forward vector; CARLA's forward vector carries the road pitch, which only
 //!   matters on steep slopes.
@@ -38,7 +39,7 @@ pub mod summary;
 
 use glam::DVec3;
 
-use crate::map::{Lane, LaneIdx, LaneKind, Map};
+use crate::map::{LaneKind, Map};
 use crate::route::DenseRoute;
 use crate::world::state::{CollisionEvent, EgoState, LightState};
 
@@ -353,7 +354,9 @@ impl<'a> RouteScorer<'a> {
         self.last_time = t;
         self.last_location = ego.position;
         let cfg = &self.config;
-        let driving = waypoint(self.map, ego.position, |l| l.kind == LaneKind::Driving);
+        let driving = self
+            .map
+            .waypoint(ego.position, |l| l.kind == LaneKind::Driving);
 
         self.collisions
             .register(t, collisions, cfg, &mut self.infractions);
@@ -557,60 +560,6 @@ impl<'a> RouteScorer<'a> {
         };
         (record, self.infractions)
     }
-}
-
-/// A place on a lane centre line found for a point: CARLA's `map.get_waypoint(location,
-/// project_to_road=True, lane_type=...)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Waypoint {
-    /// The lane.
-    pub lane: LaneIdx,
-    /// Arc length along it.
-    pub s: f64,
-    /// The centre-line point.
-    pub position: DVec3,
-    /// Heading of travel there, radians.
-    pub yaw: f64,
-    /// 3-D distance from the queried point.
-    pub distance: f64,
-}
-
-/// Lanes within this plan distance are compared in 3-D.
-const NEAR_RADIUS: f64 = 10.0;
-/// Beyond it, the plan-nearest lane within this distance is taken.
-const FAR_RADIUS: f64 = 100.0;
-
-/// The lane accepted by `keep` whose centre line is nearest `p`: in 3-D among the lanes within
-/// 10 m in plan, else the plan-nearest within 100 m.
-pub(crate) fn waypoint(map: &Map, p: DVec3, keep: impl Fn(&Lane) -> bool) -> Option<Waypoint> {
-    waypoint_within(map, p, FAR_RADIUS, keep)
-}
-
-/// [`waypoint`] searching no further than `radius` in plan.
-pub(crate) fn waypoint_within(
-    map: &Map,
-    p: DVec3,
-    radius: f64,
-    keep: impl Fn(&Lane) -> bool,
-) -> Option<Waypoint> {
-    let mut candidates = map.lanes_near(p.truncate(), radius.min(NEAR_RADIUS), &keep);
-    if candidates.is_empty() && radius > NEAR_RADIUS {
-        candidates.extend(map.nearest(p.truncate(), radius, &keep));
-    }
-    candidates
-        .into_iter()
-        .map(|(lane, proj)| {
-            let pose = map.lane(lane).pose_at(proj.s);
-            let distance = (pose.position - p).length();
-            Waypoint {
-                lane,
-                s: proj.s,
-                position: pose.position,
-                yaw: pose.yaw,
-                distance,
-            }
-        })
-        .min_by(|a, b| a.distance.total_cmp(&b.distance))
 }
 
 /// Python's `str(round(x, digits))` for the magnitudes the messages print.

@@ -8,50 +8,9 @@
 //! The reference point is the box centre; the rear axle sits 1.42 m behind it.
 
 use glam::{DVec2, DVec3};
+use ssrdrive_proto::control::Control;
 
 use super::state::EgoState;
-
-/// The control an agent sends each tick (CARLA's VehicleControl subset).
-#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
-pub struct Control {
-    /// Steering in [-1, 1], +1 = full right.
-    pub steer: f64,
-    /// Throttle in [0, 1].
-    pub throttle: f64,
-    /// Brake in [0, 1].
-    pub brake: f64,
-}
-
-impl Control {
-    /// The same control with every field clamped to its range; NaN becomes 0 (and brake 1, so
-    /// a broken agent stops rather than drives off).
-    pub fn sanitized(self) -> Control {
-        let clamp = |v: f64, lo: f64| {
-            if v.is_nan() {
-                f64::NAN
-            } else {
-                v.clamp(lo, 1.0)
-            }
-        };
-        let (steer, throttle, brake) = (
-            clamp(self.steer, -1.0),
-            clamp(self.throttle, 0.0),
-            clamp(self.brake, 0.0),
-        );
-        if steer.is_nan() || throttle.is_nan() || brake.is_nan() {
-            return Control {
-                steer: 0.0,
-                throttle: 0.0,
-                brake: 1.0,
-            };
-        }
-        Control {
-            steer,
-            throttle,
-            brake,
-        }
-    }
-}
 
 /// Physical parameters of the ego.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,14 +87,19 @@ impl Ego {
         let c = control.sanitized();
         self.control = c;
         let max_delta = dt / p.steer_time;
-        self.steer += (c.steer - self.steer).clamp(-max_delta, max_delta);
-        let drive = c.throttle * p.max_accel * (1.0 - self.speed / p.top_speed).max(0.0);
+        let (steer, throttle, brake) = (
+            f64::from(c.steer),
+            f64::from(c.throttle),
+            f64::from(c.brake),
+        );
+        self.steer += (steer - self.steer).clamp(-max_delta, max_delta);
+        let drive = throttle * p.max_accel * (1.0 - self.speed / p.top_speed).max(0.0);
         let resist = if self.speed > 0.0 {
             p.rolling + p.drag * self.speed * self.speed
         } else {
             0.0
         };
-        let accel = drive - c.brake * p.max_brake - resist;
+        let accel = drive - brake * p.max_brake - resist;
         let v0 = self.speed;
         let v1 = (v0 + accel * dt).max(0.0);
         let v = 0.5 * (v0 + v1);

@@ -7,23 +7,24 @@
 //! [`WorldConfig::seed`], so a (map, route, config) triple always replays identically.
 
 pub mod ego;
+pub mod idm;
 pub mod lights;
 pub mod scenarios;
 pub mod state;
 pub mod traffic;
 
+use ego::{Ego, EgoParams};
 use glam::DVec2;
+use lights::LightController;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-use crate::map::Map;
-use crate::render::Appearance;
-use crate::route::DenseRoute;
-use ego::{Control, Ego, EgoParams};
-use lights::LightController;
 use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
+use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
 use traffic::{EgoPresence, Traffic};
+
+use crate::map::Map;
+use crate::route::DenseRoute;
 
 /// Simulation step, seconds (20 Hz).
 pub const DT: f64 = 0.05;
@@ -55,17 +56,6 @@ pub struct WorldConfig {
     /// Draw camera frames in a look varied from the seed (colours, sun, noise) instead of the
     /// canonical one.
     pub randomise_appearance: bool,
-}
-
-impl WorldConfig {
-    /// The look camera frames of this world are drawn in.
-    pub fn appearance(&self) -> Appearance {
-        if self.randomise_appearance {
-            Appearance::randomised(self.seed)
-        } else {
-            Appearance::default()
-        }
-    }
 }
 
 impl Default for WorldConfig {

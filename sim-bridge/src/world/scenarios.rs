@@ -16,10 +16,11 @@
 
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
+use ssrdrive_proto::command::RoadOption;
 
 use super::state::{ActorKind, Obb};
 use crate::map::{LaneIdx, LaneKind, Map};
-use crate::route::{DenseRoute, RoadOption};
+use crate::route::DenseRoute;
 
 /// Metres of route between S3 walkers, on average.
 pub const S3_SPACING: f64 = 250.0;

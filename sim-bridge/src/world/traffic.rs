@@ -19,25 +19,25 @@ use std::collections::{BTreeMap, HashMap};
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
 
+use super::idm::Idm;
 use super::state::{LightState, Obb};
 use crate::map::{LaneIdx, LaneKind, Map};
 
-/// Comfortable IDM acceleration, m/s^2.
-const IDM_ACCEL: f64 = 2.0;
-/// Comfortable IDM deceleration, m/s^2.
-const IDM_DECEL: f64 = 3.0;
+/// How background vehicles follow: gentler than the expert, with a longer headway, and slower
+/// in curves than it (2.5 m/s^2 of lateral acceleration on junction connectors).
+const IDM: Idm = Idm {
+    accel: 2.0,
+    decel: 3.0,
+    min_gap: 2.5,
+    headway: 1.2,
+    lateral_accel: 2.5,
+};
 /// Hardest braking a background vehicle uses, m/s^2.
 const MAX_DECEL: f64 = 8.0;
-/// IDM standstill gap, m.
-const MIN_GAP: f64 = 2.5;
-/// IDM time headway, s.
-const HEADWAY: f64 = 1.2;
 /// How far ahead a vehicle looks for leaders and stop lines, m.
 const LOOKAHEAD: f64 = 60.0;
 /// Distance to a junction at which a vehicle asks to enter it, m.
 pub const REQUEST_DISTANCE: f64 = 10.0;
-/// Lateral acceleration limit that caps speed on curved connectors, m/s^2.
-const LATERAL_ACCEL: f64 = 2.5;
 /// Stuck time before a vehicle is moved elsewhere, s.
 pub const RESPAWN_AFTER_S: f64 = 40.0;
 /// A stuck vehicle is moved only when farther than this from the ego, m.
@@ -240,7 +240,7 @@ impl Traffic {
             if let Some(ego_gap) = ego_on_path(map, v, ego) {
                 gap = gap.min_by_gap(ego_gap);
             }
-            accels.push(idm(v, gap.0, gap.1, map));
+            accels.push(follow(v, gap.0, gap.1, map));
         }
         for (i, a) in accels.into_iter().enumerate() {
             self.advance(map, i, a, t, dt, rng);
@@ -342,7 +342,7 @@ impl Traffic {
         {
             match lights[light] {
                 LightState::Red => return true,
-                LightState::Yellow if to_end > v.speed * v.speed / (2.0 * IDM_DECEL) => {
+                LightState::Yellow if to_end > v.speed * v.speed / (2.0 * IDM.decel) => {
                     return true;
                 }
                 _ => {}
@@ -435,7 +435,7 @@ impl Traffic {
             v.arrival.get_or_insert(t);
         }
         if self.stop_at_end.contains_key(&v.lane)
-            && to_end < v.half.x + MIN_GAP + 1.5
+            && to_end < v.half.x + IDM.min_gap + 1.5
             && v.speed < 0.1
         {
             v.stopped_at_sign = true;
@@ -613,19 +613,12 @@ pub(crate) fn extend_path(map: &Map, v: &mut Vehicle, rng: &mut impl Rng) {
     }
 }
 
-/// IDM acceleration towards a leader `gap` metres ahead moving at `lead_speed`.
-fn idm(v: &Vehicle, gap: f64, lead_speed: f64, map: &Map) -> f64 {
-    let v0 = curve_limited_speed(map, v).min(v.desired_speed).max(0.5);
-    let free = 1.0 - (v.speed / v0).powi(4);
-    let interaction = if gap.is_finite() {
-        let dv = v.speed - lead_speed;
-        let s_star = MIN_GAP
-            + (v.speed * HEADWAY + v.speed * dv / (2.0 * (IDM_ACCEL * IDM_DECEL).sqrt())).max(0.0);
-        (s_star / gap.max(0.1)).powi(2)
-    } else {
-        0.0
-    };
-    (IDM_ACCEL * (free - interaction)).clamp(-MAX_DECEL, IDM_ACCEL)
+/// IDM acceleration towards a leader `gap` metres ahead (infinite: none) moving at `lead_speed`.
+fn follow(v: &Vehicle, gap: f64, lead_speed: f64, map: &Map) -> f64 {
+    let desired = curve_limited_speed(map, v).min(v.desired_speed).max(0.5);
+    let leader = gap.is_finite().then_some((gap, lead_speed));
+    IDM.acceleration(v.speed, desired, leader)
+        .clamp(-MAX_DECEL, IDM.accel)
 }
 
 /// Speed that keeps lateral acceleration under the limit on the current and next lane.
@@ -637,7 +630,7 @@ fn curve_limited_speed(map: &Map, v: &Vehicle) -> f64 {
             let turn = crate::map::angle_diff(l.pose_at(l.length()).yaw, l.pose_at(0.0).yaw).abs();
             if turn > 0.3 {
                 let radius = l.length() / turn;
-                limit = limit.min((LATERAL_ACCEL * radius).sqrt());
+                limit = limit.min(IDM.curve_speed(radius));
             }
         }
     }

@@ -8,8 +8,8 @@
 
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::camera::Rig;
 
-use crate::camera::Rig;
 use crate::model::float_tensor;
 use crate::pose::EgoMotion;
 

@@ -7,19 +7,17 @@ mod grid;
 mod spatial;
 mod temporal;
 
-pub use grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
-pub use spatial::ImageFeatures;
-pub use temporal::{HISTORY_S, HISTORY_TICKS, align_previous_bev};
-
 use burn::module::{Module, Param};
 use burn::nn::{LayerNorm, Linear};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Distribution, Tensor};
-
+pub use grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
+pub use spatial::ImageFeatures;
 use spatial::SpatialCrossAttention;
+use ssrdrive_proto::camera::MAX_CAMERAS;
 use temporal::TemporalSelfAttention;
+pub use temporal::{HISTORY_S, HISTORY_TICKS, align_previous_bev};
 
-use crate::camera::MAX_CAMERAS;
 use crate::model::config::SsrConfig;
 use crate::model::cpu_kernels::{self, Activation};
 use crate::model::float_tensor;

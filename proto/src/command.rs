@@ -1,6 +1,10 @@
-//! CARLA's RoadOption: the high-level command attached to each route point.
+//! CARLA's RoadOption: the high-level command attached to each route point, the command an
+//! agent is given every tick, and its one-hot encoding as the network reads it.
 
 use serde::{Deserialize, Serialize};
+
+/// Length of [`RoadOption::one_hot`]: the six commands the network tells apart.
+pub const COMMANDS: usize = 6;
 
 /// The navigation command of a route point, with CARLA's numeric values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -49,6 +53,22 @@ impl RoadOption {
         })
     }
 
+    /// Position of the command's 1 in [`RoadOption::one_hot`]: CARLA's value minus one, with
+    /// [`RoadOption::Void`] read as [`RoadOption::LaneFollow`] (TCP's convention).
+    pub fn one_hot_index(self) -> usize {
+        match self {
+            RoadOption::Void => RoadOption::LaneFollow.one_hot_index(),
+            other => other.value() as usize - 1,
+        }
+    }
+
+    /// The command as the network reads it.
+    pub fn one_hot(self) -> [f32; COMMANDS] {
+        let mut encoded = [0.0; COMMANDS];
+        encoded[self.one_hot_index()] = 1.0;
+        encoded
+    }
+
     /// CARLA's name, as written in route files and logs.
     pub fn name(self) -> &'static str {
         match self {
@@ -76,5 +96,24 @@ impl RoadOption {
             self,
             RoadOption::Left | RoadOption::Right | RoadOption::Straight
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn void_is_encoded_as_lane_follow() {
+        assert_eq!(RoadOption::Void.one_hot(), RoadOption::LaneFollow.one_hot());
+        assert_eq!(RoadOption::Left.one_hot(), [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(RoadOption::ChangeLaneRight.one_hot_index(), COMMANDS - 1);
+        for value in -1..=6 {
+            if let Some(option) = RoadOption::from_value(value) {
+                assert_eq!(option.one_hot().iter().sum::<f32>(), 1.0);
+                assert_eq!(RoadOption::from_value(option.value()), Some(option));
+            }
+        }
+        assert_eq!(RoadOption::from_value(0), None);
     }
 }

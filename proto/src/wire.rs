@@ -1,10 +1,9 @@
-//! Conversions between the simulator's types and the `ssrdrive.v1` wire messages, shared by
-//! the client here and the server in `ssr-agent` so both read the protocol the same way.
+//! Conversions between the contract's types and the `ssrdrive.v1` wire messages, shared by the
+//! simulator's client and the agent's server so both read the protocol the same way.
 
-use ssrdrive_proto::v1;
-
-use crate::agent::{CameraFrame, Control, Observation};
 use crate::camera::{CameraSpec, Rig, RigError};
+use crate::control::Control;
+use crate::v1;
 
 /// A rig on the wire.
 pub fn rig_to_proto(rig: &Rig) -> v1::Rig {
@@ -67,54 +66,21 @@ pub fn rgb_images(
         .collect()
 }
 
-/// A rendered frame as an uncompressed RGB8 image.
-pub fn frame_to_proto(frame: &CameraFrame) -> v1::Image {
-    v1::Image {
-        camera_id: frame.camera.clone(),
-        width: frame.width,
-        height: frame.height,
-        encoding: v1::ImageEncoding::Rgb8 as i32,
-        data: frame.rgb.clone(),
-    }
-}
-
-/// The step request of one observation (its frames in rig order).
-pub fn step_request(episode_id: &str, obs: &Observation) -> v1::StepRequest {
-    v1::StepRequest {
-        episode_id: episode_id.to_string(),
-        frame_index: obs.frame,
-        timestamp_s: obs.time,
-        images: obs.frames.iter().map(frame_to_proto).collect(),
-        speed_mps: obs.speed,
-        pose: Some(v1::Pose {
-            x: obs.position.x,
-            y: obs.position.y,
-            z: obs.position.z,
-            yaw: obs.yaw,
-        }),
-        command: obs.command.value(),
-        target_point: Some(v1::EgoPoint {
-            x: obs.target_point.x,
-            y: obs.target_point.y,
-        }),
-        debug: false,
-    }
-}
-
+/// A control on the wire.
 pub fn control_to_proto(control: Control) -> v1::Control {
     v1::Control {
-        steer: control.steer,
-        throttle: control.throttle,
-        brake: control.brake,
+        steer: control.steer.into(),
+        throttle: control.throttle.into(),
+        brake: control.brake.into(),
     }
 }
 
 /// A control from the wire, clamped to its ranges (NaN becomes a full stop).
 pub fn control_from_proto(control: &v1::Control) -> Control {
     Control {
-        steer: control.steer,
-        throttle: control.throttle,
-        brake: control.brake,
+        steer: control.steer as f32,
+        throttle: control.throttle as f32,
+        brake: control.brake as f32,
     }
     .sanitized()
 }

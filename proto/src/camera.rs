@@ -1,5 +1,5 @@
 //! Camera rigs in CARLA's sensor description and their pinhole projection, shared by the
-//! renderer, the dataset and the network (the `ssr-agent` crate re-exports this module).
+//! renderer, the dataset and the network.
 //!
 //! A [`CameraSpec`] is what a CARLA user writes in `sensors()`: a position (x, y, z) in metres
 //! and a rotation (roll, pitch, yaw) in degrees relative to the ego vehicle, in CARLA's
@@ -15,6 +15,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error_text::clipped;
+use crate::files::{CappedReadError, read_capped_text};
 
 /// Most cameras a rig may hold (the network keeps one learned embedding per camera slot).
 pub const MAX_CAMERAS: usize = 6;
@@ -262,22 +263,20 @@ impl Rig {
         if let Some(rig) = Self::preset(arg) {
             return Ok(rig);
         }
-        let path = std::path::Path::new(arg);
-        let unreadable = |e: std::io::Error| {
-            let names: Vec<&str> = RIG_PRESETS.iter().map(|(n, _)| *n).collect();
-            RigError::File {
-                path: arg.to_string(),
-                problem: format!("{e} (and not a preset: {})", names.join(", ")),
-            }
-        };
-        let bytes = std::fs::metadata(path).map_err(unreadable)?.len();
-        if bytes > MAX_RIG_FILE_BYTES {
-            return Err(RigError::File {
-                path: arg.to_string(),
-                problem: format!("{bytes} bytes, over the {MAX_RIG_FILE_BYTES}-byte limit"),
-            });
-        }
-        let text = std::fs::read_to_string(path).map_err(unreadable)?;
+        let text =
+            read_capped_text(std::path::Path::new(arg), MAX_RIG_FILE_BYTES).map_err(|e| {
+                let names: Vec<&str> = RIG_PRESETS.iter().map(|(n, _)| *n).collect();
+                let problem = match e {
+                    CappedReadError::Io(e) => {
+                        format!("{e} (and not a preset: {})", names.join(", "))
+                    }
+                    other => other.to_string(),
+                };
+                RigError::File {
+                    path: arg.to_string(),
+                    problem,
+                }
+            })?;
         Self::from_json(&text).map_err(|e| RigError::File {
             path: arg.to_string(),
             problem: e.to_string(),

@@ -1,0 +1,330 @@
+//! Expert driving datasets: the on-disk format and the [`Dataset`] reader that training uses
+//! (the recorder and the collector that write them are sim-bridge's `dataset` module).
+//!
+//! # Layout (format version 1)
+//! ```text
+//! <root>/manifest.json                    Manifest: rig, rate, counts, sizes, towns, episodes
+//! <root>/episodes/<name>/episode.json     EpisodeInfo: town, route, seed, rig, noise, outcome
+//! <root>/episodes/<name>/measurements.jsonl   one FrameRecord per line, in time order
+//! <root>/episodes/<name>/<camera>/<index:06>.png   RGB8 frames, one folder per camera
+//! ```
+//! Every file is plain JSON or PNG, so a dataset can be inspected with `jq` and an image
+//! viewer, and read one episode (one line) at a time. Every file is read capped
+//! ([`read_capped`]): JSON at 512 MiB, PNG at 64 MiB.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Rig;
+use crate::control::Control;
+use crate::files::{FileError, read_capped};
+use crate::image::{RgbImage, decode_png};
+
+/// Value of [`Manifest::format`].
+pub const FORMAT: &str = "ssrdrive-dataset";
+/// Value of [`Manifest::version`].
+pub const VERSION: u32 = 1;
+/// Spacing of the future waypoints and controls, seconds.
+pub const FUTURE_STEP: f64 = 0.5;
+/// Number of future waypoints and controls (3 s).
+pub const FUTURE_COUNT: usize = 6;
+/// Largest JSON file read (manifest, episode, measurements), bytes.
+const MAX_JSON_BYTES: u64 = 512 * 1024 * 1024;
+/// Largest PNG read, bytes.
+const MAX_PNG_BYTES: u64 = 64 * 1024 * 1024;
+
+/// Why the expert slows or stops: the kind of the nearest obstacle, or the forecast.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BrakeReason {
+    /// A vehicle or cyclist on the path.
+    Vehicle,
+    /// A walker on the path.
+    Walker,
+    /// A static obstacle or parked car on the path.
+    Obstacle,
+    /// A red light, or a yellow one it can still stop for.
+    TrafficLight,
+    /// A stop sign it has not yet stopped at.
+    StopSign,
+    /// Traffic on the lane it must change into.
+    LaneChange,
+    /// The collision forecast.
+    PredictedCollision,
+}
+
+/// One stored frame: what the agent observed, what the expert did and what came next.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Position in the episode, from 0.
+    pub index: usize,
+    /// Simulator tick (20 Hz) it was taken at.
+    pub tick: u64,
+    /// Simulation time, s.
+    pub time: f64,
+    /// Forward speed, m/s.
+    pub speed: f64,
+    /// Ego box centre on the ground, world frame (OpenDRIVE: x east, y north, z up), m.
+    pub position: [f64; 3],
+    /// Heading, rad counter-clockwise from +x.
+    pub yaw: f64,
+    /// Route-follower command, CARLA RoadOption value (1 left ... 6 change lane right).
+    pub command: i32,
+    /// Route-follower target point, ego frame (x forward, y left), m.
+    pub target_point: [f64; 2],
+    /// The expert's control: the training label (steer +1 = full right).
+    pub control: Control,
+    /// The control actually applied (differs from `control` while noise is injected).
+    pub executed: Control,
+    /// Whether injected noise was steering the car on this tick.
+    pub noise: bool,
+    /// Why the expert brakes or holds still, if it does for a hazard.
+    pub brake_reason: Option<BrakeReason>,
+    /// Future ego positions every [`FUTURE_STEP`] s, in this frame's ego frame, m: where the
+    /// car went (perturbations included).
+    pub waypoints: Vec<[f64; 2]>,
+    /// The expert's plan from this frame's state ([`FUTURE_COUNT`] waypoints every
+    /// [`FUTURE_STEP`] s on the route's centre line, ego frame, m): where it means to go, the
+    /// trajectory label (inside a perturbation it leads back to the lane, where `waypoints`
+    /// follow the drift). Empty in datasets recorded before it existed.
+    #[serde(default)]
+    pub plan: Vec<[f64; 2]>,
+    /// The expert's control at the same future instants.
+    pub future_controls: Vec<Control>,
+    /// False when the route ended before the last future instant (then fewer than
+    /// [`FUTURE_COUNT`] waypoints are given).
+    pub future_complete: bool,
+    /// Image files relative to the episode folder, in rig order.
+    pub images: Vec<String>,
+}
+
+/// Noise injection: now and then the executed control is pushed off the expert's for a short
+/// while, laterally (a steering offset) or, for a share of the perturbations, longitudinally (the
+/// pedals held: coasting with a light brake, or pressing on); the recorded labels stay the
+/// expert's own (its correction).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NoiseConfig {
+    /// Perturbations started per simulated second, on average (0 = none).
+    pub rate: f64,
+    /// Duration of one perturbation, s (drawn uniformly in this range).
+    pub duration: [f64; 2],
+    /// Steering offset magnitude (drawn uniformly, random sign).
+    pub steer: [f64; 2],
+    /// Share of the perturbations that act on the pedals instead of the steering.
+    #[serde(default)]
+    pub longitudinal: f64,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        Self {
+            rate: 0.1,
+            duration: [0.5, 1.0],
+            steer: [0.1, 0.3],
+            longitudinal: 0.0,
+        }
+    }
+}
+
+/// How one episode ended in the simulator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeOutcome {
+    /// The leaderboard status ("Completed", "Failed - Agent got blocked", ...).
+    pub status: String,
+    /// Route completion, percent.
+    pub route_completion: f64,
+    /// Driving score of the run (noise included).
+    pub driving_score: f64,
+    /// Simulated seconds.
+    pub sim_seconds: f64,
+}
+
+/// `episode.json`: everything about one recorded route run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeInfo {
+    /// Folder name under `episodes/`.
+    pub name: String,
+    pub town: String,
+    pub route_set: String,
+    pub route_id: String,
+    pub repetition: usize,
+    /// World seed (traffic, scenarios, lights, appearance, noise).
+    pub seed: u64,
+    pub rig: Rig,
+    /// Stored frames per simulated second.
+    pub rate_hz: f64,
+    pub ticks_per_frame: u64,
+    pub noise: NoiseConfig,
+    /// Who drove, when not the expert (DAgger: the learner, labelled by the expert).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub driver: Option<String>,
+    pub randomise_appearance: bool,
+    pub frames: usize,
+    /// Frames whose future was cut by the end of the route.
+    pub truncated_frames: usize,
+    /// Bytes of images and measurements.
+    pub bytes: u64,
+    pub outcome: EpisodeOutcome,
+    pub wall_seconds: f64,
+}
+
+/// Per-town totals in the manifest.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TownCount {
+    pub episodes: usize,
+    pub frames: usize,
+}
+
+/// An episode as the manifest lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeEntry {
+    pub name: String,
+    pub town: String,
+    pub route_set: String,
+    pub route_id: String,
+    pub frames: usize,
+}
+
+/// `manifest.json`: the dataset at a glance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Always [`VERSION`].
+    pub version: u32,
+    pub rig: Rig,
+    pub rate_hz: f64,
+    pub future_step_s: f64,
+    pub future_count: usize,
+    pub episodes: usize,
+    pub frames: usize,
+    pub truncated_frames: usize,
+    pub bytes: u64,
+    pub towns: BTreeMap<String, TownCount>,
+    /// Every complete episode, sorted by name.
+    pub episode_list: Vec<EpisodeEntry>,
+}
+
+/// A dataset that cannot be read, with the file and the problem.
+pub type DatasetError = FileError;
+
+/// A whole file, refusing one over `limit` bytes.
+fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>, DatasetError> {
+    read_capped(path, limit).map_err(|e| DatasetError::read(path, e))
+}
+
+/// A JSON file of a dataset (`manifest.json`, `episode.json`), read capped.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, DatasetError> {
+    let bytes = read_limited(path, MAX_JSON_BYTES)?;
+    serde_json::from_slice(&bytes).map_err(|e| DatasetError::invalid(path, e.to_string()))
+}
+
+/// A dataset opened for reading.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    root: PathBuf,
+    pub manifest: Manifest,
+}
+
+impl Dataset {
+    /// Open the dataset at `root` (reads only the manifest).
+    pub fn open(root: &Path) -> Result<Self, DatasetError> {
+        let path = root.join("manifest.json");
+        let manifest: Manifest = read_json(&path)?;
+        if manifest.format != FORMAT || manifest.version != VERSION {
+            return Err(DatasetError::invalid(
+                &path,
+                format!(
+                    "format {} version {}, expected {FORMAT} version {VERSION}",
+                    manifest.format, manifest.version
+                ),
+            ));
+        }
+        Ok(Self {
+            root: root.to_path_buf(),
+            manifest,
+        })
+    }
+
+    /// Folder of an episode (the name is made file-name-safe first, as collection made it).
+    pub fn episode_dir(&self, name: &str) -> PathBuf {
+        self.root.join("episodes").join(safe_name(name))
+    }
+
+    /// An episode's `episode.json`.
+    pub fn episode(&self, name: &str) -> Result<EpisodeInfo, DatasetError> {
+        read_json(&self.episode_dir(name).join("episode.json"))
+    }
+
+    /// An episode's frame records, in time order. A line that does not parse, or records out
+    /// of order, is an error naming the line.
+    pub fn frames(&self, name: &str) -> Result<Vec<FrameRecord>, DatasetError> {
+        let path = self.episode_dir(name).join("measurements.jsonl");
+        parse_frames(&read_limited(&path, MAX_JSON_BYTES)?, &path)
+    }
+
+    /// The images of one frame, in rig order.
+    pub fn images(&self, name: &str, record: &FrameRecord) -> Result<Vec<RgbImage>, DatasetError> {
+        let dir = self.episode_dir(name);
+        record
+            .images
+            .iter()
+            .map(|rel| {
+                if rel.contains("..") || Path::new(rel).is_absolute() {
+                    return Err(DatasetError::invalid(
+                        &dir,
+                        format!("image path {rel} leaves the episode"),
+                    ));
+                }
+                let path = dir.join(rel);
+                let bytes = read_limited(&path, MAX_PNG_BYTES)?;
+                decode_png(&bytes).map_err(|e| DatasetError::invalid(&path, e.to_string()))
+            })
+            .collect()
+    }
+}
+
+/// Frame records from the bytes of a `measurements.jsonl` (`path` names it in errors). A line
+/// that does not parse, or records out of order, is an error naming the line.
+pub fn parse_frames(bytes: &[u8], path: &Path) -> Result<Vec<FrameRecord>, DatasetError> {
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| DatasetError::invalid(path, format!("not UTF-8: {e}")))?;
+    let mut out = Vec::new();
+    for (n, line) in text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
+        let record: FrameRecord = serde_json::from_str(line)
+            .map_err(|e| DatasetError::invalid(path, format!("line {}: {e}", n + 1)))?;
+        if record.index != out.len() {
+            return Err(DatasetError::invalid(
+                path,
+                format!(
+                    "line {}: frame {} where {} was due",
+                    n + 1,
+                    record.index,
+                    out.len()
+                ),
+            ));
+        }
+        out.push(record);
+    }
+    Ok(out)
+}
+
+/// `raw` with every character other than ASCII letters, digits, `_` and `-` replaced by `-`,
+/// so it can name a file or folder and never leave its parent.
+pub fn safe_name(raw: &str) -> String {
+    raw.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
+}
