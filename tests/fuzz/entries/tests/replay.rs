@@ -1,5 +1,5 @@
-//! Replays every fuzz seed (`fuzz/seeds/<target>/`) and every input the fuzzers found to crash,
-//! hang or exhaust memory (`fuzz/regressions/<target>/`, each fixed since) through the same
+//! Replays every fuzz seed (`tests/fuzz/seeds/<target>/`) and every input the fuzzers found to crash,
+//! hang or exhaust memory (`tests/fuzz/regressions/<target>/`, each fixed since) through the same
 //! entry the fuzzer uses. CI runs this; it does not fuzz.
 
 use std::path::Path;

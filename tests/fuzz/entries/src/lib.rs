@@ -1,4 +1,4 @@
-//! What each fuzz target does with its input, in one place for the fuzzer (`fuzz/`) and for the
+//! What each fuzz target does with its input, in one place for the fuzzer (`tests/fuzz/`) and for the
 //! main build's regression test, which replays every seed and every crash found. Each entry
 //! hands arbitrary bytes to one parser of untrusted input through its public API; an `Err` is
 //! the expected answer to garbage, and any panic, hang or runaway allocation is a bug.
@@ -12,7 +12,7 @@ use ssrdrive_proto::v1;
 /// What a fuzz target does with one input.
 pub type Entry = fn(&[u8]);
 
-/// The fuzz targets, by name: the folders of `fuzz/seeds` and `fuzz/regressions`.
+/// The fuzz targets, by name: the folders of `tests/fuzz/seeds` and `tests/fuzz/regressions`.
 pub const TARGETS: [(&str, Entry); 7] = [
     ("image_decode", image_decode),
     ("rig_json", rig_json),
