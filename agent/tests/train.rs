@@ -153,10 +153,10 @@ fn validation_situations_follow_the_command_and_count_start_ups() {
 }
 
 #[test]
-fn balanced_sampling_favours_starts_slowing_turns_and_recoveries() {
+fn balanced_sampling_favours_starts_slowing_turns_recoveries_and_the_learners_states() {
     use ssr_agent::train::data::sampling_weight;
     use ssrdrive_proto::dataset::FrameRecord;
-    let frame = |speed: f64, throttle: f32, brake: f32, command: i32, noise: bool| {
+    let record = |speed: f64, throttle: f32, brake: f32, command: i32, noise: bool| {
         let mut f: FrameRecord = serde_json::from_str(
             r#"{"index":0,"tick":0,"time":0,"speed":0,"position":[0,0,0],"yaw":0,"command":4,
             "target_point":[10,0],"control":{"steer":0,"throttle":0,"brake":0},
@@ -169,7 +169,10 @@ fn balanced_sampling_favours_starts_slowing_turns_and_recoveries() {
         f.control.brake = brake;
         f.command = command;
         f.noise = noise;
-        sampling_weight(&f)
+        f
+    };
+    let frame = |speed, throttle, brake, command, noise| {
+        sampling_weight(&record(speed, throttle, brake, command, noise), false)
     };
     let cruising = frame(8.0, 0.5, 0.0, 4, false);
     let standing = frame(0.0, 0.0, 1.0, 4, false);
@@ -185,5 +188,9 @@ fn balanced_sampling_favours_starts_slowing_turns_and_recoveries() {
     assert!(
         frame(8.0, 0.5, 0.0, 4, true) > cruising,
         "a perturbed frame"
+    );
+    assert!(
+        sampling_weight(&record(8.0, 0.5, 0.0, 4, false), true) > cruising,
+        "a state the learner reached (DAgger)"
     );
 }

@@ -208,7 +208,8 @@ fn a_lane_section_too_short_to_bake_keeps_the_links_through_it() {
 /// cells.
 #[test]
 fn a_lane_of_absurd_width_is_left_out() {
-    let xml = include_str!("../../tests/fuzz/regressions/map_xodr/slow-cubic-lane-width-135000-km.xodr");
+    let xml =
+        include_str!("../../tests/fuzz/regressions/map_xodr/slow-cubic-lane-width-135000-km.xodr");
     let map = Map::from_str("wild-width", xml, MapOptions::default()).unwrap();
     assert!(
         map.lanes.iter().all(|l| l.road_id != "2"),

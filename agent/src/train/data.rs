@@ -188,6 +188,7 @@ impl TrainingData {
                     ),
                 ));
             }
+            let learner_drove = dataset.episode(&entry.name)?.driver.is_some();
             let usable = frames.iter().filter(|f| {
                 f.future_complete
                     && f.waypoints.len() >= pred_len
@@ -196,7 +197,7 @@ impl TrainingData {
             });
             for f in usable {
                 if !held_out {
-                    train_weights.push(sampling_weight(f));
+                    train_weights.push(sampling_weight(f, learner_drove));
                 }
                 side.push(SampleRef {
                     episode: index as u32,
@@ -364,12 +365,17 @@ impl TrainingData {
     }
 }
 
+/// How much more often a frame from an episode the learner drove (DAgger: the states the
+/// learner reaches, labelled by the expert) is drawn than the same frame from an expert episode.
+/// A round adds a few thousand frames to half a million; drawn at par they would hardly count.
+pub const LEARNER_DROVE_WEIGHT: f32 = 3.0;
+
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying
 /// still) is a fifth of the data and teaches little, so it is drawn a third as often; starting
 /// from standstill, slowing down for a light, a sign or a road user, turns, lane changes and
 /// perturbed frames (recoveries) are rare and decide closed-loop driving, so they are drawn more
-/// often.
-pub fn sampling_weight(frame: &FrameRecord) -> f32 {
+/// often, and so are the frames of episodes the learner drove ([`LEARNER_DROVE_WEIGHT`]).
+pub fn sampling_weight(frame: &FrameRecord, learner_drove: bool) -> f32 {
     let still = frame.speed < 0.1;
     let starting = frame.speed < 1.0 && frame.control.throttle > 0.1;
     let slowing = !still && frame.control.brake > 0.0;
@@ -389,6 +395,9 @@ pub fn sampling_weight(frame: &FrameRecord) -> f32 {
     };
     if frame.noise {
         weight *= 1.5;
+    }
+    if learner_drove {
+        weight *= LEARNER_DROVE_WEIGHT;
     }
     weight
 }

@@ -6,7 +6,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::{EpisodeEntry, FrameRecord, Manifest, TownCount, safe_name};
+use ssrdrive_proto::dataset::{
+    EpisodeEntry, EpisodeInfo, EpisodeOutcome, FrameRecord, Manifest, NoiseConfig, TownCount,
+    safe_name,
+};
 use ssrdrive_proto::image::encode_png;
 
 use super::rig;
@@ -65,6 +68,35 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
             lines.push('\n');
         }
         std::fs::write(dir.join("measurements.jsonl"), lines).unwrap();
+        let info = EpisodeInfo {
+            name: name.clone(),
+            town: "fixture".into(),
+            route_set: "fixture".into(),
+            route_id: route.to_string(),
+            repetition: 0,
+            seed: route as u64,
+            rig: camera_rig.clone(),
+            rate_hz: 2.0,
+            ticks_per_frame: 10,
+            noise: NoiseConfig::default(),
+            driver: None,
+            randomise_appearance: false,
+            frames: FIXTURE_FRAMES,
+            truncated_frames: 0,
+            bytes: 0,
+            outcome: EpisodeOutcome {
+                status: "Completed".into(),
+                route_completion: 100.0,
+                driving_score: 100.0,
+                sim_seconds: FIXTURE_FRAMES as f64 * 0.5,
+            },
+            wall_seconds: 0.0,
+        };
+        std::fs::write(
+            dir.join("episode.json"),
+            serde_json::to_string(&info).unwrap(),
+        )
+        .unwrap();
         episode_list.push(EpisodeEntry {
             name,
             town: "fixture".into(),
