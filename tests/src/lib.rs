@@ -1,10 +1,12 @@
 //! Helpers for the end-to-end tests in tests/tests/: the workspace's built binaries and a real
-//! `ssr-agent serve` process on an ephemeral loopback port, killed when dropped.
+//! `ssr-agent serve` process on an ephemeral loopback port, killed when dropped, or one
+//! [`SharedServer`] for every test of a test binary, killed when the binary exits.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
+use std::sync::{Mutex, Once, OnceLock};
 use std::time::{Duration, Instant};
 
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
@@ -173,6 +175,51 @@ impl Drop for Server {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// One server for all the tests of a test binary that use it: started on first use, killed when
+/// the binary exits (a static is never dropped). Declare it as a `static` with its flags.
+pub struct SharedServer {
+    flags: &'static [&'static str],
+    server: OnceLock<Server>,
+}
+
+/// Process ids of the shared servers to kill at exit.
+static SHARED_PIDS: Mutex<Vec<u32>> = Mutex::new(Vec::new());
+
+extern "C" fn kill_shared_servers() {
+    let pids = SHARED_PIDS.lock().map(|p| p.clone()).unwrap_or_default();
+    for pid in pids {
+        // SAFETY: kill(2) only signals the process; a pid that is gone is an ignored error.
+        unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+    }
+}
+
+impl SharedServer {
+    /// A server that will be started with these extra flags.
+    pub const fn new(flags: &'static [&'static str]) -> Self {
+        Self {
+            flags,
+            server: OnceLock::new(),
+        }
+    }
+
+    /// The server, started on the first call.
+    pub fn get(&'static self) -> &'static Server {
+        self.server.get_or_init(|| {
+            static AT_EXIT: Once = Once::new();
+            // SAFETY: registers a plain function with no arguments, as atexit(3) requires.
+            AT_EXIT.call_once(|| unsafe {
+                libc::atexit(kill_shared_servers);
+            });
+            let server = Server::start(self.flags);
+            SHARED_PIDS
+                .lock()
+                .expect("pid list")
+                .push(server.child.id());
+            server
+        })
     }
 }
 

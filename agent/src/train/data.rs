@@ -409,7 +409,7 @@ pub fn action_of(control: &Control) -> [f32; 2] {
     } else {
         control.throttle
     };
-    [acceleration as f32, control.steer as f32]
+    [acceleration, control.steer]
 }
 
 /// A prepared batch on the CPU.

@@ -82,22 +82,13 @@ impl Agent for OraclePlan {
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
         let expert = self.expert.run_step(obs, world)?;
         let waypoints: Vec<[f32; 2]> = self.expert.plan.iter().copied().map(to_f32).collect();
-        let branch = self.with_branch.then_some(Control {
-            steer: expert.steer as f32,
-            throttle: expert.throttle as f32,
-            brake: expert.brake as f32,
-        });
+        let branch = self.with_branch.then_some(expert);
         let decision = self.controller.act_with_branch(
             &waypoints,
             to_f32(obs.target_point),
             obs.speed as f32,
             branch,
         );
-        let c = decision.control;
-        Ok(Control {
-            steer: c.steer.into(),
-            throttle: c.throttle.into(),
-            brake: c.brake.into(),
-        })
+        Ok(decision.control)
     }
 }

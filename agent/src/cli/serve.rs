@@ -1,12 +1,12 @@
-//! Command-line and environment settings of `ssr-agent serve`, layered over the config file:
-//! defaults < `--config` file < environment (`SSR_AGENT_*`) < flags.
+//! `ssr-agent serve`: its command-line and environment settings, layered over the config file
+//! (defaults < `--config` file < environment (`SSR_AGENT_*`) < flags), and the run itself.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::Args;
 use ssr_agent::device::Backend;
-use ssr_agent::serve::{LogFormat, ServeConfig};
+use ssr_agent::serve::{self, LogFormat, ServeConfig};
 
 #[derive(Debug, Args)]
 pub struct ServeArgs {
@@ -139,5 +139,47 @@ impl ServeArgs {
         set(&mut config.unstick, &self.unstick);
         config.validate()?;
         Ok(config)
+    }
+}
+
+/// Serve until Ctrl-C or SIGTERM, then drain.
+pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
+    let config = args.resolve()?;
+    super::init_logs(config.log_format);
+    let device = config.backend.device()?;
+    let (policy, info) = serve::load_policy(&config, &device)?;
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?
+        .block_on(async {
+            let listeners = serve::Listeners::bind(&config).await?;
+            // Parents that asked for port 0 read the real ports from these lines.
+            println!("listening on {}", listeners.grpc.local_addr()?);
+            if let Some(metrics) = &listeners.metrics {
+                println!("metrics on http://{}/metrics", metrics.local_addr()?);
+            }
+            serve::run(listeners, config, policy, info, shutdown_signal()).await
+        })
+}
+
+/// Ctrl-C, or SIGTERM on Unix (what container runtimes send).
+async fn shutdown_signal() {
+    let interrupt = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut signal) => {
+                signal.recv().await;
+            }
+            Err(_) => std::future::pending().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = interrupt => {}
+        () = terminate => {}
     }
 }
