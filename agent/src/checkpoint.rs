@@ -30,31 +30,59 @@ pub const TRAINING_KEY: &str = "training";
 /// Largest safetensors header accepted.
 pub const MAX_HEADER_BYTES: u64 = 16 << 20;
 
+/// Why a checkpoint cannot be saved, read or loaded; every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
+    /// The file could not be opened, read or written.
     #[error("checkpoint {path}: {source}")]
     Io {
+        /// The checkpoint file (or the label of one in memory).
         path: PathBuf,
+        /// The I/O error.
         source: std::io::Error,
     },
+    /// The file is not safetensors: no header, a header over the cap, or one that is not JSON.
     #[error("checkpoint {path} is not a safetensors file: {reason}")]
-    NotSafetensors { path: PathBuf, reason: String },
+    NotSafetensors {
+        /// The checkpoint file (or the label of one in memory).
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The file is shorter than its header says.
     #[error(
         "checkpoint {path} is truncated: its header promises {expected} bytes, the file has {actual}"
     )]
     Truncated {
+        /// The checkpoint file (or the label of one in memory).
         path: PathBuf,
+        /// Bytes the header promises (length prefix, header and tensor data).
         expected: u64,
+        /// Bytes the file has.
         actual: u64,
     },
+    /// The metadata holds no model config under [`CONFIG_KEY`].
     #[error("checkpoint {path} has no '{CONFIG_KEY}' in its metadata (not saved by ssr-agent?)")]
-    MissingConfig { path: PathBuf },
+    MissingConfig {
+        /// The checkpoint file (or the label of one in memory).
+        path: PathBuf,
+    },
+    /// The model config in the metadata does not parse or does not validate.
     #[error("checkpoint {path} holds an invalid model config: {reason}")]
-    BadConfig { path: PathBuf, reason: String },
+    BadConfig {
+        /// The checkpoint file (or the label of one in memory).
+        path: PathBuf,
+        /// Why the config was refused.
+        reason: String,
+    },
+    /// The weights do not fit the network the config describes (names or shapes).
     #[error("checkpoint {path} does not match its config '{config}': {details}")]
     Mismatch {
+        /// The checkpoint file (or the label of one in memory).
         path: PathBuf,
+        /// The config's name.
         config: String,
+        /// Which tensors are missing, extra or of the wrong shape.
         details: String,
     },
 }
@@ -62,10 +90,13 @@ pub enum CheckpointError {
 /// What a checkpoint's header says, read without loading the weights.
 #[derive(Debug, Clone)]
 pub struct CheckpointInfo {
+    /// The model config the weights were saved with (validated).
     pub config: SsrConfig,
     /// Every metadata entry except the config.
     pub metadata: BTreeMap<String, String>,
+    /// Tensors in the file.
     pub tensors: usize,
+    /// Size of the file, bytes.
     pub bytes: u64,
 }
 

@@ -31,6 +31,7 @@ const MAX_SPEED: f32 = 100.0;
 pub struct StepInput {
     /// One frame per rig camera, in rig order.
     pub frames: Vec<RgbImage>,
+    /// The cameras the frames come from (checked against the frames).
     pub rig: Rig,
     /// Ego pose in the world frame; consecutive poses give the ego motion.
     pub pose: Pose2,
@@ -47,28 +48,53 @@ pub struct StepInput {
 /// What is wrong with one step input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InputError {
+    /// The rig itself is invalid.
     #[error(transparent)]
     Rig(#[from] RigError),
+    /// The number of frames is not the number of rig cameras.
     #[error("the rig has {expected} cameras but {got} frames came")]
-    FrameCount { expected: usize, got: usize },
-    #[error("camera '{camera}': frame is {got_w}x{got_h} but the rig says {want_w}x{want_h}")]
-    FrameSize {
-        camera: String,
-        want_w: u32,
-        want_h: u32,
-        got_w: u32,
-        got_h: u32,
-    },
-    #[error("camera '{camera}': a {w}x{h} RGB8 frame needs {want} bytes, got {got}")]
-    FrameBytes {
-        camera: String,
-        w: u32,
-        h: u32,
-        want: usize,
+    FrameCount {
+        /// Cameras in the rig.
+        expected: usize,
+        /// Frames given.
         got: usize,
     },
+    /// A frame's size is not its camera's.
+    #[error("camera '{camera}': frame is {got_w}x{got_h} but the rig says {want_w}x{want_h}")]
+    FrameSize {
+        /// The camera's id.
+        camera: String,
+        /// Width the rig gives the camera, pixels.
+        want_w: u32,
+        /// Height the rig gives the camera, pixels.
+        want_h: u32,
+        /// Width of the frame, pixels.
+        got_w: u32,
+        /// Height of the frame, pixels.
+        got_h: u32,
+    },
+    /// A frame's pixel buffer is not `w * h * 3` bytes long.
+    #[error("camera '{camera}': a {w}x{h} RGB8 frame needs {want} bytes, got {got}")]
+    FrameBytes {
+        /// The camera's id.
+        camera: String,
+        /// Frame width, pixels.
+        w: u32,
+        /// Frame height, pixels.
+        h: u32,
+        /// Bytes the frame needs.
+        want: usize,
+        /// Bytes the frame has.
+        got: usize,
+    },
+    /// Speed, target point or pose is not finite or out of its range.
     #[error("{field} = {value} is not a finite number in range")]
-    BadNumber { field: &'static str, value: f32 },
+    BadNumber {
+        /// The field, e.g. `speed` or `target_point.x`.
+        field: &'static str,
+        /// Its value.
+        value: f32,
+    },
 }
 
 /// Why a (batched) step was refused before anything ran.
@@ -76,9 +102,20 @@ pub enum InputError {
 pub enum StepError {
     /// A bad input, naming the episode (its index in the batch).
     #[error("episode {episode}: {source}")]
-    Input { episode: usize, source: InputError },
+    Input {
+        /// Index of the episode in the batch.
+        episode: usize,
+        /// What is wrong with its input.
+        source: InputError,
+    },
+    /// The batch has a different number of episode states and inputs.
     #[error("step_batch got {episodes} episode states for {inputs} inputs")]
-    BatchShape { episodes: usize, inputs: usize },
+    BatchShape {
+        /// Episode states given.
+        episodes: usize,
+        /// Inputs given.
+        inputs: usize,
+    },
 }
 
 /// What one episode remembers between ticks.
@@ -116,10 +153,13 @@ pub struct StepDebug {
     /// `[tokens][rows * cols]` TokenLearner attention over the BEV (each row sums to 1); empty
     /// for a network without STL.
     pub token_attention: Vec<Vec<f32>>,
+    /// Rows of the BEV grid (for reshaping `token_attention`).
     pub bev_rows: usize,
+    /// Columns of the BEV grid.
     pub bev_cols: usize,
-    /// Control branch Beta parameters for [acceleration, steer].
+    /// Control branch Beta alpha parameters for [acceleration, steer].
     pub alpha: [f32; 2],
+    /// Control branch Beta beta parameters for [acceleration, steer].
     pub beta: [f32; 2],
     /// The speed head's prediction, m/s.
     pub predicted_speed: f32,
@@ -128,12 +168,14 @@ pub struct StepDebug {
 /// What one step returns.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepOutput {
+    /// The control the vehicle gets, with both sources and the fusion status.
     pub decision: ControlDecision,
     /// Time spent in this episode's PID and fusion (the rest of a step is the shared forward
     /// pass).
     pub control_time: std::time::Duration,
     /// Planned waypoints, ego frame, 0.5 s apart.
     pub waypoints: Vec<[f32; 2]>,
+    /// Debug outputs, when the input asked for them.
     pub debug: Option<StepDebug>,
 }
 
@@ -202,6 +244,7 @@ impl SsrPolicy {
         }
     }
 
+    /// The network's model config.
     pub fn config(&self) -> &SsrConfig {
         &self.config
     }

@@ -8,12 +8,16 @@ use serde::{Deserialize, Serialize};
 /// The ego's planar pose in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Pose2 {
+    /// Position east, world frame, m.
     pub x: f32,
+    /// Position north, world frame, m.
     pub y: f32,
+    /// Heading, rad counter-clockwise from +x (east).
     pub yaw: f32,
 }
 
 impl Pose2 {
+    /// The pose at (`x`, `y`) m with heading `yaw` rad, world frame.
     pub fn new(x: f32, y: f32, yaw: f32) -> Self {
         Self { x, y, yaw }
     }
@@ -22,8 +26,9 @@ impl Pose2 {
 /// How the ego moved from the previous tick to this one, in the previous ego frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct EgoMotion {
-    /// Translation of the ego origin, previous ego frame (x forward, y left), metres.
+    /// Forward translation of the ego origin, previous ego frame (x forward), m.
     pub dx: f32,
+    /// Leftward translation of the ego origin, previous ego frame (y left), m.
     pub dy: f32,
     /// Heading change, radians, counter-clockwise positive.
     pub dyaw: f32,

@@ -27,16 +27,23 @@ pub const MAX_IMAGE_PIXELS: u64 = 16 * 1024 * 1024;
 /// One camera in CARLA's sensor description.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CameraSpec {
+    /// Camera name, unique in its rig: 1-64 ASCII letters, digits, '_' or '-' (it names files).
     pub id: String,
     /// Position relative to the ego, CARLA frame (x forward, y right, z up), metres.
     pub x: f32,
+    /// Lateral position, CARLA frame (positive to the right), m.
     pub y: f32,
+    /// Height, m (z up).
     pub z: f32,
-    /// Rotation relative to the ego, degrees, CARLA convention.
+    /// Rotation relative to the ego, degrees, CARLA convention: roll about the forward axis.
     pub roll: f32,
+    /// Pitch, degrees; positive looks up.
     pub pitch: f32,
+    /// Yaw, degrees; positive turns right.
     pub yaw: f32,
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
     /// Horizontal field of view, degrees.
     pub fov: f32,
@@ -45,22 +52,36 @@ pub struct CameraSpec {
 /// A rig that cannot be used, with the camera and the field at fault.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RigError {
+    /// The rig has no camera.
     #[error("a rig needs at least one camera")]
     Empty,
+    /// The rig has more than [`MAX_CAMERAS`] cameras (the count given).
     #[error("a rig holds at most {MAX_CAMERAS} cameras, this one has {0}")]
     TooManyCameras(usize),
+    /// A camera with a field out of range.
     #[error("camera {index} ('{id}'): {problem}")]
     BadCamera {
+        /// Index of the camera in the rig.
         index: usize,
+        /// The camera's id (clipped for printing).
         id: String,
+        /// What is wrong, naming the field.
         problem: String,
     },
+    /// Two cameras share an id (the id given).
     #[error("camera id '{0}' appears twice in the rig")]
     DuplicateId(String),
+    /// The text is not a rig in JSON (the parser's message).
     #[error("not a rig in JSON (a list of cameras or {{\"cameras\": [...]}}): {0}")]
     Json(String),
+    /// A rig file that cannot be read or parsed.
     #[error("rig {path}: {problem}")]
-    File { path: String, problem: String },
+    File {
+        /// The argument given: a path that is not a preset name.
+        path: String,
+        /// Why the file could not be read or parsed.
+        problem: String,
+    },
 }
 
 impl CameraSpec {
@@ -175,6 +196,7 @@ impl CameraSpec {
 /// A camera's optical centre and unit axes in the ego frame (x forward, y left, z up).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraPose {
+    /// Optical centre, ego frame, m.
     pub position: [f32; 3],
     /// Optical axis.
     pub forward: [f32; 3],
@@ -214,6 +236,7 @@ impl Projector {
 /// An ordered set of cameras; frames arrive in this order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Rig {
+    /// The cameras, in the order frames arrive.
     pub cameras: Vec<CameraSpec>,
 }
 
@@ -290,6 +313,7 @@ impl Rig {
         Ok(rig)
     }
 
+    /// Checks the rig: 1..=[`MAX_CAMERAS`] cameras, every camera valid, ids distinct.
     pub fn validate(&self) -> Result<(), RigError> {
         if self.cameras.is_empty() {
             return Err(RigError::Empty);

@@ -146,44 +146,62 @@ pub struct EpisodeOutcome {
 pub struct EpisodeInfo {
     /// Folder name under `episodes/`.
     pub name: String,
+    /// Town (map) the route runs in.
     pub town: String,
+    /// Route set the route comes from, as named to the collector.
     pub route_set: String,
+    /// Route id within its set.
     pub route_id: String,
+    /// Repetition of the route, from 0.
     pub repetition: usize,
     /// World seed (traffic, scenarios, lights, appearance, noise).
     pub seed: u64,
+    /// Cameras the frames were taken with.
     pub rig: Rig,
     /// Stored frames per simulated second.
     pub rate_hz: f64,
+    /// Simulator ticks (20 Hz) between stored frames.
     pub ticks_per_frame: u64,
+    /// Noise injected into the executed control.
     pub noise: NoiseConfig,
     /// Who drove, when not the expert (DAgger: the learner, labelled by the expert).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub driver: Option<String>,
+    /// Whether camera frames were drawn in a look varied from the seed.
     pub randomise_appearance: bool,
+    /// Frames stored.
     pub frames: usize,
     /// Frames whose future was cut by the end of the route.
     pub truncated_frames: usize,
     /// Bytes of images and measurements.
     pub bytes: u64,
+    /// Score and status of the run.
     pub outcome: EpisodeOutcome,
+    /// Wall-clock time the run took to simulate and record, s.
     pub wall_seconds: f64,
 }
 
 /// Per-town totals in the manifest.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct TownCount {
+    /// Episodes recorded in the town.
     pub episodes: usize,
+    /// Frames recorded in the town.
     pub frames: usize,
 }
 
 /// An episode as the manifest lists it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeEntry {
+    /// Folder name under `episodes/`.
     pub name: String,
+    /// Town (map) the route runs in.
     pub town: String,
+    /// Route set the route comes from.
     pub route_set: String,
+    /// Route id within its set.
     pub route_id: String,
+    /// Frames stored.
     pub frames: usize,
 }
 
@@ -194,14 +212,23 @@ pub struct Manifest {
     pub format: String,
     /// Always [`VERSION`].
     pub version: u32,
+    /// Cameras every episode was recorded with.
     pub rig: Rig,
+    /// Stored frames per simulated second.
     pub rate_hz: f64,
+    /// Spacing of the future waypoints and controls, s ([`FUTURE_STEP`]).
     pub future_step_s: f64,
+    /// Future waypoints and controls per frame ([`FUTURE_COUNT`]).
     pub future_count: usize,
+    /// Complete episodes.
     pub episodes: usize,
+    /// Frames over all episodes.
     pub frames: usize,
+    /// Frames over all episodes whose future was cut by the end of the route.
     pub truncated_frames: usize,
+    /// Bytes of images and measurements over all episodes.
     pub bytes: u64,
+    /// Episode and frame totals per town, by town name.
     pub towns: BTreeMap<String, TownCount>,
     /// Every complete episode, sorted by name.
     pub episode_list: Vec<EpisodeEntry>,
@@ -225,6 +252,7 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, Datas
 #[derive(Debug, Clone)]
 pub struct Dataset {
     root: PathBuf,
+    /// The dataset's `manifest.json`.
     pub manifest: Manifest,
 }
 

@@ -9,16 +9,26 @@ use std::path::{Path, PathBuf};
 /// A file that cannot be read or written, with its path and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
+    /// The operating system refused a read or write.
     #[error("{path}: {source}")]
     Io {
+        /// The file (or folder) at fault.
         path: PathBuf,
+        /// The error the operating system gave.
         source: std::io::Error,
     },
+    /// The file is unusable for a reason other than I/O: too large, malformed, inconsistent.
     #[error("{path}: {problem}")]
-    Invalid { path: PathBuf, problem: String },
+    Invalid {
+        /// The file (or folder) at fault.
+        path: PathBuf,
+        /// What is wrong with it.
+        problem: String,
+    },
 }
 
 impl FileError {
+    /// An I/O failure on `path`.
     pub fn io(path: &Path, source: std::io::Error) -> Self {
         Self::Io {
             path: path.to_path_buf(),
@@ -26,6 +36,7 @@ impl FileError {
         }
     }
 
+    /// A non-I/O problem with `path`, described by `problem`.
     pub fn invalid(path: &Path, problem: impl Into<String>) -> Self {
         Self::Invalid {
             path: path.to_path_buf(),
@@ -45,10 +56,16 @@ impl FileError {
 /// Why [`read_capped`] failed.
 #[derive(Debug, thiserror::Error)]
 pub enum CappedReadError {
+    /// The file could not be opened or read.
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    /// The file holds more than `limit` bytes.
     #[error("over the {limit}-byte limit")]
-    TooLarge { limit: u64 },
+    TooLarge {
+        /// The cap, bytes.
+        limit: u64,
+    },
+    /// A text file that is not valid UTF-8.
     #[error("not UTF-8 text")]
     NotUtf8,
 }

@@ -10,34 +10,51 @@ pub use crate::camera::MAX_IMAGE_PIXELS;
 /// An RGB8 image, row-major.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RgbImage {
+    /// Width, pixels.
     pub width: u32,
+    /// Height, pixels.
     pub height: u32,
+    /// Pixels, 3 bytes (R, G, B) each, row by row from the top-left: `width * height * 3` bytes.
     pub rgb: Vec<u8>,
 }
 
 /// Why an image could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
+    /// The PNG decoder failed.
     #[error("not a readable PNG: {0}")]
     Decode(#[from] png::DecodingError),
+    /// The PNG encoder failed.
     #[error("PNG encoding failed: {0}")]
     Encode(#[from] png::EncodingError),
+    /// A colour type or bit depth other than 8-bit RGB or RGBA (the PNG's).
     #[error("PNG is {0:?} at {1:?} bits; expected 8-bit RGB or RGBA")]
     Format(png::ColorType, png::BitDepth),
+    /// Width and height (pixels) whose product is over [`MAX_IMAGE_PIXELS`].
     #[error("PNG of {0}x{1} is over the {MAX_IMAGE_PIXELS}-pixel limit")]
     TooLarge(u32, u32),
+    /// A PNG whose size is not the one the caller expected.
     #[error("PNG is {width}x{height} but {want_w}x{want_h} was expected")]
     Dimensions {
+        /// The PNG's width, pixels.
         width: u32,
+        /// The PNG's height, pixels.
         height: u32,
+        /// The expected width, pixels.
         want_w: u32,
+        /// The expected height, pixels.
         want_h: u32,
     },
+    /// A pixel buffer whose length is not `width * height * 3`.
     #[error("{len} bytes of pixels for {width}x{height} RGB (expected {expected})")]
     Size {
+        /// Width given, pixels.
         width: u32,
+        /// Height given, pixels.
         height: u32,
+        /// Bytes in the buffer.
         len: usize,
+        /// Bytes `width * height * 3` needs.
         expected: usize,
     },
 }

@@ -12,6 +12,8 @@
 //! - [`files`]: capped reads and atomic writes; [`error_text`]: how errors are printed;
 //!   [`logging`]: how both binaries log.
 
+#![forbid(unsafe_code)]
+
 pub mod camera;
 pub mod command;
 pub mod control;
@@ -23,6 +25,8 @@ pub mod logging;
 pub mod wire;
 
 /// Package `ssrdrive.v1`: messages, `agent_service_client` and `agent_service_server`.
+// Generated code: the .proto comments are its docs.
+#[allow(missing_docs)]
 pub mod v1 {
     tonic::include_proto!("ssrdrive.v1");
 

@@ -106,9 +106,11 @@ pub struct RouteContext<'a> {
     pub route: &'a DenseRoute,
     /// The downsampled global plan, as the leaderboard hands it to agents.
     pub plan: &'a [PlanNode],
-    /// The route's id in its set, the repetition and the world seed (for logs).
+    /// The route's id in its set (for logs).
     pub route_id: &'a str,
+    /// Repetition of the route, from 0 (for logs).
     pub repetition: usize,
+    /// The world seed (for logs).
     pub seed: u64,
     /// The ego's half length and half width, metres.
     pub ego_half_extent: DVec2,

@@ -10,6 +10,8 @@
 //! servers over gRPC). What it shares with the agent (rigs, controls, commands, the dataset
 //! format, wire conversions, file reads) is the contract crate `ssrdrive_proto`.
 
+#![forbid(unsafe_code)]
+
 pub mod agent;
 pub mod client;
 pub mod dataset;

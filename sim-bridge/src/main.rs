@@ -1,6 +1,8 @@
 //! The `sim-bridge` command line: evaluate agents on route sets, generate the bundled towns and
 //! routes, inspect route sets, and benchmark the simulator.
 
+#![forbid(unsafe_code)]
+
 mod cli;
 
 use clap::Parser;

@@ -9,6 +9,8 @@ use ssrdrive_proto::control::Control;
 
 use super::ControlConfig;
 
+/// TCP's situation-based fusion of the trajectory and control-branch controls; keeps the recent
+/// fused steers that decide "turning".
 #[derive(Debug, Clone)]
 pub struct Fusion {
     recent_steers: VecDeque<f32>,
@@ -16,6 +18,7 @@ pub struct Fusion {
 }
 
 impl Fusion {
+    /// A fusion that starts "not turning", remembering up to `window` fused steers.
     pub fn new(window: usize) -> Self {
         Self {
             recent_steers: VecDeque::with_capacity(window),
@@ -28,6 +31,8 @@ impl Fusion {
         self.turning
     }
 
+    /// Mixes the two controls (the weaker source weighted `config.alpha`), clamps them, and updates
+    /// the turning status for the next tick from the fused steer.
     pub fn fuse(
         &mut self,
         trajectory: Control,

@@ -12,6 +12,8 @@
 //! Waypoints and target points are in the ego frame: x forward, y left, metres, origin at the
 //! centre of the vehicle box.
 
+#![forbid(unsafe_code)]
+
 pub mod beta;
 pub mod fusion;
 pub mod pid;
@@ -55,12 +57,18 @@ impl Default for Vehicle {
 pub struct ControlConfig {
     /// The vehicle being steered.
     pub vehicle: Vehicle,
-    /// Look-ahead beyond the box centre: `base + gain * speed`, at most `max` (m, s).
+    /// Look-ahead beyond the box centre at standstill, m: the look-ahead is
+    /// `lookahead_base + lookahead_gain * speed`, at most `lookahead_max`.
     pub lookahead_base: f32,
+    /// Look-ahead added per m/s of speed, s.
     pub lookahead_gain: f32,
+    /// Longest look-ahead, m.
     pub lookahead_max: f32,
+    /// Speed PID proportional gain (throttle per m/s of speed error).
     pub speed_kp: f32,
+    /// Speed PID integral gain, on the mean error over the window.
     pub speed_ki: f32,
+    /// Speed PID derivative gain, on the difference of the last two errors.
     pub speed_kd: f32,
     /// PID error window length (ticks).
     pub pid_window: usize,
@@ -70,12 +78,15 @@ pub struct ControlConfig {
     pub brake_ratio: f32,
     /// Largest speed error handed to the speed PID, m/s.
     pub clip_delta: f32,
+    /// Largest throttle the trajectory and the fusion give, in [0, 1].
     pub max_throttle: f32,
     /// Weight of the weaker source in the fusion (TCP's alpha).
     pub alpha: f32,
-    /// Fusion status window (ticks) and the steer magnitude and count that mean "turning".
+    /// Fusion status window: how many of the last fused steers are counted, ticks.
     pub turn_window: usize,
+    /// A fused |steer| above this counts as a turning tick.
     pub turn_steer: f32,
+    /// More turning ticks than this in the window mean "turning".
     pub turn_count: usize,
     /// The timed unstick rule (on by default).
     pub unstick: Unstick,
@@ -153,6 +164,7 @@ impl ControlConfig {
 /// The three controls of one tick: what the vehicle gets and where it came from.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct ControlDecision {
+    /// What the vehicle gets: the fused control, or the unstick rule's override.
     pub control: Control,
     /// From the waypoints through the PIDs.
     pub trajectory: Control,
@@ -175,6 +187,7 @@ pub struct EpisodeController {
 }
 
 impl EpisodeController {
+    /// The state of a new episode driven under `config`.
     pub fn new(config: ControlConfig) -> Self {
         Self {
             follower: TrajectoryFollower::new(&config),

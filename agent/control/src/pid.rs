@@ -3,6 +3,7 @@
 
 use std::collections::VecDeque;
 
+/// A PID controller whose integral term is the mean error over a fixed window.
 #[derive(Debug, Clone)]
 pub struct Pid {
     kp: f32,
@@ -12,6 +13,7 @@ pub struct Pid {
 }
 
 impl Pid {
+    /// Gains `kp`, `ki`, `kd` and an error window of `window` ticks (at least 2), zero-filled.
     pub fn new(kp: f32, ki: f32, kd: f32, window: usize) -> Self {
         Self {
             kp,

@@ -15,8 +15,9 @@ use burn::tensor::{Device, Tensor};
 use super::config::SsrConfig;
 use super::cpu_kernels::{self, Activation};
 
-/// ImageNet mean and standard deviation of RGB in [0, 1].
+/// ImageNet mean of R, G, B in [0, 1].
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
+/// ImageNet standard deviation of R, G, B in [0, 1].
 pub const IMAGENET_STD: [f32; 3] = [0.229, 0.224, 0.225];
 
 fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, device: &Device) -> Conv2d {
@@ -171,6 +172,8 @@ pub struct Backbone {
 }
 
 impl Backbone {
+    /// A randomly initialised trunk and neck with the stages of `config.backbone`, ending at
+    /// `config.channels` channels.
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let b = &config.backbone;
         let mut blocks = Vec::new();

@@ -14,16 +14,22 @@ use super::bev::BevGrid;
 pub struct SsrConfig {
     /// Preset name, for logs ("paper", "cpu-default" or a user's own).
     pub name: String,
-    /// Network input size; frames of another size are resized (the calibration is unaffected,
-    /// since projections are kept in normalised image coordinates).
+    /// Network input width, pixels; frames of another size are resized (the calibration is
+    /// unaffected, since projections are kept in normalised image coordinates).
     pub image_width: usize,
+    /// Network input height, pixels (resized like the width).
     pub image_height: usize,
+    /// The image backbone's ResNet stages.
     pub backbone: BackboneConfig,
     /// Channels of the image features after the neck and of the BEV.
     pub channels: usize,
+    /// The BEV grid and encoder.
     pub bev: BevConfig,
+    /// Scenes TokenLearner and the token self-attention.
     pub tokens: TokenConfig,
+    /// The TCP head.
     pub head: HeadConfig,
+    /// The Future Feature Predictor (training only).
     pub ffp: FfpConfig,
     /// Whether the network sees the ego's status: its speed (in the head's measurement encoder
     /// and the BEV can-bus) and its motion since the history frame (can-bus). Ego status is
@@ -41,6 +47,7 @@ fn ego_status_default() -> bool {
 /// ResNet with basic blocks.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BackboneConfig {
+    /// Output channels of the stem (7x7/2 conv).
     pub stem_width: usize,
     /// Blocks per stage (ResNet-34: 3, 4, 6, 3).
     pub blocks: Vec<usize>,
@@ -58,12 +65,15 @@ pub struct BevConfig {
     pub grid: BevGrid,
     /// Heights above the ground of the pillar points lifted from every cell, metres.
     pub pillar_heights: Vec<f32>,
+    /// Encoder layers (each TSA, SCA and FFN).
     pub layers: usize,
+    /// Attention heads of temporal and spatial attention (must divide `channels`).
     pub heads: usize,
     /// Sampling points per head in spatial cross-attention (split evenly over the pillar heights).
     pub spatial_points: usize,
     /// Sampling points per head and queue slot in temporal self-attention.
     pub temporal_points: usize,
+    /// Hidden width of each encoder layer's feed-forward network.
     pub ffn_dim: usize,
 }
 
@@ -75,10 +85,15 @@ pub struct TokenConfig {
     /// `bottleneck` and `layers` are unused.
     #[serde(default)]
     pub dense_bev: bool,
+    /// Scene tokens TokenLearner produces.
     pub num_tokens: usize,
+    /// Hidden width of TokenLearner's MLP.
     pub bottleneck: usize,
+    /// Self-attention layers over the scene tokens.
     pub layers: usize,
+    /// Attention heads of those layers and of the FFP's world model (must divide `channels`).
     pub heads: usize,
+    /// Hidden width of their feed-forward networks (and of the FFP's world model's).
     pub ffn_dim: usize,
 }
 
@@ -87,8 +102,9 @@ pub struct TokenConfig {
 pub struct HeadConfig {
     /// Width of the measurement encoder (speed, target point, command).
     pub measurement_dim: usize,
-    /// Width of the join MLPs' hidden layers and of the GRU states.
+    /// Width of the hidden layers of the head's MLPs (speed, join, attention, merge).
     pub hidden_dim: usize,
+    /// Width of the GRU states (trajectory and control branches).
     pub state_dim: usize,
     /// Waypoints (and future control steps) predicted, 0.5 s apart.
     pub pred_len: usize,
@@ -97,6 +113,7 @@ pub struct HeadConfig {
 /// Future Feature Predictor (training only).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FfpConfig {
+    /// Self-attention layers of the latent world model.
     pub layers: usize,
     /// TokenFuser's expansion of the scene tokens (64 in SSR).
     pub fuser_slots: usize,
@@ -106,7 +123,9 @@ pub struct FfpConfig {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("model config '{name}': {problem}")]
 pub struct ConfigError {
+    /// The config's name, or the preset name or path it was loaded from.
     pub name: String,
+    /// What does not fit, naming the field.
     pub problem: String,
 }
 

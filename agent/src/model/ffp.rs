@@ -101,6 +101,8 @@ impl TokenFuser {
     }
 }
 
+/// The Future Feature Predictor: MLN on the planned waypoints, a latent world model of
+/// self-attention layers, and TokenFuser back onto the BEV.
 #[derive(Module, Debug)]
 pub struct FutureFeaturePredictor {
     motion_norm: MotionLayerNorm,
@@ -109,6 +111,8 @@ pub struct FutureFeaturePredictor {
 }
 
 impl FutureFeaturePredictor {
+    /// A randomly initialised predictor for `config` (the head's waypoints, `config.ffp` layers
+    /// and fuser slots).
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let c = config.channels;
         let t = &config.tokens;

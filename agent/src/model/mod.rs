@@ -33,7 +33,9 @@ use tcp_head::{HeadOutput, TcpHead};
 pub struct ModelInput {
     /// `[B * cameras, 3, H, W]` ImageNet-normalised, at the config's input size.
     pub images: Tensor<4>,
+    /// Cameras per episode (the images are grouped by episode, cameras in rig order).
     pub cameras: usize,
+    /// Per-episode camera reference points, temporal alignment and can-bus, as tensors.
     pub geometry: GeometryTensors,
     /// `[B, Q, C]`; ignored (may be zeros) where `geometry.has_previous` is 0.
     pub previous_bev: Tensor<3>,
@@ -50,16 +52,25 @@ pub struct ModelInput {
 pub struct ModelOutput {
     /// `[B, Q, C]`: kept as the episode's previous BEV for the next tick.
     pub bev: Tensor<3>,
+    /// The scene tokens, with the STL attention and navigation gate.
     pub scene: SceneTokens,
+    /// Waypoints, control-branch Beta parameters and predicted speed.
     pub head: HeadOutput,
 }
 
+/// The SSR network: backbone, BEV encoder, Scenes TokenLearner, TCP head and the Future
+/// Feature Predictor (training only).
 #[derive(Module, Debug)]
 pub struct SsrModel {
+    /// Image backbone (ResNet and neck).
     pub backbone: Backbone,
+    /// BEV encoder.
     pub bev: BevEncoder,
+    /// Scenes TokenLearner.
     pub stl: SceneTokenLearner,
+    /// TCP head.
     pub head: TcpHead,
+    /// Future Feature Predictor (used by training only).
     pub ffp: FutureFeaturePredictor,
 }
 

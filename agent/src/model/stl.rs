@@ -30,6 +30,7 @@ pub struct NavigationGate {
 }
 
 impl NavigationGate {
+    /// A randomly initialised gate over `channels` BEV channels.
     pub fn new(channels: usize, device: &Device) -> Self {
         Self {
             fc_in: xavier_linear(COMMANDS + 2, channels, device),
@@ -56,6 +57,8 @@ pub struct TokenLearner {
 }
 
 impl TokenLearner {
+    /// A randomly initialised learner of `tokens` tokens over `channels`-wide features, through an
+    /// MLP with a `bottleneck`-wide hidden layer.
     pub fn new(channels: usize, bottleneck: usize, tokens: usize, device: &Device) -> Self {
         Self {
             norm: GroupNormConfig::new(1, channels)
@@ -99,12 +102,15 @@ struct LearnerParts {
     layers: Vec<SelfAttentionLayer>,
 }
 
+/// Scenes TokenLearner: navigation gate, TokenLearner and token self-attention over the BEV
+/// (or, in the "no STL" ablation, the BEV cells passed through with their positions).
 #[derive(Module, Debug)]
 pub struct SceneTokenLearner {
     parts: Option<LearnerParts>,
 }
 
 impl SceneTokenLearner {
+    /// A randomly initialised STL for `config.tokens` (no parameters in the "no STL" ablation).
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let c = config.channels;
         let t = &config.tokens;

@@ -79,11 +79,13 @@ impl BetaPolicy {
 pub struct HeadOutput {
     /// `[B, P, 2]` cumulative waypoints, ego frame.
     pub waypoints: Tensor<3>,
-    /// `[B, 2]` Beta parameters of [acceleration, steer] for the current step.
+    /// `[B, 2]` Beta alpha parameters of [acceleration, steer] for the current step.
     pub alpha: Tensor<2>,
+    /// `[B, 2]` Beta beta parameters of [acceleration, steer] for the current step.
     pub beta: Tensor<2>,
-    /// `[B, P, 2]` Beta parameters of the future control steps (training targets only).
+    /// `[B, P, 2]` Beta alpha parameters of the future control steps (training targets only).
     pub future_alpha: Tensor<3>,
+    /// `[B, P, 2]` Beta beta parameters of the future control steps (training targets only).
     pub future_beta: Tensor<3>,
     /// `[B, 1]` predicted speed / 12.
     pub speed: Tensor<2>,
@@ -91,6 +93,8 @@ pub struct HeadOutput {
     pub control_attention: Tensor<2>,
 }
 
+/// TCP's head: a measurement encoder, a GRU trajectory branch and a control branch with
+/// guided attention over the scene tokens, plus a speed prediction.
 #[derive(Module, Debug)]
 pub struct TcpHead {
     measurements: Mlp,
@@ -125,6 +129,7 @@ fn pool(weights: Tensor<2>, tokens: Tensor<3>) -> Tensor<2> {
 }
 
 impl TcpHead {
+    /// A randomly initialised head for `config.head` over `config.scene_tokens()` tokens.
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let c = config.channels;
         let h = &config.head;

@@ -22,8 +22,11 @@ use crate::policy::{SsrPolicy, StepInput, StepOutput};
 /// Batch shape limits.
 #[derive(Debug, Clone, Copy)]
 pub struct BatchSettings {
+    /// Most steps in one forward pass; 1 serves steps one by one.
     pub max_batch: usize,
+    /// Longest the oldest step of a batch waits for others to join it.
     pub max_queue_delay: Duration,
+    /// Most steps waiting in the queue; [`Batcher::submit`] refuses more.
     pub max_queue: usize,
     /// Model threads taking batches from the queue, each running its own forward passes
     /// (Triton's instance count): parts of the network that do not spread over all cores then
@@ -33,28 +36,36 @@ pub struct BatchSettings {
 
 /// One step waiting for the network.
 pub struct StepJob {
+    /// The episode's state, held for this step.
     pub lease: StepLease,
+    /// The checked step input.
     pub input: StepInput,
+    /// When the step was queued.
     pub enqueued: Instant,
+    /// Where the result (or the reason the step failed) goes.
     pub reply: oneshot::Sender<Result<BatchedStep, String>>,
 }
 
 /// A step's result and how its batch went.
 #[derive(Debug)]
 pub struct BatchedStep {
+    /// The policy's output for this step.
     pub output: StepOutput,
     /// Enqueued to batch start.
     pub queue: Duration,
     /// The batch's forward pass (image resize and normalisation included), control excluded.
     pub model: Duration,
+    /// Steps in the batch this step ran in.
     pub batch_size: usize,
 }
 
 /// Why a step could not be queued.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum SubmitError {
+    /// The queue is full; the value is its capacity, steps.
     #[error("the step queue is full ({0} steps waiting); retry later or add replicas")]
     QueueFull(usize),
+    /// Every model thread has stopped.
     #[error("the model thread has stopped")]
     Stopped,
 }

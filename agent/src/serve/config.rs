@@ -119,17 +119,30 @@ const DRAIN_RULE: &str = "must be in [0, 3600] seconds";
 /// Why a config cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ServeConfigError {
+    /// The config file could not be read (or is over the size cap).
     #[error("reading {path}: {source}")]
     Io {
+        /// The config file.
         path: PathBuf,
+        /// Why the read failed.
         source: CappedReadError,
     },
+    /// The config file is not valid TOML for [`ServeConfig`].
     #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
+    Parse {
+        /// The config file.
+        path: PathBuf,
+        /// The TOML parser's message.
+        message: String,
+    },
+    /// A setting is out of range.
     #[error("{field} = {value}: {rule}")]
     Invalid {
+        /// The setting's name.
         field: &'static str,
+        /// Its value, as text.
         value: String,
+        /// The range or rule it breaks.
         rule: &'static str,
     },
 }
@@ -248,22 +261,27 @@ impl ServeConfig {
         Ok(())
     }
 
+    /// [`ServeConfig::idle_timeout_s`] as a duration.
     pub fn idle_timeout(&self) -> Duration {
         Duration::from_secs_f64(self.idle_timeout_s)
     }
 
+    /// [`ServeConfig::max_queue_delay_ms`] as a duration.
     pub fn max_queue_delay(&self) -> Duration {
         Duration::from_secs_f64(self.max_queue_delay_ms / 1000.0)
     }
 
+    /// [`ServeConfig::request_timeout_s`] as a duration.
     pub fn request_timeout(&self) -> Duration {
         Duration::from_secs_f64(self.request_timeout_s)
     }
 
+    /// [`ServeConfig::max_message_mib`] in bytes.
     pub fn max_message_bytes(&self) -> usize {
         self.max_message_mib << 20
     }
 
+    /// [`ServeConfig::max_decoded_mib`] in bytes.
     pub fn max_decoded_bytes(&self) -> usize {
         self.max_decoded_mib << 20
     }

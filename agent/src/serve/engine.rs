@@ -23,6 +23,7 @@ use crate::policy::{SsrPolicy, StepOutput};
 /// What the server runs, for `GetAgentInfo`.
 #[derive(Debug, Clone)]
 pub struct ModelInfo {
+    /// The network's model config.
     pub config: SsrConfig,
     /// Checkpoint file name, or "untrained (random weights)".
     pub checkpoint: String,
@@ -160,10 +161,12 @@ impl Engine {
         })
     }
 
+    /// The server's Prometheus metrics.
     pub fn metrics(&self) -> &Arc<Metrics> {
         &self.metrics
     }
 
+    /// Longest a request may take ([`ServeConfig::request_timeout_s`]).
     pub fn request_timeout(&self) -> Duration {
         self.config.request_timeout()
     }
@@ -177,6 +180,7 @@ impl Engine {
         !self.warming.load(Ordering::Relaxed)
     }
 
+    /// The `GetAgentInfo` answer: model, config, expected rig, version and serving limits.
     pub fn agent_info(&self) -> v1::AgentInfo {
         v1::AgentInfo {
             model: "ssr".into(),
@@ -191,6 +195,8 @@ impl Engine {
         }
     }
 
+    /// Opens an episode for the request's rig (checked against the pixel budget), with its
+    /// fusion-alpha override if any, driven by `driver`.
     pub fn start_episode(
         &self,
         request: &v1::StartEpisodeRequest,
@@ -233,6 +239,7 @@ impl Engine {
         })
     }
 
+    /// Closes an episode `driver` drives; the answer gives the steps it ran.
     pub fn end_episode(
         &self,
         episode_id: &str,

@@ -22,16 +22,32 @@ use crate::policy::EpisodeState;
 /// Why an episode operation was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EpisodeError {
+    /// No open episode has this id (clipped).
     #[error("unknown episode '{0}' (never started, ended, or expired after being idle)")]
     NotFound(String),
+    /// The table is at its episode limit.
     #[error("{open} episodes are open, the server's limit; end one or try another replica")]
-    TooMany { open: usize },
+    TooMany {
+        /// Episodes open now.
+        open: usize,
+    },
+    /// A step whose frame index is not above the last stepped one.
     #[error("episode '{id}': frame_index {got} does not follow the last stepped frame {last}")]
-    OutOfOrder { id: String, last: u64, got: u64 },
+    OutOfOrder {
+        /// The episode's id.
+        id: String,
+        /// Frame index of the episode's last completed step.
+        last: u64,
+        /// Frame index of the refused step.
+        got: u64,
+    },
+    /// A step of this episode (id given) is already in flight.
     #[error("episode '{0}': a step is already in flight; send the next one after its answer")]
     Busy(String),
+    /// A unary call on an episode (id clipped) that a `Drive` stream owns.
     #[error("episode '{0}' belongs to the Drive stream that started it; step and end it there")]
     StreamOwned(String),
+    /// The operating system's random source failed (its message given).
     #[error("no randomness for an episode id: {0}")]
     NoRandomness(String),
 }
@@ -40,7 +56,9 @@ pub enum EpisodeError {
 /// started it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Driver {
+    /// Unary `Step` and `EndEpisode` calls.
     Unary,
+    /// The `Drive` stream that started the episode.
     Stream,
 }
 
@@ -69,6 +87,7 @@ fn random_id() -> Result<String, EpisodeError> {
 }
 
 impl EpisodeTable {
+    /// An empty table holding at most `max_episodes`, closing those idle past `idle_timeout`.
     pub fn new(max_episodes: usize, idle_timeout: Duration) -> Arc<Self> {
         Arc::new(Self {
             episodes: Mutex::new(HashMap::new()),
@@ -173,6 +192,7 @@ impl EpisodeTable {
         self.lock().len()
     }
 
+    /// Whether no episode is open.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -33,10 +33,15 @@ struct PhaseLabels {
 /// The step phases timed separately.
 #[derive(Debug, Clone, Copy)]
 pub struct StepPhases {
+    /// Waiting in the queue for a batch.
     pub queue: Duration,
+    /// Decoding the images.
     pub decode: Duration,
+    /// The shared forward pass of the step's batch.
     pub model: Duration,
+    /// This step's PID and fusion.
     pub control: Duration,
+    /// The whole step, from receipt of the request to its answer.
     pub total: Duration,
 }
 
@@ -58,6 +63,7 @@ fn latency_histogram() -> Histogram {
 }
 
 impl Metrics {
+    /// A registry with every metric at zero.
     pub fn new() -> Arc<Self> {
         let mut registry = Registry::default();
         let requests = Family::<RequestLabels, Counter>::default();
@@ -115,6 +121,7 @@ impl Metrics {
         })
     }
 
+    /// Counts one answered RPC of `method` with status `code`.
     pub fn request(&self, method: &'static str, code: tonic::Code) {
         self.requests
             .get_or_create(&RequestLabels {
@@ -124,6 +131,7 @@ impl Metrics {
             .inc();
     }
 
+    /// Records the phase times of one step.
     pub fn observe_step(&self, phases: &StepPhases) {
         for (phase, time) in [
             ("queue", phases.queue),
@@ -138,19 +146,23 @@ impl Metrics {
         }
     }
 
+    /// Records the size of one forward pass, episodes.
     pub fn observe_batch(&self, size: usize) {
         self.batch_size.observe(size as f64);
     }
 
+    /// Counts an opened episode; `open` is the number open now.
     pub fn episode_started(&self, open: usize) {
         self.episodes_started.inc();
         self.active_episodes.set(open as i64);
     }
 
+    /// Records that an episode was ended; `open` is the number open now.
     pub fn episode_ended(&self, open: usize) {
         self.active_episodes.set(open as i64);
     }
 
+    /// Counts `expired` episodes closed for being idle; `open` is the number open now.
     pub fn episodes_expired(&self, expired: usize, open: usize) {
         self.episodes_expired.inc_by(expired as u64);
         self.active_episodes.set(open as i64);

@@ -101,11 +101,14 @@ pub fn load_policy(
 
 /// The server's bound ports (bind first to learn the real port when asking for port 0).
 pub struct Listeners {
+    /// The gRPC port, at `listen`.
     pub grpc: TcpListener,
+    /// The metrics port, at `metrics_listen`; `None` when metrics are off.
     pub metrics: Option<TcpListener>,
 }
 
 impl Listeners {
+    /// Binds the gRPC port and, if configured, the metrics port.
     pub async fn bind(config: &ServeConfig) -> anyhow::Result<Self> {
         let grpc = TcpListener::bind(config.listen)
             .await

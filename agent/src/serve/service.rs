@@ -29,6 +29,7 @@ pub struct AgentServiceImpl {
 }
 
 impl AgentServiceImpl {
+    /// Serves `engine`; Drive streams end once `draining` turns `true`.
     pub fn new(engine: Arc<Engine>, draining: watch::Receiver<bool>) -> Self {
         Self { engine, draining }
     }

@@ -7,8 +7,11 @@ use rand_chacha::ChaCha8Rng;
 /// One draw of the jitter, applied identically to every frame of a sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Photometric {
+    /// Brightness factor: every channel is multiplied by it last.
     pub brightness: f32,
+    /// Contrast factor: distance from the frame's mean luma is scaled by it.
     pub contrast: f32,
+    /// Saturation factor: each channel's distance from the pixel's luma is scaled by it.
     pub saturation: f32,
 }
 

@@ -12,26 +12,39 @@ use crate::model::config::SsrConfig;
 #[serde(rename_all = "kebab-case", tag = "kind")]
 pub enum Schedule {
     /// Cosine from `lr` down to `lr * final_ratio` at the last step.
-    Cosine { final_ratio: f64 },
+    Cosine {
+        /// The final learning rate as a fraction of the peak.
+        final_ratio: f64,
+    },
     /// Multiply by `gamma` every `every` steps (TCP halves its rate on a fixed schedule).
-    Step { every: u64, gamma: f64 },
+    Step {
+        /// Steps between two decays (counted after the warm-up).
+        every: u64,
+        /// Factor applied at each decay.
+        gamma: f64,
+    },
 }
 
 /// Everything a run is defined by (the dataset path is given separately).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
+    /// The network being trained.
     pub model: SsrConfig,
+    /// Samples per optimiser step.
     pub batch_size: usize,
     /// Optimiser steps of the whole run (the schedule spans them).
     pub steps: u64,
     /// Peak learning rate (AdamW).
     pub lr: f64,
+    /// AdamW's decoupled weight decay.
     pub weight_decay: f32,
     /// Linear warm-up from 0, steps.
     pub warmup_steps: u64,
+    /// How the learning rate decays after the warm-up.
     pub schedule: Schedule,
     /// Each parameter's gradient is clipped to this L2 norm (burn's per-parameter clipping).
     pub clip_norm: f32,
+    /// Weights of the loss terms.
     pub loss: LossWeights,
     /// Ablation "no FFP": no future-BEV prediction and no BEV loss.
     pub future_bev: bool,

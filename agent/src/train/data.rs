@@ -40,7 +40,9 @@ pub const FUTURE_BEV_S: f64 = 1.5;
 /// first-frame path (history and ego motion dropped, as on an episode's first tick).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SampleDraw {
+    /// The jitter applied to every frame of the sample; `None` leaves the frames as recorded.
     pub photometric: Option<Photometric>,
+    /// Train the first-frame path: no history BEV and no ego motion.
     pub drop_history: bool,
 }
 
@@ -69,7 +71,9 @@ pub enum Labels {
 /// One sample: a frame of an episode (indices into [`TrainingData`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SampleRef {
+    /// Index of the episode in the training data.
     pub episode: u32,
+    /// Index of the frame in the episode.
     pub frame: u32,
 }
 
@@ -86,12 +90,15 @@ pub struct TrainingData {
     future_offset: usize,
     pred_len: usize,
     labels: Labels,
+    /// Samples of the training routes.
     pub train: Vec<SampleRef>,
     /// Each training sample's sampling weight ([`sampling_weight`]), in `train`'s order.
     pub train_weights: Vec<f32>,
+    /// Samples of the held-out routes.
     pub validation: Vec<SampleRef>,
-    /// Routes (town/set/id) on each side.
+    /// Routes (town/set/id) on the training side.
     pub train_routes: usize,
+    /// Routes (town/set/id) on the validation side.
     pub validation_routes: usize,
 }
 
@@ -415,7 +422,9 @@ pub fn action_of(control: &Control) -> [f32; 2] {
 /// A prepared batch on the CPU.
 #[derive(Debug, Default)]
 pub struct Batch {
+    /// Samples in the batch (B).
     pub size: usize,
+    /// Cameras per sample.
     pub cameras: usize,
     /// `[B * cameras, 3, H, W]` the current frames.
     current_images: Vec<f32>,

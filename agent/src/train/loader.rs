@@ -38,6 +38,8 @@ pub struct BatchLoader {
 }
 
 impl BatchLoader {
+    /// Starts the background thread preparing the batches of `steps` from `data`, as `config` says
+    /// (batch size, seed, balanced sampling, augmentation, history dropout).
     pub fn start(
         data: Arc<TrainingData>,
         config: &TrainConfig,

@@ -17,11 +17,17 @@ use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
 /// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LossWeights {
+    /// Weight of the waypoint L1.
     pub waypoints: f32,
+    /// Weight of the current action's Beta KL.
     pub action: f32,
+    /// Weight of the future actions' Beta KL.
     pub future_action: f32,
+    /// Weight of the speed L1.
     pub speed: f32,
+    /// Weight of the future-BEV MSE.
     pub bev: f32,
+    /// Concentration k of the Beta targets made from the expert's deterministic actions.
     pub target_concentration: f32,
 }
 
@@ -104,11 +110,17 @@ impl BetaTargets {
 /// The terms of one batch's loss.
 #[derive(Debug, Clone)]
 pub struct Losses {
+    /// Weighted sum of the terms (the BEV term only when present).
     pub total: Tensor<1>,
+    /// Waypoint L1, m (mean over coordinates).
     pub waypoints: Tensor<1>,
+    /// Beta KL of the current action.
     pub action: Tensor<1>,
+    /// Beta KL of the future actions.
     pub future_action: Tensor<1>,
+    /// Speed L1, in units of speed / 12.
     pub speed: Tensor<1>,
+    /// Future-BEV MSE; `None` without an FFP prediction.
     pub bev: Option<Tensor<1>>,
 }
 

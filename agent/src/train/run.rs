@@ -40,23 +40,42 @@ use crate::model::config::SsrConfig;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
 
+/// Why a training run could not start or go on.
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
+    /// The dataset could not be read or has no usable samples.
     #[error("dataset: {0}")]
     Dataset(#[from] DatasetError),
+    /// A checkpoint could not be read or written.
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    /// The training config is invalid (the message names the field).
     #[error("training config: {0}")]
     Config(String),
+    /// A file of the run's folder could not be read or written.
     #[error("{path}: {source}")]
     Io {
+        /// The file or folder.
         path: PathBuf,
+        /// The I/O error.
         source: std::io::Error,
     },
+    /// The resume state is missing, incomplete or does not fit the run.
     #[error("cannot resume from {path}: {problem}")]
-    Resume { path: PathBuf, problem: String },
+    Resume {
+        /// The run folder or resume state at fault.
+        path: PathBuf,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The loss became NaN or infinite.
     #[error("step {step}: the loss is {value}; lower the learning rate or check the data")]
-    Diverged { step: u64, value: f32 },
+    Diverged {
+        /// The optimiser step whose loss it was, from 1.
+        step: u64,
+        /// The loss.
+        value: f32,
+    },
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
@@ -69,7 +88,9 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
 /// How to run: where the data is, where the run goes, and when to stop.
 #[derive(Debug, Clone)]
 pub struct TrainOptions {
+    /// The dataset root (the folder of `manifest.json`).
     pub data: PathBuf,
+    /// The run's folder (see the module doc).
     pub out: PathBuf,
     /// Continue the run in `out` from its resume state (its own config is used).
     pub resume: bool,
@@ -84,33 +105,50 @@ pub struct TrainOptions {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum MetricsLine {
+    /// One optimiser step's loss terms (`"kind": "step"`).
     Step(StepMetrics),
+    /// One validation pass (`"kind": "validation"`).
     Validation(ValidationMetrics),
 }
 
 /// The loss terms of one optimiser step (`step` counts steps done, from 1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepMetrics {
+    /// Optimiser steps done, this one included.
     pub step: u64,
+    /// Learning rate of this step.
     pub lr: f64,
+    /// The weighted total loss.
     pub loss: f32,
+    /// Waypoint L1, m.
     pub waypoints: f32,
+    /// Beta KL of the current action.
     pub action: f32,
+    /// Beta KL of the future actions.
     pub future_action: f32,
+    /// Speed L1, in units of speed / 12.
     pub speed: f32,
+    /// Future-BEV MSE; `None` without the FFP.
     pub bev: Option<f32>,
+    /// Training throughput of this sitting so far, samples per second (validation excluded).
     pub samples_per_s: f64,
 }
 
 /// What a finished (or stopped) run reports.
 #[derive(Debug, Clone)]
 pub struct RunSummary {
+    /// Optimiser steps the run has done, over every sitting.
     pub steps_done: u64,
     /// Steps run in this sitting and their wall time (the rate excludes validation).
     pub steps_run: u64,
+    /// Wall time of this sitting, s (validation and checkpoints included).
     pub wall_seconds: f64,
+    /// Training throughput of this sitting, samples per second (validation excluded).
     pub samples_per_s: f64,
+    /// The last validation of this sitting, if any.
     pub validation: Option<ValidationMetrics>,
+    /// `final.safetensors` when the run is complete, else the checkpoint of the step it
+    /// stopped at.
     pub checkpoint: PathBuf,
 }
 

@@ -18,20 +18,25 @@ pub const L2_HORIZONS_S: [f64; 3] = [1.0, 2.0, 3.0];
 /// Errors over one set of validation samples.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GroupMetrics {
+    /// Validation samples in the group.
     pub samples: usize,
     /// L2 of the planned waypoint at [`L2_HORIZONS_S`] to the label, metres (`None` where the
     /// model plans less far).
     pub l2_m: Vec<Option<f32>>,
-    /// Mean absolute error of the control branch's control against the expert's.
+    /// Mean absolute error of the control branch's steer against the expert's.
     pub steer_mae: f32,
+    /// Mean absolute error of the control branch's throttle against the expert's.
     pub throttle_mae: f32,
+    /// Mean absolute error of the control branch's brake against the expert's.
     pub brake_mae: f32,
 }
 
 /// Open-loop metrics over the validation routes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ValidationMetrics {
+    /// Optimiser steps done when the validation ran.
     pub step: u64,
+    /// Mean total loss over the validation samples.
     pub loss: f32,
     /// Over every sample (flattened: the metrics lines keep their earlier shape).
     #[serde(flatten)]

@@ -25,26 +25,33 @@ use crate::agent::AgentError;
 pub struct LoadConfig {
     /// `grpc://HOST:PORT`.
     pub target: String,
+    /// Concurrent episodes, each on its own connection.
     pub episodes: usize,
     /// Steps per second per episode.
     pub rate_hz: f64,
+    /// How long steps are scheduled for.
     pub duration: Duration,
     /// Deadline of each step.
     pub call_timeout: Duration,
+    /// Camera rig every episode starts with.
     pub rig: v1::Rig,
 }
 
 /// Counters shared with a progress display while the run goes.
 #[derive(Debug, Default)]
 pub struct LoadProgress {
+    /// Steps answered so far (any status).
     pub steps: AtomicU64,
+    /// Steps answered with an error status so far.
     pub errors: AtomicU64,
 }
 
 /// What a run measured.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct LoadReport {
+    /// Episodes run.
     pub episodes: usize,
+    /// Steps per second per episode.
     pub rate_hz: f64,
     /// Wall time from the first intended step to the last answer, seconds.
     pub duration_s: f64,
@@ -61,11 +68,16 @@ pub struct LoadReport {
     pub behind_schedule: u64,
 }
 
+/// Percentiles of a set of samples, nearest rank, in the samples' unit.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct Percentiles {
+    /// Median.
     pub p50: f64,
+    /// 90th percentile.
     pub p90: f64,
+    /// 99th percentile.
     pub p99: f64,
+    /// Largest sample.
     pub max: f64,
 }
 

@@ -34,9 +34,11 @@ use crate::world::{DT, WorldConfig};
 pub struct CollectConfig {
     /// Dataset root.
     pub out: PathBuf,
+    /// Cameras to record.
     pub rig: Rig,
     /// Stored frames per simulated second (20 Hz divided by a whole number of ticks).
     pub rate_hz: f64,
+    /// Noise injected into the executed control.
     pub noise: NoiseConfig,
     /// Who drives, when not the expert (DAgger), as recorded in each episode: the learner's
     /// server, for example.
@@ -53,11 +55,17 @@ pub type DriverFactory<'a> = &'a (dyn Fn() -> Result<Box<dyn Agent>, String> + S
 
 /// One route run to record.
 pub struct EpisodeTask<'m> {
+    /// Town the route runs in.
     pub map: &'m Map,
+    /// Route set the route comes from, as named on the command line.
     pub route_set: String,
+    /// The route as its `<route>` element gives it.
     pub spec: RouteSpec,
+    /// The route planned over the lane graph, densified to about 1 m.
     pub dense: DenseRoute,
+    /// Repetition of the route, from 0.
     pub repetition: usize,
+    /// Traffic, scenarios, seed and look of the run's world.
     pub world: WorldConfig,
 }
 
@@ -85,12 +93,14 @@ pub struct CollectSummary {
     pub skipped: usize,
     /// Frames recorded now.
     pub frames: usize,
+    /// Wall-clock time of the whole collection, s.
     pub wall_seconds: f64,
 }
 
 /// Progress reports, one per finished episode.
 #[derive(Debug, Clone)]
 pub struct EpisodeDone {
+    /// The episode's `episode.json`.
     pub info: EpisodeInfo,
     /// Whether it was already on disk.
     pub skipped: bool,

@@ -68,8 +68,11 @@ pub struct EpisodeRecorder<'d> {
 /// What a finished recording holds.
 #[derive(Debug, Clone, Copy)]
 pub struct RecordingTotals {
+    /// Frames written.
     pub frames: usize,
+    /// Frames written whose future was cut by the end of the route.
     pub truncated_frames: usize,
+    /// Bytes of images and measurements written.
     pub bytes: u64,
 }
 

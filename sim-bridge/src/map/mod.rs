@@ -37,15 +37,25 @@ pub enum MapError {
     /// The file could not be read, or is larger than [`MAX_MAP_BYTES`].
     #[error("cannot read map {path}: {source}")]
     Io {
+        /// The map file, as given.
         path: String,
+        /// Why the read failed.
         source: CappedReadError,
     },
     /// The OpenDRIVE importer refused the document.
     #[error("map {origin} is not valid OpenDRIVE: {message}")]
-    Invalid { origin: String, message: String },
+    Invalid {
+        /// The map's name (the file stem, or the name given with the document).
+        origin: String,
+        /// Why it was refused.
+        message: String,
+    },
     /// The document has no driving lane to route on.
     #[error("map {origin} has no driving lanes")]
-    NoDrivingLanes { origin: String },
+    NoDrivingLanes {
+        /// The map's name (the file stem, or the name given with the document).
+        origin: String,
+    },
 }
 
 /// Options for loading a map.

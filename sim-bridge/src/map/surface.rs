@@ -46,7 +46,9 @@ impl Material {
 /// Paint colour of a road-mark line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Paint {
+    /// White paint (and any colour other than yellow).
     White,
+    /// Yellow paint.
     Yellow,
 }
 
@@ -55,6 +57,7 @@ pub enum Paint {
 pub struct SurfaceTriangle {
     /// Corners, world frame, counter-clockwise seen from above.
     pub corners: [Vec3; 3],
+    /// What the triangle is made of.
     pub material: Material,
 }
 
@@ -63,13 +66,16 @@ pub struct SurfaceTriangle {
 pub struct PaintQuad {
     /// Corners, world frame, counter-clockwise seen from above.
     pub corners: [Vec3; 4],
+    /// Colour of the paint.
     pub paint: Paint,
 }
 
 /// The drawable road surface of a map.
 #[derive(Debug, Clone, Default)]
 pub struct Surface {
+    /// Triangles of every permanent lane.
     pub triangles: Vec<SurfaceTriangle>,
+    /// Painted pieces of every road-mark line.
     pub paint: Vec<PaintQuad>,
 }
 

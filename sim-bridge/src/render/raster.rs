@@ -15,6 +15,7 @@ pub const NEAR: f32 = 0.05;
 /// A camera placed in the world: position, unit axes and intrinsics.
 #[derive(Debug, Clone, Copy)]
 pub struct View {
+    /// Optical centre, world frame, m.
     pub origin: Vec3,
     /// Image +u (right).
     pub right: Vec3,
@@ -57,13 +58,18 @@ impl View {
 /// A colour buffer (0x00RRGGBB) and an inverse-depth buffer.
 #[derive(Debug, Clone)]
 pub struct Target {
+    /// Image width, pixels.
     pub width: usize,
+    /// Image height, pixels.
     pub height: usize,
+    /// Colour of each pixel, 0x00RRGGBB, row by row from the top-left.
     pub colour: Vec<u32>,
+    /// Inverse depth (1/z, 1/m) of each pixel; 0 where nothing was drawn.
     pub depth: Vec<f32>,
 }
 
 impl Target {
+    /// A `width` x `height` target, black and empty.
     pub fn new(width: usize, height: usize) -> Self {
         Self {
             width,

@@ -8,17 +8,24 @@ use super::style::{Appearance, Rgb};
 /// A world-space triangle with its final (lit) colour.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tri {
+    /// Corners, world frame, m.
     pub corners: [Vec3; 3],
+    /// Lit colour, 0x00RRGGBB.
     pub colour: u32,
 }
 
 /// An upright box: plan centre, heading, half length and width, bottom and top heights.
 #[derive(Debug, Clone, Copy)]
 pub struct UprightBox {
+    /// Centre in plan (x, y), world frame, m.
     pub centre: Vec2,
+    /// Heading of the length axis, rad counter-clockwise from +x.
     pub yaw: f32,
+    /// Half length (along the heading) and half width, m.
     pub half: Vec2,
+    /// Height of the bottom face, world z, m.
     pub bottom: f32,
+    /// Height of the top face, world z, m.
     pub top: f32,
 }
 

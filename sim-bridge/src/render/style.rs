@@ -16,18 +16,27 @@ pub type Rgb = Vec3;
 /// Everything that decides the look of a frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Appearance {
+    /// Colour of [`Material::Driving`] surfaces.
     pub driving: Rgb,
+    /// Colour of [`Material::Parking`] surfaces.
     pub parking: Rgb,
+    /// Colour of [`Material::Sidewalk`] surfaces.
     pub sidewalk: Rgb,
+    /// Colour of [`Material::Shoulder`] surfaces.
     pub shoulder: Rgb,
+    /// Colour of [`Material::Grass`] surfaces.
     pub grass: Rgb,
+    /// Colour of [`Paint::White`] road marks.
     pub white_paint: Rgb,
+    /// Colour of [`Paint::Yellow`] road marks.
     pub yellow_paint: Rgb,
-    /// Sky at the zenith and at the horizon.
+    /// Sky at the zenith.
     pub sky_top: Rgb,
+    /// Sky at the horizon.
     pub sky_horizon: Rgb,
-    /// Terrain near the camera and in the distance (haze).
+    /// Terrain near the camera.
     pub terrain_near: Rgb,
+    /// Terrain in the distance (haze).
     pub terrain_far: Rgb,
     /// Unit vector towards the sun, world frame.
     pub sun: Vec3,

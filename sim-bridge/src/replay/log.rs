@@ -54,6 +54,7 @@ impl LogWriter {
             .map_err(|e| LogError::io(&self.partial, e))
     }
 
+    /// Appends one tick's record.
     pub fn tick(&mut self, tick: v1::LogTick) -> Result<(), LogError> {
         self.write(v1::log_record::Record::Tick(tick))
     }
@@ -71,7 +72,9 @@ impl LogWriter {
 /// A log read back.
 #[derive(Debug, Clone)]
 pub struct StepLog {
+    /// The first record: format, who drove, route, seed, rig, tick length and ego box.
     pub header: v1::LogHeader,
+    /// Every whole tick record, in order.
     pub ticks: Vec<v1::LogTick>,
     /// The file ended inside a record (a run that was cut off): the whole ticks before it are
     /// kept.

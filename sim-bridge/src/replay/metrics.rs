@@ -23,11 +23,13 @@ pub const WAYPOINT_STEP_S: f64 = 0.5;
 /// Metrics at one horizon.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct HorizonMetrics {
+    /// The horizon, s.
     pub horizon_s: f64,
     /// Mean L2, metres (`None` without samples).
     pub l2_m: Option<f64>,
     /// Share of predictions in collision, 0..1 (`None` without samples).
     pub collision_rate: Option<f64>,
+    /// Predictions that reached the horizon and had a recorded pose there.
     pub samples: usize,
 }
 

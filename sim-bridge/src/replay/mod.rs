@@ -30,7 +30,9 @@ use metrics::{HorizonMetrics, open_loop};
 /// Mean and max of absolute differences.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct Spread {
+    /// Mean of the absolute differences.
     pub mean: f64,
+    /// Largest absolute difference.
     pub max: f64,
 }
 
@@ -48,7 +50,9 @@ impl Spread {
 pub struct ReplayReport {
     /// Who drove when the log was recorded.
     pub recorded_agent: String,
+    /// The route's id in its set.
     pub route_id: String,
+    /// Ticks in the log (those without a recorded request are not sent).
     pub ticks: usize,
     /// The log was cut short (its whole ticks were replayed).
     pub truncated: bool,
@@ -56,13 +60,16 @@ pub struct ReplayReport {
     pub latency_ms: Percentiles,
     /// Answers by gRPC status code name.
     pub codes: BTreeMap<String, usize>,
-    /// |replayed - recorded| of steer, throttle and brake.
+    /// |replayed - recorded| of steer, over answered ticks (`None` without any).
     pub steer_diff: Option<Spread>,
+    /// |replayed - recorded| of throttle, over answered ticks (`None` without any).
     pub throttle_diff: Option<Spread>,
+    /// |replayed - recorded| of brake, over answered ticks (`None` without any).
     pub brake_diff: Option<Spread>,
     /// Per tick, the mean distance between replayed and recorded waypoints (metres): mean and
     /// max over ticks (logs of agents that planned).
     pub trajectory_drift_m: Option<Spread>,
+    /// Open-loop L2 and collision rate of the replayed trajectories, one entry per horizon.
     pub open_loop: Vec<HorizonMetrics>,
 }
 

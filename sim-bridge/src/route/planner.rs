@@ -47,16 +47,23 @@ pub enum PlanError {
     /// A keypoint has no driving lane to match (the map has none).
     #[error("route {route}: keypoint {index} at ({x:.1}, {y:.1}): the map has no driving lane")]
     OffMap {
+        /// The route's id.
         route: String,
+        /// Index of the keypoint in the route, from 0.
         index: usize,
+        /// The keypoint's x, world frame (OpenDRIVE, east), m.
         x: f64,
+        /// The keypoint's y, world frame (OpenDRIVE, north), m.
         y: f64,
     },
     /// No path over the lane graph.
     #[error("route {route}: no path over the lane graph from keypoint {from} to keypoint {to}")]
     NoPath {
+        /// The route's id.
         route: String,
+        /// Index of the keypoint the leg starts at, from 0.
         from: usize,
+        /// Index of the keypoint the leg should reach (`from + 1`).
         to: usize,
     },
 }

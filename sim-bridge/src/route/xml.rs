@@ -55,18 +55,35 @@ pub enum RouteFileError {
     /// The file could not be read, or is larger than [`MAX_ROUTE_FILE_BYTES`].
     #[error("cannot read route file {path}: {source}")]
     Io {
+        /// The route file, as given.
         path: String,
+        /// Why the read failed.
         source: CappedReadError,
     },
     /// Over a cap on untrusted input.
     #[error("route file {origin}: {what}")]
-    TooLarge { origin: String, what: String },
+    TooLarge {
+        /// The file's name (its path, or the name given with the text).
+        origin: String,
+        /// Which cap it passed.
+        what: String,
+    },
     /// Not well-formed XML.
     #[error("route file {origin} is not well-formed XML: {message}")]
-    Xml { origin: String, message: String },
+    Xml {
+        /// The file's name (its path, or the name given with the text).
+        origin: String,
+        /// The XML parser's message.
+        message: String,
+    },
     /// Well-formed, but not a route file as the leaderboard writes them.
     #[error("route file {origin}: {message}")]
-    Invalid { origin: String, message: String },
+    Invalid {
+        /// The file's name (its path, or the name given with the text).
+        origin: String,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 /// Read a route file.

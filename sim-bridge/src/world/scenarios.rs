@@ -136,8 +136,11 @@ pub enum ScenarioAction {
     StartCrosser(u32),
     /// Hold `ego_light` green and launch a red-light runner from `lane` at `s`.
     RedLightRunner {
+        /// Id of the traffic light that controls the ego's approach to the junction.
         ego_light: usize,
+        /// Lane the runner starts on.
         lane: LaneIdx,
+        /// Distance along that lane where the runner starts, m.
         s: f64,
     },
 }

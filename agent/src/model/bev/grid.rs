@@ -22,17 +22,22 @@ const BEHIND_CAMERA: f32 = -4.0;
 /// The area the BEV covers and its cells.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BevGrid {
-    /// Cells along x (rows, forward is row 0) and along y (columns, left is column 0).
+    /// Cells along x (rows, forward is row 0).
     pub rows: usize,
+    /// Cells along y (columns, left is column 0).
     pub cols: usize,
-    /// Extent in the ego frame, metres: x in [x_min, x_max], y in [y_min, y_max].
+    /// Rear edge of the grid, ego-frame x, m (negative: behind the ego).
     pub x_min: f32,
+    /// Front edge of the grid, ego-frame x, m.
     pub x_max: f32,
+    /// Right edge of the grid, ego-frame y, m (negative: to the right).
     pub y_min: f32,
+    /// Left edge of the grid, ego-frame y, m.
     pub y_max: f32,
 }
 
 impl BevGrid {
+    /// Number of cells, `rows * cols` (the BEV's query count Q).
     pub fn cells(&self) -> usize {
         self.rows * self.cols
     }

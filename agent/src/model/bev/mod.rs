@@ -36,6 +36,8 @@ struct EncoderLayer {
     norm_ffn: LayerNorm,
 }
 
+/// The BEV encoder: learned queries, positional and camera embeddings, can-bus injection and
+/// the encoder layers (TSA -> LN -> SCA -> LN -> FFN -> LN).
 #[derive(Module, Debug)]
 pub struct BevEncoder {
     queries: Param<Tensor<2>>,
@@ -59,6 +61,8 @@ fn uniform(shape: [usize; 2], device: &Device) -> Param<Tensor<2>> {
 }
 
 impl BevEncoder {
+    /// A randomly initialised encoder for `config` (grid, channels, heads, sampling points,
+    /// layers).
     pub fn new(config: &SsrConfig, device: &Device) -> Self {
         let c = config.channels;
         let bev = &config.bev;

@@ -27,8 +27,11 @@ pub struct SpatialCrossAttention {
 pub struct ImageFeatures {
     /// `[B * cameras, h * w, C]`, camera embedding added.
     pub values: Tensor<3>,
+    /// Height h of the feature map.
     pub height: usize,
+    /// Width w of the feature map.
     pub width: usize,
+    /// Cameras per sample.
     pub cameras: usize,
 }
 
