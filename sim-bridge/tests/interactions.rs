@@ -2,7 +2,8 @@
 //! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
 //! and y = -5.25): a follower keeps off an ego that pokes into its lane, and the expert does not
 //! wait for a car that ran into its rear. And on `maps/lane_add.xodr` (a lane that begins at
-//! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue.
+//! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue; traffic
+//! holds back for an ego that waits to change into its lane.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
@@ -24,13 +25,17 @@ fn road() -> Map {
 
 /// The route between two keypoints, given in the map frame (x east, y north).
 fn route(map: &Map, from: (f64, f64), to: (f64, f64)) -> DenseRoute {
+    route_through(map, &[from, to])
+}
+
+/// The route through these keypoints, given in the map frame (x east, y north).
+fn route_through(map: &Map, keypoints: &[(f64, f64)]) -> DenseRoute {
     // Route files use CARLA's frame: y flipped.
-    let xml = format!(
-        r#"<routes><route id="0" town="x">
-            <waypoint x="{}" y="{}" z="0.0"/><waypoint x="{}" y="{}" z="0.0"/>
-        </route></routes>"#,
-        from.0, -from.1, to.0, -to.1
-    );
+    let waypoints: String = keypoints
+        .iter()
+        .map(|(x, y)| format!(r#"<waypoint x="{x}" y="{}" z="0.0"/>"#, -y))
+        .collect();
+    let xml = format!(r#"<routes><route id="0" town="x">{waypoints}</route></routes>"#);
     let spec = &sim_bridge::route::xml::parse("test", &xml).unwrap()[0];
     sim_bridge::route::planner::plan_route(map, spec).unwrap()
 }
@@ -150,4 +155,43 @@ fn the_expert_waits_for_a_lane_change_gap_then_noses_into_a_slow_queue() {
     world.traffic.vehicles[0].speed = 6.0;
     let view = hazards::scan(&world, &route, index, &mut memory);
     assert_eq!(view.cause, Some(BrakeReason::LaneChange), "{view:?}");
+}
+
+#[test]
+fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
+    let map = road();
+    let route = route_through(&map, &[(20.0, -1.75), (150.0, -1.75), (250.0, -5.25)]);
+    let start = route
+        .points
+        .iter()
+        .position(|p| p.option.is_lane_change())
+        .expect("the route changes into the outer lane");
+    // The ego stands 6 m short of where its route starts to change lanes; a car comes up the
+    // outer lane behind it at 8 m/s.
+    let stand = route.points[start - 6];
+    let target = route.points[route.points.len() - 1].lane;
+    let ego_s = map.lane(target).project(stand.position.truncate()).s;
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -2), ego_s - 40.0, 8.0);
+    world.ego = Ego::new(EgoParams::default(), stand.position, stand.yaw);
+    let ego_half = world.ego_state().half_extent.x;
+    for _ in 0..(15.0 / 0.05) as usize {
+        let index = ego_index(&world, &route);
+        world.trigger_scenarios(index);
+        world.step(HOLD);
+    }
+    let car = &world.traffic.vehicles[0];
+    assert!(car.speed < 0.1, "it waits for the ego: {car:?}");
+    let room = ego_s - ego_half - (car.s + car.half.x);
+    assert!(
+        (2.0..6.0).contains(&room),
+        "it leaves {room:.1} m behind the ego"
+    );
+
+    // Once the ego no longer waits (the lane change is behind it), the car goes on.
+    let end = route.points.len() - 1;
+    world.trigger_scenarios(end);
+    for _ in 0..(5.0 / 0.05) as usize {
+        world.step(HOLD);
+    }
+    assert!(world.traffic.vehicles[0].speed > 1.0, "it drives on");
 }

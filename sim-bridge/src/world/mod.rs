@@ -21,9 +21,9 @@ use rand_chacha::ChaCha8Rng;
 use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
 use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
-use traffic::{EgoPresence, Traffic};
+use traffic::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, Traffic};
 
-use crate::map::Map;
+use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;
 
 /// Simulation step, seconds (20 Hz).
@@ -105,6 +105,11 @@ pub struct World<'m> {
     /// Route scenarios.
     pub scenarios: Vec<Scenario>,
     route_progress: usize,
+    /// Distance along the route of each route point, m.
+    route_distance: Vec<f64>,
+    /// The route's lane changes: where each starts (distance along the route, m) and the lane
+    /// it changes into.
+    lane_changes: Vec<(f64, LaneIdx)>,
     rng: ChaCha8Rng,
     ids: IdSource,
 }
@@ -150,6 +155,8 @@ impl<'m> World<'m> {
             lights,
             scenarios: scenario_list,
             route_progress: 0,
+            route_distance: route.cum.clone(),
+            lane_changes: lane_changes(map, route),
             rng,
             ids,
         };
@@ -235,6 +242,17 @@ impl<'m> World<'m> {
         }
     }
 
+    /// The lane the route changes into next, when that change starts within
+    /// [`MERGE_WAIT_AHEAD`] of the ego's progress.
+    fn lane_change_ahead(&self) -> Option<LaneIdx> {
+        let here = self.route_distance.get(self.route_progress)?;
+        self.lane_changes
+            .iter()
+            .find(|(at, _)| *at > *here)
+            .filter(|(at, _)| at - here <= MERGE_WAIT_AHEAD)
+            .map(|&(_, lane)| lane)
+    }
+
     /// Apply `control` to the ego and advance everything by [`DT`]; returns the ego's contacts.
     pub fn step(&mut self, control: Control) -> Vec<CollisionEvent> {
         self.ego.step(control, DT);
@@ -245,11 +263,16 @@ impl<'m> World<'m> {
             .lane_for_pose(ego.position, ego.yaw)
             .filter(|(_, p)| p.distance < 2.0)
             .map(|(l, p)| (l, p.s));
+        let merging_into = (ego.speed < MERGE_WAIT_SPEED)
+            .then(|| self.lane_change_ahead())
+            .flatten()
+            .map(|lane| (lane, self.map.lane(lane).project(ego.position.truncate()).s));
         let presence = EgoPresence {
             on_lane,
             obb: ego.obb(),
             z: ego.position.z,
             speed: ego.speed,
+            merging_into,
         };
         self.time += DT;
         self.lights.update(self.time);
@@ -308,4 +331,24 @@ impl<'m> World<'m> {
             self.ego.position.z = self.map.lane(lane).pose_at(proj.s).position.z;
         }
     }
+}
+
+/// Where the route changes lanes: the distance along it at which each change starts (its first
+/// point commanded to change lanes) and the lane it changes into.
+fn lane_changes(map: &Map, route: &DenseRoute) -> Vec<(f64, LaneIdx)> {
+    let points = &route.points;
+    (1..points.len())
+        .filter_map(|j| {
+            let (from, to) = (map.lane(points[j - 1].lane), points[j].lane);
+            if from.left != Some(to) && from.right != Some(to) {
+                return None;
+            }
+            let start = (0..j)
+                .rev()
+                .take_while(|&k| points[k].option.is_lane_change())
+                .last()
+                .unwrap_or(j);
+            Some((route.cum[start], to))
+        })
+        .collect()
 }

@@ -10,7 +10,11 @@
 //! drop, as on CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic
 //! manager does. A vehicle near the ego also checks the corridor its path sweeps
 //! ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego is on, and stops short of
-//! it. Vehicles stuck for [`RESPAWN_AFTER_S`] out of the ego's sight (more than
+//! it. Courtesy: while the ego stands waiting to change into a lane (its route changes lanes
+//! within [`MERGE_WAIT_AHEAD`] m), vehicles coming up that lane behind it hold back
+//! [`COURTESY_GAP`] m short of its rear, within [`COURTESY_RANGE`], so a queue lets it in, as
+//! drivers do for a car that signals (without it a lane change planned inside a standing or
+//! crawling queue never happens). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the ego's sight (more than
 //! [`RESPAWN_CLEARANCE`] away), or at such a lane end anywhere, are moved to a free place
 //! elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
 
@@ -42,6 +46,15 @@ pub const REQUEST_DISTANCE: f64 = 10.0;
 pub const RESPAWN_AFTER_S: f64 = 40.0;
 /// A stuck vehicle is moved only when farther than this from the ego, m.
 pub const RESPAWN_CLEARANCE: f64 = 50.0;
+/// A lane change on the ego's route this close ahead (along the route, m) while the ego stands
+/// (slower than [`MERGE_WAIT_SPEED`], m/s) asks traffic on the target lane to let it in.
+pub const MERGE_WAIT_AHEAD: f64 = 20.0;
+/// Speed under which the ego counts as waiting to merge, m/s.
+pub const MERGE_WAIT_SPEED: f64 = 1.0;
+/// How far behind a waiting ego's rear the vehicles on the target lane stop, m.
+const COURTESY_GAP: f64 = 1.5;
+/// Vehicles whose front is farther than this behind that stop point go on as usual, m.
+const COURTESY_RANGE: f64 = 30.0;
 /// Chance per second that a vehicle on a multi-lane road starts a lane change.
 const LANE_CHANGE_RATE: f64 = 0.01;
 /// Length over which connectors leaving the same lane still overlap, m.
@@ -99,6 +112,9 @@ pub struct EgoPresence {
     pub z: f64,
     /// Speed.
     pub speed: f64,
+    /// The lane the ego waits to change into and the ego's arc length projected on it, while
+    /// it stands before a lane change of its route.
+    pub merging_into: Option<(LaneIdx, f64)>,
 }
 
 impl EgoPresence {
@@ -239,6 +255,9 @@ impl Traffic {
             let mut gap = self.free_distance(map, lights, &occupancy, i, grants[i]);
             if let Some(ego_gap) = ego_on_path(map, v, ego) {
                 gap = gap.min_by_gap(ego_gap);
+            }
+            if let Some(hold) = courtesy_hold(map, v, ego) {
+                gap = gap.min_by_gap((hold, 0.0));
             }
             accels.push(follow(v, gap.0, gap.1, map));
         }
@@ -555,6 +574,22 @@ fn ego_on_path(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<(f64, f64)> 
         along += EGO_WATCH_STEP;
     }
     None
+}
+
+/// The free gap to where a vehicle coming up the lane a waiting ego changes into holds back
+/// for it (see the module doc), if it is one of those vehicles.
+fn courtesy_hold(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<f64> {
+    let (lane, ego_s) = ego.merging_into?;
+    let s = if v.lane == lane {
+        v.s
+    } else if v.next.first() == Some(&lane) {
+        v.s - map.lane(v.lane).length()
+    } else {
+        return None;
+    };
+    let stop = ego_s - ego.obb.half.x - COURTESY_GAP;
+    let gap = stop - (s + v.half.x);
+    (gap > -0.5 && gap < COURTESY_RANGE).then_some(gap.max(0.0))
 }
 
 trait MinByGap {
