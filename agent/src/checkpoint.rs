@@ -288,7 +288,7 @@ fn apply(
         config: info.config.name.clone(),
         details,
     };
-    let mut model = SsrModel::new(&info.config, device);
+    let mut model = info.config.init(device);
     let mut store = store.validate(true).allow_partial(false);
     let result = model
         .load_from(&mut store)

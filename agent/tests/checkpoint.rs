@@ -8,13 +8,13 @@ use burn::tensor::Device;
 
 use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::checkpoint::{CheckpointError, inspect, load, save};
-use ssr_agent::model::{SsrModel, float_values};
+use ssr_agent::model::float_values;
 
 #[test]
 fn save_then_load_gives_identical_outputs() {
     let device = Device::flex();
     let config = tiny_config();
-    let model = SsrModel::new(&config, &device);
+    let model = config.init(&device);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("roundtrip.safetensors");
     save(&model, &config, &[("note", "unit test".into())], &path).unwrap();
@@ -41,7 +41,7 @@ fn save_then_load_gives_identical_outputs() {
 fn bad_checkpoints_are_clear_errors() {
     let device = Device::flex();
     let config = tiny_config();
-    let model = SsrModel::new(&config, &device);
+    let model = config.init(&device);
     let dir = tempfile::tempdir().unwrap();
     let scratch = |name: &str| dir.path().join(name);
     let good = scratch("good.safetensors");

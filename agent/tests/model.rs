@@ -14,16 +14,17 @@ use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::model::bev::align_previous_bev;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::cpu_kernels::{self, Activation};
+use ssr_agent::model::fused::{FusedBatchNorm, FusedLinear};
 use ssr_agent::model::sampling::{
     bilinear_sample, deformable_aggregate, deformable_aggregate_by_tensor_ops,
 };
 use ssr_agent::model::stl::NavigationGate;
-use ssr_agent::model::{SsrModel, float_tensor, float_values};
+use ssr_agent::model::{float_tensor, float_values};
 use ssr_agent::pose::{EgoMotion, Pose2};
 
 fn check_shapes(config: &SsrConfig, batch: usize, cameras: usize) {
     let device = Device::flex();
-    let model = SsrModel::new(config, &device).valid();
+    let model = config.init(&device).valid();
     let input = model_input(config, batch, cameras, true, &device);
     let (fh, fw) = config.feature_size();
     assert_eq!(
@@ -103,7 +104,7 @@ fn configs_validate_and_bad_ones_name_the_field() {
 fn first_frame_ignores_the_previous_bev_and_later_frames_use_it() {
     let device = Device::flex();
     let config = tiny_config();
-    let model = SsrModel::new(&config, &device).valid();
+    let model = config.init(&device).valid();
     let mut first = model_input(&config, 1, 1, false, &device);
     let a = float_values(model.forward(&first).bev);
     first.previous_bev = first.previous_bev.clone().mul_scalar(-3.0).add_scalar(5.0);
@@ -177,7 +178,7 @@ fn temporal_alignment_moves_a_static_blob_by_the_ego_motion() {
 fn token_attention_rows_sum_to_one() {
     let device = Device::flex();
     let config = tiny_config();
-    let model = SsrModel::new(&config, &device).valid();
+    let model = config.init(&device).valid();
     let out = model.forward(&model_input(&config, 2, 1, true, &device));
     let q = config.bev.grid.cells();
     for row in float_values(out.scene.attention.unwrap()).chunks(q) {
@@ -209,7 +210,10 @@ fn command_and_target_point_change_the_gate() {
 #[test]
 fn sampler_matches_grid_sample() {
     for device in [Device::flex(), Device::flex().autodiff()] {
-        assert_eq!(cpu_kernels::apply(&device), !device.is_autodiff());
+        assert_eq!(
+            cpu_kernels::is_flex_inference(&device),
+            !device.is_autodiff()
+        );
         let (n, c, h, w, l) = (3, 5, 6, 9, 40);
         let maps = Tensor::<4>::random([n, c, h, w], Distribution::Normal(0.0, 1.0), &device);
         // Inside, on the border, and outside the map.
@@ -470,22 +474,22 @@ fn fused_batch_norm_matches_burn() {
             layer.beta = beta.clone();
             layer
         };
-        let (reference, fused_layer) = (layer(), layer());
+        let (reference, fused_layer) = (layer(), FusedBatchNorm::from(layer()));
         let x = Tensor::<4>::random(shape, Distribution::Normal(2.0, 3.0), &device).require_grad();
 
         let expected = reference.forward(x.clone());
-        let fused = cpu_kernels::batch_norm_layer(&fused_layer, x.clone());
+        let fused = fused_layer.forward(x.clone());
         let diff = max_abs_diff(float_values(fused.clone()), float_values(expected.clone()));
         assert!(diff < 1e-4, "{case}: differs from BatchNorm by {diff}");
         for (name, fused, expected) in [
             (
                 "running mean",
-                &fused_layer.running_mean,
+                &fused_layer.inner().running_mean,
                 &reference.running_mean,
             ),
             (
                 "running variance",
-                &fused_layer.running_var,
+                &fused_layer.inner().running_var,
                 &reference.running_var,
             ),
         ] {
@@ -535,8 +539,8 @@ fn fused_linear_matches_burn() {
         .require_grad();
 
         let expected = layer.forward(x.clone());
-        let inference = cpu_kernels::linear(&layer.valid(), x.clone().inner());
-        let fused = cpu_kernels::linear(&layer, x.clone());
+        let inference = FusedLinear::from(layer.valid()).forward(x.clone().inner());
+        let fused = FusedLinear::from(layer.clone()).forward(x.clone());
         assert_outputs_match(&case, inference, &fused, &expected, 1e-4);
 
         let grads = backward_both(fused, expected);

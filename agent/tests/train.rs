@@ -50,7 +50,7 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
     // ego motion of this batch (every ReLU negative, so no gradient behind it) in 1 run of 100.
     device.seed(7);
     let config = tiny_config();
-    let mut model = SsrModel::new(&config, &device);
+    let mut model = config.init(&device);
     let batch = 2;
     let input = model_input(&config, batch, 1, true, &device);
     let future_input = model_input(&config, batch, 1, true, &device);

@@ -12,7 +12,7 @@ use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use ssr_agent::checkpoint;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::{SsrModel, float_values};
+use ssr_agent::model::float_values;
 use ssr_agent::train::augment::Photometric;
 use ssr_agent::train::config::{Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, SampleDraw, TrainingData, action_of};
@@ -266,7 +266,7 @@ fn a_dropped_history_trains_the_first_frame_path() {
         .copied()
         .collect();
     let device = Device::flex();
-    let model = SsrModel::new(&config.model, &device);
+    let model = config.model.init(&device);
     let waypoints = |drop_history: bool, history_value: f32| {
         let batch = set
             .batch(&with_history, &config.model, |_| SampleDraw {

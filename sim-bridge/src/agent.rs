@@ -149,3 +149,7 @@ pub trait Agent {
     /// such as the expert may read it; sensor-based agents use `obs` alone.
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError>;
 }
+
+/// Makes one worker's agent (each worker thread drives its own, e.g. its own connection), or
+/// says why it cannot.
+pub type AgentFactory<'a> = &'a (dyn Fn() -> Result<Box<dyn Agent>, String> + Sync);

@@ -173,6 +173,11 @@ fn bad_arguments_fail_with_a_clear_message() {
         "town05-short-style",
     ]);
     assert!(String::from_utf8_lossy(&run.stderr).contains("unknown agent"));
+    for flag in ["--jobs", "--repetitions"] {
+        let run = sim_bridge(&["eval", flag, "0"]);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success() && err.contains("at least 1"), "{err}");
+    }
 }
 
 #[test]

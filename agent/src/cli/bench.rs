@@ -12,7 +12,7 @@ use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
 use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::{ModelInput, SsrModel, float_tensor};
+use ssr_agent::model::{ModelInput, float_tensor};
 use ssr_agent::policy::{SsrPolicy, StepInput};
 use ssr_agent::pose::{EgoMotion, Pose2};
 use ssr_agent::train::loss::{BetaTargets, ImitationTargets, LossWeights, losses};
@@ -141,7 +141,7 @@ fn sync(device: &Device) {
 }
 
 fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {
-    let model = SsrModel::new(config, device).valid();
+    let model = config.init(device).valid();
     let input = model_input(config, batch, device);
     let (w, i) = (args.warmup, args.iterations);
     let features = model.image_features(input.images.clone());
@@ -242,7 +242,7 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
 
 fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {
     let device = device.clone().autodiff();
-    let mut model = SsrModel::new(config, &device);
+    let mut model = config.init(&device);
     let mut optimizer = AdamWConfig::new().with_weight_decay(0.01).init();
     let input = model_input(config, batch, &device);
     let p = config.head.pred_len;

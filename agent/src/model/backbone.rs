@@ -5,47 +5,49 @@
 //! Output: `[N, C, h, w]` with the size of [`SsrConfig::feature_size`] (stride 16 or 32).
 
 use burn::module::Module;
-use burn::nn::conv::{Conv2d, Conv2dConfig};
-use burn::nn::pool::{MaxPool2d, MaxPool2dConfig};
-use burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
+use burn::nn::conv::Conv2dConfig;
+use burn::nn::pool::MaxPool2dConfig;
+use burn::nn::{BatchNormConfig, PaddingConfig2d};
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
 use super::cpu_kernels::{self, Activation};
+use super::fused::{FusedBatchNorm, FusedConv2d, FusedMaxPool2d};
 
 /// ImageNet mean of R, G, B in [0, 1].
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
 /// ImageNet standard deviation of R, G, B in [0, 1].
 pub const IMAGENET_STD: [f32; 3] = [0.229, 0.224, 0.225];
 
-fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, device: &Device) -> Conv2d {
+fn conv(cin: usize, cout: usize, kernel: usize, stride: usize, device: &Device) -> FusedConv2d {
     let pad = kernel / 2;
     Conv2dConfig::new([cin, cout], [kernel, kernel])
         .with_stride([stride, stride])
         .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
         .with_bias(false)
         .init(device)
+        .into()
 }
 
 /// Convolution followed by batch norm.
 #[derive(Module, Debug)]
 struct ConvBn {
-    conv: Conv2d,
-    bn: BatchNorm,
+    conv: FusedConv2d,
+    bn: FusedBatchNorm,
 }
 
 impl ConvBn {
     fn new(cin: usize, cout: usize, kernel: usize, stride: usize, device: &Device) -> Self {
         Self {
             conv: conv(cin, cout, kernel, stride, device),
-            bn: BatchNormConfig::new(cout).init(device),
+            bn: BatchNormConfig::new(cout).init(device).into(),
         }
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        cpu_kernels::batch_norm_layer(&self.bn, cpu_kernels::conv2d_layer(&self.conv, x))
+        self.bn.forward(self.conv.forward(x))
     }
 }
 
@@ -60,8 +62,8 @@ impl ConvBn {
 /// rearrangement's zero taps (64 instead of 49) cost 10 %.
 #[derive(Module, Debug)]
 struct Stem {
-    conv: Conv2d,
-    bn: BatchNorm,
+    conv: FusedConv2d,
+    bn: FusedBatchNorm,
 }
 
 impl Stem {
@@ -73,18 +75,18 @@ impl Stem {
     fn new(cout: usize, device: &Device) -> Self {
         Self {
             conv: conv(3, cout, Self::KERNEL, Self::STRIDE, device),
-            bn: BatchNormConfig::new(cout).init(device),
+            bn: BatchNormConfig::new(cout).init(device).into(),
         }
     }
 
     /// `[N, 3, H, W]` to `[N, cout, ceil(H/2), ceil(W/2)]`.
     fn forward(&self, images: Tensor<4>) -> Tensor<4> {
-        let y = if self.conv.weight.dims()[0] <= Self::DIRECT_MAX_WIDTH {
+        let y = if self.conv.inner().weight.dims()[0] <= Self::DIRECT_MAX_WIDTH {
             self.space_to_depth_conv(images)
         } else {
-            cpu_kernels::conv2d_layer(&self.conv, images)
+            self.conv.forward(images)
         };
-        cpu_kernels::batch_norm_layer(&self.bn, y)
+        self.bn.forward(y)
     }
 
     /// The strided convolution computed on the space-to-depth rearrangement of the image.
@@ -108,14 +110,14 @@ impl Stem {
             .permute([0, 1, 3, 5, 2, 4])
             .reshape([n, c * s * s, padded_h / s, padded_w / s]);
         let taps = k.div_ceil(s);
-        let weight = self.conv.weight.val();
+        let weight = self.conv.inner().weight.val();
         let cout = weight.dims()[0];
         let weight = weight
             .pad([(0, taps * s - k), (0, taps * s - k)], 0.0)
             .reshape([cout, c, taps, s, taps, s])
             .permute([0, 1, 3, 5, 2, 4])
             .reshape([cout, c * s * s, taps, taps]);
-        let y = if cpu_kernels::apply_differentiable(&phases.device()) {
+        let y = if cpu_kernels::is_flex(&phases.device()) {
             cpu_kernels::conv2d(phases, weight, None, [1, 1], [0, 0])
         } else {
             conv2d(
@@ -165,10 +167,10 @@ impl BasicBlock {
 #[derive(Module, Debug)]
 pub struct Backbone {
     stem: Stem,
-    pool: MaxPool2d,
+    pool: FusedMaxPool2d,
     blocks: Vec<BasicBlock>,
-    lateral: Conv2d,
-    smooth: Conv2d,
+    lateral: FusedConv2d,
+    smooth: FusedConv2d,
 }
 
 impl Backbone {
@@ -195,24 +197,25 @@ impl Backbone {
             pool: MaxPool2dConfig::new([3, 3])
                 .with_strides([2, 2])
                 .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
-                .init(),
+                .init()
+                .into(),
             blocks,
-            lateral: Conv2dConfig::new([cin, c], [1, 1]).init(device),
+            lateral: Conv2dConfig::new([cin, c], [1, 1]).init(device).into(),
             smooth: Conv2dConfig::new([c, c], [3, 3])
                 .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
-                .init(device),
+                .init(device)
+                .into(),
         }
     }
 
     /// `[N, 3, H, W]` normalised images to `[N, C, h, w]` features.
     pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
         let stem = cpu_kernels::activation(self.stem.forward(images), Activation::Relu);
-        let mut x = cpu_kernels::max_pool2d_layer(&self.pool, stem);
+        let mut x = self.pool.forward(stem);
         for block in &self.blocks {
             x = block.forward(x);
         }
-        let lateral = cpu_kernels::conv2d_layer(&self.lateral, x);
-        cpu_kernels::conv2d_layer(&self.smooth, lateral)
+        self.smooth.forward(self.lateral.forward(x))
     }
 }
 
@@ -268,7 +271,7 @@ mod tests {
         let stem = Stem::new(8, &device);
         for [h, w] in [[96, 320], [13, 17], [8, 7]] {
             let images = Tensor::<4>::random([2, 3, h, w], Distribution::Normal(0.0, 1.0), &device);
-            let expected = stem.conv.forward(images.clone());
+            let expected = stem.conv.inner().forward(images.clone());
             let actual = stem.space_to_depth_conv(images);
             assert_eq!(actual.dims(), expected.dims(), "{h}x{w}");
             let error: f32 = (actual - expected).abs().max().into_scalar();

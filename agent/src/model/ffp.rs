@@ -12,12 +12,13 @@
 //! of the future frame.
 
 use burn::module::Module;
-use burn::nn::{GroupNorm, GroupNormConfig, Linear};
+use burn::nn::{GroupNorm, GroupNormConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
 use super::config::SsrConfig;
 use super::cpu_kernels::{self, Activation};
+use super::fused::FusedLinear;
 use super::init::{constant_linear, xavier_linear};
 use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
@@ -33,9 +34,9 @@ fn plain_layer_norm(x: Tensor<3>) -> Tensor<3> {
 /// Motion-aware layer norm conditioned on the flattened trajectory.
 #[derive(Module, Debug)]
 struct MotionLayerNorm {
-    reduce: Linear,
-    gamma: Linear,
-    beta: Linear,
+    reduce: FusedLinear,
+    gamma: FusedLinear,
+    beta: FusedLinear,
 }
 
 impl MotionLayerNorm {
@@ -60,11 +61,11 @@ impl MotionLayerNorm {
 #[derive(Module, Debug)]
 struct TokenFuser {
     norm_tokens: GroupNorm,
-    expand: Linear,
+    expand: FusedLinear,
     norm_slots: GroupNorm,
     norm_bev: GroupNorm,
-    mix_in: Linear,
-    mix_out: Linear,
+    mix_in: FusedLinear,
+    mix_out: FusedLinear,
 }
 
 impl TokenFuser {
@@ -89,14 +90,10 @@ impl TokenFuser {
         let tokens = single_group_norm(&self.norm_tokens, tokens);
         let slots = self
             .norm_slots
-            .forward(cpu_kernels::linear(&self.expand, tokens.swap_dims(1, 2)));
+            .forward(self.expand.forward(tokens.swap_dims(1, 2)));
         let bev = single_group_norm(&self.norm_bev, bev);
-        let hidden =
-            cpu_kernels::activation(cpu_kernels::linear(&self.mix_in, bev), Activation::Gelu);
-        let mix = cpu_kernels::activation(
-            cpu_kernels::linear(&self.mix_out, hidden),
-            Activation::Sigmoid,
-        );
+        let hidden = cpu_kernels::activation(self.mix_in.forward(bev), Activation::Gelu);
+        let mix = cpu_kernels::activation(self.mix_out.forward(hidden), Activation::Sigmoid);
         mix.matmul(slots.swap_dims(1, 2))
     }
 }

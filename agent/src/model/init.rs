@@ -2,20 +2,22 @@
 //! circular initial sampling offsets for deformable attention.
 
 use burn::module::Param;
-use burn::nn::{Initializer, Linear, LinearConfig};
+use burn::nn::{Initializer, LinearConfig};
 use burn::tensor::{Device, Tensor};
 
+use super::fused::FusedLinear;
+
 /// A linear layer with Xavier-uniform weights and zero bias.
-pub fn xavier_linear(d_in: usize, d_out: usize, device: &Device) -> Linear {
+pub fn xavier_linear(d_in: usize, d_out: usize, device: &Device) -> FusedLinear {
     let mut linear = LinearConfig::new(d_in, d_out)
         .with_initializer(Initializer::XavierUniform { gain: 1.0 })
         .init(device);
     linear.bias = Some(Param::from_tensor(Tensor::zeros([d_out], device)));
-    linear
+    linear.into()
 }
 
 /// A linear layer with zero weights and the given bias.
-pub fn constant_linear(d_in: usize, d_out: usize, bias: Vec<f32>, device: &Device) -> Linear {
+pub fn constant_linear(d_in: usize, d_out: usize, bias: Vec<f32>, device: &Device) -> FusedLinear {
     assert_eq!(bias.len(), d_out);
     let mut linear = LinearConfig::new(d_in, d_out)
         .with_initializer(Initializer::Zeros)
@@ -25,7 +27,7 @@ pub fn constant_linear(d_in: usize, d_out: usize, bias: Vec<f32>, device: &Devic
         [d_out],
         device,
     )));
-    linear
+    linear.into()
 }
 
 /// Offset layer of a deformable attention: zero weights, and a bias that places head h's points
@@ -37,7 +39,7 @@ pub fn deformable_offsets(
     heads: usize,
     points: usize,
     device: &Device,
-) -> Linear {
+) -> FusedLinear {
     let mut bias = Vec::with_capacity(groups * heads * points * 2);
     for _ in 0..groups {
         for head in 0..heads {

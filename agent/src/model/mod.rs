@@ -11,6 +11,7 @@ pub mod bev;
 pub mod config;
 pub mod cpu_kernels;
 pub mod ffp;
+pub mod fused;
 mod init;
 mod norm;
 pub mod sampling;
@@ -74,18 +75,20 @@ pub struct SsrModel {
     pub ffp: FutureFeaturePredictor,
 }
 
-impl SsrModel {
+impl SsrConfig {
     /// A freshly initialised network (random weights: a component, not a driver).
-    pub fn new(config: &SsrConfig, device: &Device) -> Self {
-        Self {
-            backbone: Backbone::new(config, device),
-            bev: BevEncoder::new(config, device),
-            stl: SceneTokenLearner::new(config, device),
-            head: TcpHead::new(config, device),
-            ffp: FutureFeaturePredictor::new(config, device),
+    pub fn init(&self, device: &Device) -> SsrModel {
+        SsrModel {
+            backbone: Backbone::new(self, device),
+            bev: BevEncoder::new(self, device),
+            stl: SceneTokenLearner::new(self, device),
+            head: TcpHead::new(self, device),
+            ffp: FutureFeaturePredictor::new(self, device),
         }
     }
+}
 
+impl SsrModel {
     /// Backbone features `[B * cameras, C, h, w]`.
     pub fn image_features(&self, images: Tensor<4>) -> Tensor<4> {
         self.backbone.forward(images)

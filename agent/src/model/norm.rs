@@ -1,30 +1,9 @@
-//! Normalisation layers: layer norm on the fused CPU kernel, and group normalisation of
-//! channels-last tensors.
+//! Group normalisation of channels-last tensors (layer norm is [`super::fused::FusedLayerNorm`]).
 
-use burn::nn::{GroupNorm, LayerNorm, LayerNormConfig};
+use burn::nn::GroupNorm;
 use burn::tensor::Tensor;
 
 use super::cpu_kernels;
-
-/// The epsilon of every layer norm in the model (Burn's default). [`LayerNorm`] keeps its own
-/// private, so the layers are built with [`layer_norm_config`] and run with [`layer_norm`].
-pub const LAYER_NORM_EPSILON: f64 = 1e-5;
-
-/// A layer norm over `d` channels with [`LAYER_NORM_EPSILON`].
-pub fn layer_norm_config(d: usize) -> LayerNormConfig {
-    LayerNormConfig::new(d).with_epsilon(LAYER_NORM_EPSILON)
-}
-
-/// `norm.forward(x)` for a norm built by [`layer_norm_config`], on the fused kernel where it
-/// applies (Flex, in inference and training).
-pub fn layer_norm<const D: usize>(norm: &LayerNorm, x: Tensor<D>) -> Tensor<D> {
-    match &norm.beta {
-        Some(beta) if cpu_kernels::apply_differentiable(&x.device()) => {
-            cpu_kernels::layer_norm(x, norm.gamma.val(), beta.val(), LAYER_NORM_EPSILON)
-        }
-        _ => norm.forward(x),
-    }
-}
 
 /// Burn's [`GroupNorm`] with one group, applied to a channels-last `[B, L, C]` tensor as the
 /// module applies it to `[B, C, L]`: statistics over all of a sample's values, then the
@@ -37,9 +16,7 @@ pub fn single_group_norm(norm: &GroupNorm, x: Tensor<3>) -> Tensor<3> {
     let [b, l, c] = x.dims();
     let flat = x.reshape([b, l * c]);
     let affine = norm.gamma.as_ref().zip(norm.beta.as_ref());
-    if let Some((gamma, beta)) =
-        affine.filter(|_| cpu_kernels::apply_differentiable(&flat.device()))
-    {
+    if let Some((gamma, beta)) = affine.filter(|_| cpu_kernels::is_flex(&flat.device())) {
         return cpu_kernels::layer_norm(flat, gamma.val(), beta.val(), norm.epsilon)
             .reshape([b, l, c]);
     }

@@ -36,7 +36,7 @@ pub fn deformable_aggregate(
         height * width,
         "values hold {hw} rows for a {height}x{width} map"
     );
-    if cpu_kernels::apply_differentiable(&values.device()) {
+    if cpu_kernels::is_flex(&values.device()) {
         cpu_kernels::deformable_aggregate(values, height, width, locations, weights)
     } else {
         deformable_aggregate_by_tensor_ops(values, height, width, locations, weights)

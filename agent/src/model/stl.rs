@@ -8,13 +8,14 @@
 //! and the reinterpretation is a quirk, not part of the method.
 
 use burn::module::Module;
-use burn::nn::{GroupNorm, GroupNormConfig, Linear};
+use burn::nn::{GroupNorm, GroupNormConfig};
 use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::command::COMMANDS;
 
 use super::config::SsrConfig;
 use super::cpu_kernels::{self, Activation};
+use super::fused::FusedLinear;
 use super::init::xavier_linear;
 use super::norm::single_group_norm;
 use super::transformer::{SelfAttentionLayer, run_layers};
@@ -25,8 +26,8 @@ pub const TARGET_SCALE: f32 = 25.0;
 /// Channel gate from the navigation information (an SE-style MLP ending in a sigmoid).
 #[derive(Module, Debug)]
 pub struct NavigationGate {
-    fc_in: Linear,
-    fc_out: Linear,
+    fc_in: FusedLinear,
+    fc_out: FusedLinear,
 }
 
 impl NavigationGate {
@@ -41,10 +42,7 @@ impl NavigationGate {
     /// `command` one-hot `[B, 6]`, `target_point` `[B, 2]` (ego frame, m) to a gate `[B, C]` in (0, 1).
     pub fn forward(&self, command: Tensor<2>, target_point: Tensor<2>) -> Tensor<2> {
         let navigation = Tensor::cat(vec![command, target_point.div_scalar(TARGET_SCALE)], 1);
-        sigmoid(cpu_kernels::linear(
-            &self.fc_out,
-            relu(cpu_kernels::linear(&self.fc_in, navigation)),
-        ))
+        sigmoid(self.fc_out.forward(relu(self.fc_in.forward(navigation))))
     }
 }
 
@@ -52,8 +50,8 @@ impl NavigationGate {
 #[derive(Module, Debug)]
 pub struct TokenLearner {
     norm: GroupNorm,
-    fc_in: Linear,
-    fc_out: Linear,
+    fc_in: FusedLinear,
+    fc_out: FusedLinear,
 }
 
 impl TokenLearner {
@@ -72,11 +70,8 @@ impl TokenLearner {
     /// `x` `[B, Q, D]` to tokens `[B, S, D]` and attention `[B, S, Q]` (each row sums to 1).
     pub fn forward(&self, x: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
         let normalised = single_group_norm(&self.norm, x.clone());
-        let hidden = cpu_kernels::activation(
-            cpu_kernels::linear(&self.fc_in, normalised),
-            Activation::Gelu,
-        );
-        let logits = cpu_kernels::linear(&self.fc_out, hidden);
+        let hidden = cpu_kernels::activation(self.fc_in.forward(normalised), Activation::Gelu);
+        let logits = self.fc_out.forward(hidden);
         let attention = cpu_kernels::softmax(logits.swap_dims(1, 2), 2);
         (attention.clone().matmul(x), attention)
     }

@@ -11,12 +11,13 @@
 //! Waypoints are in the ego frame (x forward, y left, metres).
 
 use burn::module::Module;
-use burn::nn::{Gru, GruConfig, Linear};
+use burn::nn::{Gru, GruConfig};
 use burn::tensor::activation::{relu, softmax, softplus};
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::command::COMMANDS;
 
 use super::config::SsrConfig;
+use super::fused::FusedLinear;
 use super::init::xavier_linear;
 
 /// Speed is divided by this (m/s) where it enters the network, as TCP does.
@@ -27,7 +28,7 @@ const BETA_FLOOR: f32 = 1e-3;
 /// Linear layers with ReLU after each.
 #[derive(Module, Debug)]
 struct Mlp {
-    layers: Vec<Linear>,
+    layers: Vec<FusedLinear>,
 }
 
 impl Mlp {
@@ -52,8 +53,8 @@ impl Mlp {
 #[derive(Module, Debug)]
 struct BetaPolicy {
     trunk: Mlp,
-    alpha: Linear,
-    beta: Linear,
+    alpha: FusedLinear,
+    beta: FusedLinear,
 }
 
 impl BetaPolicy {
@@ -99,19 +100,19 @@ pub struct HeadOutput {
 pub struct TcpHead {
     measurements: Mlp,
     speed: Mlp,
-    speed_out: Linear,
+    speed_out: FusedLinear,
     join_trajectory: Mlp,
     trajectory_gru: Gru,
-    waypoint_out: Linear,
+    waypoint_out: FusedLinear,
     initial_attention: Mlp,
-    initial_attention_out: Linear,
+    initial_attention_out: FusedLinear,
     join_control: Mlp,
     policy: BetaPolicy,
     control_gru: Gru,
     guided_attention: Mlp,
-    guided_attention_out: Linear,
+    guided_attention_out: FusedLinear,
     merge: Mlp,
-    merge_out: Linear,
+    merge_out: FusedLinear,
     step: Mlp,
     pred_len: usize,
 }

@@ -3,22 +3,21 @@
 //! queries and keys but not to values. Used over the scene tokens and in the FFP world model.
 
 use burn::module::Module;
+use burn::nn::Initializer;
 use burn::nn::attention::{MhaInput, MultiHeadAttention, MultiHeadAttentionConfig};
-use burn::nn::{Initializer, LayerNorm, Linear};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
-use super::cpu_kernels;
+use super::fused::{FusedLayerNorm, FusedLinear};
 use super::init::xavier_linear;
-use super::norm::{layer_norm, layer_norm_config};
 
 #[derive(Module, Debug)]
 pub struct SelfAttentionLayer {
     attention: MultiHeadAttention,
-    norm_attention: LayerNorm,
-    ffn_in: Linear,
-    ffn_out: Linear,
-    norm_ffn: LayerNorm,
+    norm_attention: FusedLayerNorm,
+    ffn_in: FusedLinear,
+    ffn_out: FusedLinear,
+    norm_ffn: FusedLayerNorm,
 }
 
 impl SelfAttentionLayer {
@@ -28,10 +27,10 @@ impl SelfAttentionLayer {
                 .with_dropout(0.0)
                 .with_initializer(Initializer::XavierUniform { gain: 1.0 })
                 .init(device),
-            norm_attention: layer_norm_config(channels).init(device),
+            norm_attention: FusedLayerNorm::new(channels, device),
             ffn_in: xavier_linear(channels, ffn_dim, device),
             ffn_out: xavier_linear(ffn_dim, channels, device),
-            norm_ffn: layer_norm_config(channels).init(device),
+            norm_ffn: FusedLayerNorm::new(channels, device),
         }
     }
 
@@ -45,12 +44,9 @@ impl SelfAttentionLayer {
             .attention
             .forward(MhaInput::new(query_key.clone(), query_key, x.clone()))
             .context;
-        let x = layer_norm(&self.norm_attention, x + attended);
-        let ffn = cpu_kernels::linear(
-            &self.ffn_out,
-            relu(cpu_kernels::linear(&self.ffn_in, x.clone())),
-        );
-        layer_norm(&self.norm_ffn, x + ffn)
+        let x = self.norm_attention.forward(x + attended);
+        let ffn = self.ffn_out.forward(relu(self.ffn_in.forward(x.clone())));
+        self.norm_ffn.forward(x + ffn)
     }
 }
 

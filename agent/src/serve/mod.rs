@@ -73,7 +73,7 @@ pub fn load_policy(
                     "serving config '{}' with RANDOM weights: a component under test, not a driver",
                     model_config.name
                 );
-                let model = SsrModel::new(&model_config, device);
+                let model = model_config.init(device);
                 (
                     model,
                     model_config,

@@ -258,7 +258,7 @@ impl Trainer {
                 problem,
             };
             let config = progress.config;
-            let mut model = SsrModel::new(&config.model, &device);
+            let mut model = config.model.init(&device);
             let mut store = BurnpackStore::from_file(resume_dir.join("model.bpk"))
                 .validate(true)
                 .allow_partial(false);
@@ -275,7 +275,7 @@ impl Trainer {
             device.seed(config.seed);
             let model = match &config.init {
                 Some(path) => initial_weights(path, &config.model, &device)?,
-                None => SsrModel::new(&config.model, &device),
+                None => config.model.init(&device),
             };
             std::fs::write(
                 out.join("train_config.json"),

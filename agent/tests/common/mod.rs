@@ -46,7 +46,7 @@ pub fn tiny_config() -> SsrConfig {
 pub fn policy_of(config: SsrConfig) -> ssr_agent::policy::SsrPolicy {
     let device = Device::flex();
     ssr_agent::policy::SsrPolicy::new(
-        ssr_agent::model::SsrModel::new(&config, &device),
+        config.init(&device),
         config,
         ssr_agent::control::ControlConfig::default(),
         device,

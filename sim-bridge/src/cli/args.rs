@@ -8,9 +8,9 @@ use anyhow::bail;
 use clap::Args;
 use sim_bridge::client::local::LocalServer;
 use sim_bridge::map::{Map, MapOptions};
-use sim_bridge::route::DenseRoute;
-use sim_bridge::route::planner::{PlanError, plan_route};
+use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::xml::RouteSpec;
+use sim_bridge::route::{DenseRoute, RoutePlan};
 use sim_bridge::world::WorldConfig;
 
 /// Which routes, on which map.
@@ -42,9 +42,6 @@ pub struct PlannedRoute {
     pub spec: RouteSpec,
     pub dense: DenseRoute,
 }
-
-/// A selected route and its dense route, or why it could not be planned.
-pub type RoutePlan = (RouteSpec, Result<DenseRoute, PlanError>);
 
 impl RouteArgs {
     /// The map and the selected routes, planned. A route that cannot be planned is reported
@@ -158,6 +155,16 @@ pub fn parse_positive(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(value) if value.is_finite() && value > 0.0 => Ok(value),
         _ => Err(format!("expected a positive number, got '{text}'")),
+    }
+}
+
+/// A count of 1 or more (a clap value parser).
+pub fn parse_count(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(count) if count >= 1 => Ok(count),
+        _ => Err(format!(
+            "expected a whole number of at least 1, got '{text}'"
+        )),
     }
 }
 

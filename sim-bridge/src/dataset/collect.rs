@@ -21,7 +21,7 @@ use ssrdrive_proto::dataset::{
 use ssrdrive_proto::files::write_atomic;
 
 use super::recorder::EpisodeRecorder;
-use crate::agent::Agent;
+use crate::agent::{Agent, AgentFactory};
 use crate::eval::run_route;
 use crate::map::Map;
 use crate::route::DenseRoute;
@@ -49,9 +49,6 @@ pub struct CollectConfig {
     /// Worker threads.
     pub jobs: usize,
 }
-
-/// Makes one worker's driver (each worker thread drives its own, e.g. its own connection).
-pub type DriverFactory<'a> = &'a (dyn Fn() -> Result<Box<dyn Agent>, String> + Sync);
 
 /// One route run to record.
 pub struct EpisodeTask<'m> {
@@ -111,7 +108,7 @@ pub struct EpisodeDone {
 pub fn collect(
     config: &CollectConfig,
     tasks: &[EpisodeTask<'_>],
-    driver: Option<DriverFactory<'_>>,
+    driver: Option<AgentFactory<'_>>,
     progress: impl Fn(&EpisodeDone) + Sync,
 ) -> Result<CollectSummary, DatasetError> {
     let ticks_per_frame = ticks_per_frame(config.rate_hz).ok_or_else(|| {

@@ -5,6 +5,8 @@
 //! scenario triggers, render the agent's cameras (if it has any), ask the agent, evaluate the
 //! criteria (with the contacts of the previous world step), then step the world.
 
+pub mod campaign;
+
 use std::time::Instant;
 
 use glam::DVec3;

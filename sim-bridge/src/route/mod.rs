@@ -12,6 +12,11 @@ use glam::{DVec2, DVec3};
 use ssrdrive_proto::command::RoadOption;
 
 use crate::map::LaneIdx;
+use crate::route::planner::PlanError;
+use crate::route::xml::RouteSpec;
+
+/// A selected route and its dense route, or why it could not be planned.
+pub type RoutePlan = (RouteSpec, Result<DenseRoute, PlanError>);
 
 /// One point of a dense route.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,32 +8,81 @@ mod spatial;
 mod temporal;
 
 use burn::module::{Module, Param};
-use burn::nn::{LayerNorm, Linear};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Distribution, Tensor};
 pub use grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
 pub use spatial::ImageFeatures;
-use spatial::SpatialCrossAttention;
+use spatial::{SpatialContext, SpatialCrossAttention, SpatialCrossAttentionConfig};
 use ssrdrive_proto::camera::MAX_CAMERAS;
-use temporal::TemporalSelfAttention;
 pub use temporal::{HISTORY_S, HISTORY_TICKS, align_previous_bev};
+use temporal::{TemporalContext, TemporalSelfAttention, TemporalSelfAttentionConfig};
 
 use crate::model::config::SsrConfig;
 use crate::model::cpu_kernels::{self, Activation};
 use crate::model::float_tensor;
+use crate::model::fused::{FusedLayerNorm, FusedLinear};
 use crate::model::init::xavier_linear;
-use crate::model::norm::{layer_norm, layer_norm_config};
 
 /// TSA -> LN -> SCA -> LN -> FFN -> LN.
 #[derive(Module, Debug)]
 struct EncoderLayer {
     temporal: TemporalSelfAttention,
-    norm_temporal: LayerNorm,
+    norm_temporal: FusedLayerNorm,
     spatial: SpatialCrossAttention,
-    norm_spatial: LayerNorm,
-    ffn_in: Linear,
-    ffn_out: Linear,
-    norm_ffn: LayerNorm,
+    norm_spatial: FusedLayerNorm,
+    ffn_in: FusedLinear,
+    ffn_out: FusedLinear,
+    norm_ffn: FusedLayerNorm,
+}
+
+impl EncoderLayer {
+    /// A randomly initialised layer for `config`.
+    fn new(config: &SsrConfig, device: &Device) -> Self {
+        let c = config.channels;
+        let bev = &config.bev;
+        Self {
+            temporal: TemporalSelfAttentionConfig {
+                channels: c,
+                heads: bev.heads,
+                points: bev.temporal_points,
+                rows: bev.grid.rows,
+                cols: bev.grid.cols,
+            }
+            .init(device),
+            norm_temporal: FusedLayerNorm::new(c, device),
+            spatial: SpatialCrossAttentionConfig {
+                channels: c,
+                heads: bev.heads,
+                anchors: bev.pillar_heights.len(),
+                points: bev.spatial_points,
+            }
+            .init(device),
+            norm_spatial: FusedLayerNorm::new(c, device),
+            ffn_in: xavier_linear(c, bev.ffn_dim, device),
+            ffn_out: xavier_linear(bev.ffn_dim, c, device),
+            norm_ffn: FusedLayerNorm::new(c, device),
+        }
+    }
+
+    /// # Shapes
+    ///
+    /// - `query`: `[B, Q, C]`
+    /// - output: `[B, Q, C]`
+    fn forward(
+        &self,
+        query: Tensor<3>,
+        temporal: &TemporalContext,
+        spatial: &SpatialContext,
+    ) -> Tensor<3> {
+        let query = self
+            .norm_temporal
+            .forward(self.temporal.forward(query, temporal));
+        let query = self
+            .norm_spatial
+            .forward(self.spatial.forward(query, spatial));
+        let hidden = cpu_kernels::activation(self.ffn_in.forward(query.clone()), Activation::Relu);
+        self.norm_ffn.forward(query + self.ffn_out.forward(hidden))
+    }
 }
 
 /// The BEV encoder: learned queries, positional and camera embeddings, can-bus injection and
@@ -44,9 +93,9 @@ pub struct BevEncoder {
     row_embed: Param<Tensor<2>>,
     col_embed: Param<Tensor<2>>,
     camera_embed: Param<Tensor<2>>,
-    can_bus_in: Linear,
-    can_bus_out: Linear,
-    can_bus_norm: LayerNorm,
+    can_bus_in: FusedLinear,
+    can_bus_out: FusedLinear,
+    can_bus_norm: FusedLayerNorm,
     layers: Vec<EncoderLayer>,
     rows: usize,
     cols: usize,
@@ -67,21 +116,7 @@ impl BevEncoder {
         let c = config.channels;
         let bev = &config.bev;
         let layers = (0..bev.layers)
-            .map(|_| EncoderLayer {
-                temporal: TemporalSelfAttention::new(c, bev.heads, bev.temporal_points, device),
-                norm_temporal: layer_norm_config(c).init(device),
-                spatial: SpatialCrossAttention::new(
-                    c,
-                    bev.heads,
-                    bev.pillar_heights.len(),
-                    bev.spatial_points,
-                    device,
-                ),
-                norm_spatial: layer_norm_config(c).init(device),
-                ffn_in: xavier_linear(c, bev.ffn_dim, device),
-                ffn_out: xavier_linear(bev.ffn_dim, c, device),
-                norm_ffn: layer_norm_config(c).init(device),
-            })
+            .map(|_| EncoderLayer::new(config, device))
             .collect();
         Self {
             queries: Param::from_tensor(Tensor::random(
@@ -98,7 +133,7 @@ impl BevEncoder {
             )),
             can_bus_in: xavier_linear(CAN_BUS_DIM, c / 2, device),
             can_bus_out: xavier_linear(c / 2, c, device),
-            can_bus_norm: layer_norm_config(c).init(device),
+            can_bus_norm: FusedLayerNorm::new(c, device),
             layers,
             rows: bev.grid.rows,
             cols: bev.grid.cols,
@@ -142,8 +177,13 @@ impl BevEncoder {
         }
     }
 
-    /// Encodes one tick: `previous_bev` `[B, Q, C]` (any values where `has_previous` is 0).
-    /// Returns the BEV `[B, Q, C]`.
+    /// Encodes one tick: the BEV from the camera features, the tick's geometry and the
+    /// previous BEV (any values where `geometry.has_previous` is 0).
+    ///
+    /// # Shapes
+    ///
+    /// - `previous_bev`: `[B, Q, C]`
+    /// - output: `[B, Q, C]`
     pub fn forward(
         &self,
         features: &ImageFeatures,
@@ -153,49 +193,32 @@ impl BevEncoder {
         let device = previous_bev.device();
         let b = previous_bev.dims()[0];
         let pos = self.positions();
-        let grid_points = reference_points(self.rows, self.cols, &device);
-        let aligned = align_previous_bev(
-            previous_bev,
-            self.rows,
-            self.cols,
-            geometry.previous_points.clone(),
-        );
-        let can_bus = layer_norm(
-            &self.can_bus_norm,
-            relu(
-                self.can_bus_out
-                    .forward(relu(self.can_bus_in.forward(geometry.can_bus.clone()))),
+        let temporal = TemporalContext {
+            pos: pos.clone(),
+            aligned_previous: align_previous_bev(
+                previous_bev,
+                self.rows,
+                self.cols,
+                geometry.previous_points.clone(),
             ),
-        );
+            has_previous: geometry.has_previous.clone(),
+            reference: reference_points(self.rows, self.cols, &device),
+        };
+        let spatial = SpatialContext {
+            pos,
+            features,
+            camera_points: geometry.camera_points.clone(),
+            camera_hits: geometry.camera_hits.clone(),
+        };
+        let can_bus = self
+            .can_bus_norm
+            .forward(relu(self.can_bus_out.forward(relu(
+                self.can_bus_in.forward(geometry.can_bus.clone()),
+            ))));
         let mut query = self.queries.val().unsqueeze_dim::<3>(0).repeat_dim(0, b)
             + can_bus.unsqueeze_dim::<3>(1);
         for layer in &self.layers {
-            query = layer.temporal.forward(
-                query,
-                pos.clone(),
-                aligned.clone(),
-                geometry.has_previous.clone(),
-                grid_points.clone(),
-                self.rows,
-                self.cols,
-            );
-            query = layer_norm(&layer.norm_temporal, query);
-            query = layer.spatial.forward(
-                query,
-                pos.clone(),
-                features,
-                geometry.camera_points.clone(),
-                geometry.camera_hits.clone(),
-            );
-            query = layer_norm(&layer.norm_spatial, query);
-            let ffn = cpu_kernels::linear(
-                &layer.ffn_out,
-                cpu_kernels::activation(
-                    cpu_kernels::linear(&layer.ffn_in, query.clone()),
-                    Activation::Relu,
-                ),
-            );
-            query = layer_norm(&layer.norm_ffn, query + ffn);
+            query = layer.forward(query, &temporal, &spatial);
         }
         query
     }

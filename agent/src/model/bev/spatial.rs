@@ -5,22 +5,40 @@
 //! result is averaged over the cameras that see the cell.
 
 use burn::module::Module;
-use burn::nn::Linear;
 use burn::tensor::{Device, Tensor};
 
 use crate::model::cpu_kernels;
+use crate::model::fused::FusedLinear;
 use crate::model::init::{constant_linear, deformable_offsets, xavier_linear};
 use crate::model::sampling::deformable_aggregate;
 
-#[derive(Module, Debug)]
-pub struct SpatialCrossAttention {
-    offsets: Linear,
-    weights: Linear,
-    value_proj: Linear,
-    output_proj: Linear,
-    heads: usize,
-    anchors: usize,
-    points_per_anchor: usize,
+/// The sizes of a [`SpatialCrossAttention`].
+#[derive(Debug, Clone)]
+pub struct SpatialCrossAttentionConfig {
+    /// Channels C of the BEV queries and the image features.
+    pub channels: usize,
+    /// Attention heads (C must be a multiple).
+    pub heads: usize,
+    /// Pillar heights lifted per BEV cell.
+    pub anchors: usize,
+    /// Sampling points per head, shared out among the anchors (a multiple of `anchors`).
+    pub points: usize,
+}
+
+impl SpatialCrossAttentionConfig {
+    /// A randomly initialised layer: offsets on BEVFormer's rays, uniform weights.
+    pub fn init(&self, device: &Device) -> SpatialCrossAttention {
+        let (c, heads, points) = (self.channels, self.heads, self.points);
+        SpatialCrossAttention {
+            offsets: deformable_offsets(c, 1, heads, points, device),
+            weights: constant_linear(c, heads * points, vec![0.0; heads * points], device),
+            value_proj: xavier_linear(c, c, device),
+            output_proj: xavier_linear(c, c, device),
+            heads,
+            anchors: self.anchors,
+            points_per_anchor: points / self.anchors,
+        }
+    }
 }
 
 /// Image features of a batch, ready for sampling.
@@ -35,44 +53,47 @@ pub struct ImageFeatures {
     pub cameras: usize,
 }
 
-impl SpatialCrossAttention {
-    pub fn new(
-        channels: usize,
-        heads: usize,
-        anchors: usize,
-        points: usize,
-        device: &Device,
-    ) -> Self {
-        let per_anchor = points / anchors;
-        Self {
-            offsets: deformable_offsets(channels, 1, heads, points, device),
-            weights: constant_linear(channels, heads * points, vec![0.0; heads * points], device),
-            value_proj: xavier_linear(channels, channels, device),
-            output_proj: xavier_linear(channels, channels, device),
-            heads,
-            anchors,
-            points_per_anchor: per_anchor,
-        }
-    }
+/// What every spatial layer of one tick samples from, computed once per tick.
+pub struct SpatialContext<'a> {
+    /// `[1, Q, C]` the BEV positional embedding (added to the queries for the offsets).
+    pub pos: Tensor<3>,
+    /// The image features.
+    pub features: &'a ImageFeatures,
+    /// `[B * cameras, Q, anchors, 2]` where each cell's pillar points fall in each camera,
+    /// normalised image coordinates.
+    pub camera_points: Tensor<4>,
+    /// `[B, cameras, Q]` 1 where a camera sees the cell, else 0.
+    pub camera_hits: Tensor<3>,
+}
 
-    /// `query` `[B, Q, C]` (with `pos` `[1, Q, C]` added for the offsets), `camera_points`
-    /// `[B * cameras, Q, anchors, 2]`, `camera_hits` `[B, cameras, Q]`. Returns the updated
-    /// query (residual included).
-    pub fn forward(
-        &self,
-        query: Tensor<3>,
-        pos: Tensor<3>,
-        features: &ImageFeatures,
-        camera_points: Tensor<4>,
-        camera_hits: Tensor<3>,
-    ) -> Tensor<3> {
+/// Deformable cross-attention from the BEV queries into the cameras (see the module doc).
+#[derive(Module, Debug)]
+pub struct SpatialCrossAttention {
+    offsets: FusedLinear,
+    weights: FusedLinear,
+    value_proj: FusedLinear,
+    output_proj: FusedLinear,
+    heads: usize,
+    anchors: usize,
+    points_per_anchor: usize,
+}
+
+impl SpatialCrossAttention {
+    /// The updated query, residual included.
+    ///
+    /// # Shapes
+    ///
+    /// - `query`: `[B, Q, C]`
+    /// - output: `[B, Q, C]`
+    pub fn forward(&self, query: Tensor<3>, context: &SpatialContext) -> Tensor<3> {
         let [b, q, c] = query.dims();
         let (heads, anchors, per_anchor) = (self.heads, self.anchors, self.points_per_anchor);
         let points = anchors * per_anchor;
+        let features = context.features;
         let cams = features.cameras;
         let head_dim = c / heads;
         let device = query.device();
-        let with_pos = query.clone() + pos;
+        let with_pos = query.clone() + context.pos.clone();
 
         // Offsets in feature cells, normalised by the feature map size.
         let scale = Tensor::<1>::from_floats(
@@ -80,16 +101,23 @@ impl SpatialCrossAttention {
             &device,
         )
         .reshape([1, 1, 1, 1, 1, 1, 2]);
-        let offsets = cpu_kernels::linear(&self.offsets, with_pos.clone())
+        let offsets = self
+            .offsets
+            .forward(with_pos.clone())
             .reshape([b, q, heads, anchors, per_anchor, 2])
             .permute([0, 2, 1, 3, 4, 5])
             .unsqueeze_dim::<7>(1)
             * scale;
-        let reference = camera_points.reshape([b, cams, 1, q, anchors, 1, 2]);
+        let reference = context
+            .camera_points
+            .clone()
+            .reshape([b, cams, 1, q, anchors, 1, 2]);
         let locations = (reference + offsets).reshape([b * cams * heads, q, points, 2]);
 
         let weights = cpu_kernels::softmax(
-            cpu_kernels::linear(&self.weights, with_pos).reshape([b, q, heads, points]),
+            self.weights
+                .forward(with_pos)
+                .reshape([b, q, heads, points]),
             3,
         )
         .permute([0, 2, 1, 3])
@@ -98,7 +126,9 @@ impl SpatialCrossAttention {
         .reshape([b * cams * heads, q, points]);
 
         let hw = features.height * features.width;
-        let values = cpu_kernels::linear(&self.value_proj, features.values.clone())
+        let values = self
+            .value_proj
+            .forward(features.values.clone())
             .reshape([b * cams, hw, heads, head_dim])
             .swap_dims(1, 2)
             .reshape([b * cams * heads, hw, head_dim]);
@@ -107,9 +137,9 @@ impl SpatialCrossAttention {
                 .reshape([b, cams, heads, q, head_dim])
                 .permute([0, 1, 3, 2, 4])
                 .reshape([b, cams, q, c]);
-        let hits = camera_hits.unsqueeze_dim::<4>(3);
+        let hits = context.camera_hits.clone().unsqueeze_dim::<4>(3);
         let count = hits.clone().sum_dim(1).clamp_min(1.0).reshape([b, q, 1]);
         let mean = (sampled * hits).sum_dim(1).reshape([b, q, c]) / count;
-        query + cpu_kernels::linear(&self.output_proj, mean)
+        query + self.output_proj.forward(mean)
     }
 }

@@ -8,10 +8,10 @@
 //! so a static object keeps its world position across ticks.
 
 use burn::module::Module;
-use burn::nn::Linear;
 use burn::tensor::{Device, Tensor};
 
 use crate::model::cpu_kernels;
+use crate::model::fused::FusedLinear;
 use crate::model::init::{constant_linear, deformable_offsets, xavier_linear};
 use crate::model::sampling::{bilinear_sample, deformable_aggregate};
 
@@ -40,59 +40,96 @@ pub fn align_previous_bev(
     bilinear_sample(previous, rows, cols, previous_points)
 }
 
-#[derive(Module, Debug)]
-pub struct TemporalSelfAttention {
-    offsets: Linear,
-    weights: Linear,
-    value_proj: Linear,
-    output_proj: Linear,
-    heads: usize,
-    points: usize,
+/// The sizes of a [`TemporalSelfAttention`].
+#[derive(Debug, Clone)]
+pub struct TemporalSelfAttentionConfig {
+    /// Channels C of the BEV queries.
+    pub channels: usize,
+    /// Attention heads (C must be a multiple).
+    pub heads: usize,
+    /// Sampling points per head and slot.
+    pub points: usize,
+    /// Rows of the BEV grid.
+    pub rows: usize,
+    /// Columns of the BEV grid.
+    pub cols: usize,
 }
 
-impl TemporalSelfAttention {
-    pub fn new(channels: usize, heads: usize, points: usize, device: &Device) -> Self {
-        Self {
-            offsets: deformable_offsets(2 * channels, SLOTS, heads, points, device),
+impl TemporalSelfAttentionConfig {
+    /// A randomly initialised layer: offsets on BEVFormer's rays, uniform weights.
+    pub fn init(&self, device: &Device) -> TemporalSelfAttention {
+        let (c, heads, points) = (self.channels, self.heads, self.points);
+        TemporalSelfAttention {
+            offsets: deformable_offsets(2 * c, SLOTS, heads, points, device),
             weights: constant_linear(
-                2 * channels,
+                2 * c,
                 SLOTS * heads * points,
                 vec![0.0; SLOTS * heads * points],
                 device,
             ),
-            value_proj: xavier_linear(channels, channels, device),
-            output_proj: xavier_linear(channels, channels, device),
+            value_proj: xavier_linear(c, c, device),
+            output_proj: xavier_linear(c, c, device),
             heads,
             points,
+            rows: self.rows,
+            cols: self.cols,
         }
     }
+}
 
-    /// `query` `[B, Q, C]`, `pos` `[1, Q, C]`, `aligned_previous` `[B, Q, C]`, `has_previous`
-    /// `[B, 1, 1]`, `reference` `[1, Q, 2]` the normalised cell centres of the `rows x cols`
-    /// grid. Returns the updated query (residual included).
-    #[allow(clippy::too_many_arguments)]
-    pub fn forward(
-        &self,
-        query: Tensor<3>,
-        pos: Tensor<3>,
-        aligned_previous: Tensor<3>,
-        has_previous: Tensor<3>,
-        reference: Tensor<3>,
-        rows: usize,
-        cols: usize,
-    ) -> Tensor<3> {
+/// What every temporal layer of one tick attends with, computed once per tick.
+#[derive(Debug, Clone)]
+pub struct TemporalContext {
+    /// `[1, Q, C]` the BEV positional embedding.
+    pub pos: Tensor<3>,
+    /// `[B, Q, C]` the previous BEV in the current ego frame ([`align_previous_bev`]).
+    pub aligned_previous: Tensor<3>,
+    /// `[B, 1, 1]` 1 where the sample has a previous BEV, 0 on an episode's first frame.
+    pub has_previous: Tensor<3>,
+    /// `[1, Q, 2]` the normalised cell centres of the grid.
+    pub reference: Tensor<3>,
+}
+
+/// BEVFormer's temporal self-attention over the two slots (see the module doc).
+#[derive(Module, Debug)]
+pub struct TemporalSelfAttention {
+    offsets: FusedLinear,
+    weights: FusedLinear,
+    value_proj: FusedLinear,
+    output_proj: FusedLinear,
+    heads: usize,
+    points: usize,
+    rows: usize,
+    cols: usize,
+}
+
+impl TemporalSelfAttention {
+    /// The updated query, residual included.
+    ///
+    /// # Shapes
+    ///
+    /// - `query`: `[B, Q, C]`, Q = rows * cols
+    /// - output: `[B, Q, C]`
+    pub fn forward(&self, query: Tensor<3>, context: &TemporalContext) -> Tensor<3> {
         let [b, q, c] = query.dims();
-        let (heads, points) = (self.heads, self.points);
+        let (heads, points, rows, cols) = (self.heads, self.points, self.rows, self.cols);
         let head_dim = c / heads;
         let device = query.device();
         // First-frame path: a sample without a previous BEV attends to its own queries twice.
-        let previous = aligned_previous * has_previous.clone()
+        let has_previous = context.has_previous.clone();
+        let previous = context.aligned_previous.clone() * has_previous.clone()
             + query.clone() * has_previous.neg().add_scalar(1.0);
-        let context = Tensor::cat(vec![previous.clone(), query.clone() + pos], 2);
+        let reference = context.reference.clone();
+        let context = Tensor::cat(
+            vec![previous.clone(), query.clone() + context.pos.clone()],
+            2,
+        );
 
         let scale = Tensor::<1>::from_floats([1.0 / cols as f32, 1.0 / rows as f32], &device)
             .reshape([1, 1, 1, 1, 1, 2]);
-        let offsets = cpu_kernels::linear(&self.offsets, context.clone())
+        let offsets = self
+            .offsets
+            .forward(context.clone())
             .reshape([b, q, SLOTS, heads, points, 2])
             .permute([0, 2, 3, 1, 4, 5])
             * scale;
@@ -103,25 +140,26 @@ impl TemporalSelfAttention {
             2,
         ]);
         let weights = cpu_kernels::softmax(
-            cpu_kernels::linear(&self.weights, context).reshape([b, q, SLOTS, heads, points]),
+            self.weights
+                .forward(context)
+                .reshape([b, q, SLOTS, heads, points]),
             4,
         )
         .permute([0, 2, 3, 1, 4])
         .reshape([b * SLOTS * heads, q, points]);
 
-        let values = cpu_kernels::linear(
-            &self.value_proj,
-            Tensor::stack::<4>(vec![previous, query.clone()], 1),
-        )
-        .reshape([b * SLOTS, q, heads, head_dim])
-        .swap_dims(1, 2)
-        .reshape([b * SLOTS * heads, q, head_dim]);
+        let values = self
+            .value_proj
+            .forward(Tensor::stack::<4>(vec![previous, query.clone()], 1))
+            .reshape([b * SLOTS, q, heads, head_dim])
+            .swap_dims(1, 2)
+            .reshape([b * SLOTS * heads, q, head_dim]);
         let sampled = deformable_aggregate(values, rows, cols, locations, weights)
             .reshape([b, SLOTS, heads, q, head_dim])
             .mean_dim(1)
             .reshape([b, heads, q, head_dim])
             .swap_dims(1, 2)
             .reshape([b, q, c]);
-        query + cpu_kernels::linear(&self.output_proj, sampled)
+        query + self.output_proj.forward(sampled)
     }
 }

@@ -5,10 +5,11 @@
 //! the data in plain Rust, parallel through rayon on the same global pool as Flex. Deformable
 //! aggregation, convolution, linear layers, layer and batch norm, softmax and the activations
 //! also train: [`extension`] gives them hand-written backward passes, and they run on Flex
-//! with or without autodiff ([`apply_differentiable`]). Max pool runs in inference only
-//! ([`apply`]); its training form keeps Burn's op and the argmax indices the backward pass
-//! needs. A GPU keeps its data on the device and Burn's tensor ops. Tests check every kernel,
-//! forward and backward, against its tensor-op form.
+//! with or without autodiff ([`is_flex`]). Max pool runs in inference only
+//! ([`is_flex_inference`]); its training form keeps Burn's op and the argmax indices the
+//! backward pass needs. A GPU keeps its data on the device and Burn's tensor ops. The model's
+//! layers reach the kernels through [`super::fused`], which picks them by device. Tests check
+//! every kernel, forward and backward, against its tensor-op form.
 
 mod activation;
 mod batch_norm;
@@ -23,23 +24,20 @@ mod output;
 mod softmax;
 
 use burn::backend::Dispatch;
-use burn::module::RunningState;
-use burn::nn::conv::Conv2d;
-use burn::nn::pool::MaxPool2d;
-use burn::nn::{BatchNorm, Linear, PaddingConfig2d};
 use burn::tensor::{Device, Tensor, TensorData};
 
 pub use activation::Activation;
 use extension::KernelOps;
 
-/// Whether the fused kernels serve this device: Flex, in inference.
-pub fn apply(device: &Device) -> bool {
+/// Whether the device is Flex in inference (no autodiff): where the inference-only kernels
+/// (max pool, the deformable sampler's loop) serve.
+pub fn is_flex_inference(device: &Device) -> bool {
     !device.is_autodiff() && *device == Device::flex()
 }
 
-/// Whether the differentiable kernels of [`extension`] serve this device: Flex, with or
-/// without autodiff.
-pub fn apply_differentiable(device: &Device) -> bool {
+/// Whether the device is Flex, with or without autodiff: where the differentiable kernels of
+/// [`extension`] serve.
+pub fn is_flex(device: &Device) -> bool {
     device.clone().without_autodiff() == Device::flex()
 }
 
@@ -72,7 +70,7 @@ pub fn deformable_aggregate(
 /// Layer norm over the last axis of `x`: normalised with `epsilon`, times `gamma`, plus `beta`,
 /// as Burn's `LayerNorm` when the two have the last axis's length `[d]`. Shorter ones repeat
 /// along the axis (its length must be a multiple of theirs). On Flex only (see
-/// [`apply_differentiable`]); differentiable: with autodiff the backward pass is the fused one
+/// [`is_flex`]); differentiable: with autodiff the backward pass is the fused one
 /// of [`extension`].
 pub fn layer_norm<const D: usize>(
     x: Tensor<D>,
@@ -88,25 +86,21 @@ pub fn layer_norm<const D: usize>(
     ))
 }
 
-/// `layer.forward(x)`: on the fused kernel where it applies (Flex, in inference and training;
-/// differentiable) and the layer has a bias, else Burn's.
-pub fn linear<const D: usize>(layer: &Linear, x: Tensor<D>) -> Tensor<D> {
-    match &layer.bias {
-        Some(bias) if apply_differentiable(&x.device()) => {
-            Tensor::from_dispatch(<Dispatch as KernelOps>::linear(
-                x.into_dispatch(),
-                layer.weight.val().into_dispatch(),
-                bias.val().into_dispatch(),
-            ))
-        }
-        _ => layer.forward(x),
-    }
+/// `x` `[..., d_in]` times the transpose of `weight` `[d_out, d_in]` plus `bias` `[d_out]`, as
+/// Burn's `Linear`. On Flex only (see [`is_flex`]); differentiable: with autodiff the backward
+/// pass is the fused one of [`extension`].
+pub fn linear<const D: usize>(x: Tensor<D>, weight: Tensor<2>, bias: Tensor<1>) -> Tensor<D> {
+    Tensor::from_dispatch(<Dispatch as KernelOps>::linear(
+        x.into_dispatch(),
+        weight.into_dispatch(),
+        bias.into_dispatch(),
+    ))
 }
 
 /// `activation` applied to every element of `x`: the fused kernel where it applies (Flex, in
 /// inference and training; differentiable), else Burn's op.
 pub fn activation<const D: usize>(x: Tensor<D>, activation: Activation) -> Tensor<D> {
-    if !apply_differentiable(&x.device()) {
+    if !is_flex(&x.device()) {
         return match activation {
             Activation::Gelu => burn::tensor::activation::gelu(x),
             Activation::Sigmoid => burn::tensor::activation::sigmoid(x),
@@ -122,40 +116,16 @@ pub fn activation<const D: usize>(x: Tensor<D>, activation: Activation) -> Tenso
 /// Softmax of `x` along `dim`: the fused kernel where it applies (Flex, in inference and
 /// training; differentiable) and `dim` is the last axis, else Burn's op.
 pub fn softmax<const D: usize>(x: Tensor<D>, dim: usize) -> Tensor<D> {
-    if dim + 1 != D || !apply_differentiable(&x.device()) {
+    if dim + 1 != D || !is_flex(&x.device()) {
         return burn::tensor::activation::softmax(x, dim);
     }
     Tensor::from_dispatch(<Dispatch as KernelOps>::softmax(x.into_dispatch()))
 }
 
-/// `norm.forward(x)`: in training (autodiff, training flag on) on Flex, the batch statistics
-/// come from the fused kernel ([`batch_norm_train`]) and update the running ones as Burn's
-/// `BatchNorm` does; otherwise Burn's layer runs.
-pub fn batch_norm_layer(norm: &BatchNorm, x: Tensor<4>) -> Tensor<4> {
-    let device = x.device();
-    if !(device.is_autodiff() && norm.training.is_enabled() && apply_differentiable(&device)) {
-        return norm.forward(x);
-    }
-    let (output, mean, variance) =
-        batch_norm_train(x, norm.gamma.val(), norm.beta.val(), norm.epsilon);
-    let momentum = norm.momentum;
-    let update = |running: &RunningState<Tensor<1>>, batch: Tensor<1>| {
-        let updated = running
-            .value_sync()
-            .to_device(&device)
-            .mul_scalar(1.0 - momentum)
-            .add(batch.mul_scalar(momentum));
-        running.update(updated.detach());
-    };
-    update(&norm.running_mean, mean);
-    update(&norm.running_var, variance);
-    output
-}
-
 /// Batch norm of `x` `[N, C, ...]` by its own statistics per channel (`epsilon` added to the
 /// variance), times `gamma` `[C]`, plus `beta` `[C]`: the output, the batch mean and the biased
 /// variance (neither tracked). As Burn's `batch_norm_train`, on Flex only (see
-/// [`apply_differentiable`]); differentiable: with autodiff the backward pass is the fused one
+/// [`is_flex`]); differentiable: with autodiff the backward pass is the fused one
 /// of [`extension`].
 pub fn batch_norm_train<const D: usize>(
     x: Tensor<D>,
@@ -176,27 +146,6 @@ pub fn batch_norm_train<const D: usize>(
     )
 }
 
-/// `layer.forward(x)`, through [`max_pool2d`] where the kernels apply and the layer is a plain
-/// one (square window and stride, symmetric padding, no dilation, floor mode).
-pub fn max_pool2d_layer(layer: &MaxPool2d, x: Tensor<4>) -> Tensor<4> {
-    let [kernel, kernel_w] = layer.kernel_size;
-    let [stride, stride_w] = layer.stride;
-    match layer.padding {
-        PaddingConfig2d::Explicit(top, left, bottom, right)
-            if apply(&x.device())
-                && kernel == kernel_w
-                && stride == stride_w
-                && [left, bottom, right] == [top; 3]
-                && top < kernel
-                && layer.dilation == [1, 1]
-                && !layer.ceil_mode =>
-        {
-            max_pool2d(x, kernel, stride, top)
-        }
-        _ => layer.forward(x),
-    }
-}
-
 /// Max pooling of `[N, C, H, W]` with a square window, a stride and symmetric padding (padded
 /// cells never win: they count as -inf), as Burn's `max_pool2d` in floor mode.
 pub fn max_pool2d(x: Tensor<4>, kernel: usize, stride: usize, padding: usize) -> Tensor<4> {
@@ -210,34 +159,6 @@ pub fn max_pool2d(x: Tensor<4>, kernel: usize, stride: usize, padding: usize) ->
     let (out_h, out_w) = (window.output_len(height), window.output_len(width));
     let output = max_pool::max_pool2d(&floats(x), n * c, height, width, window);
     Tensor::from_data(TensorData::new(output, [n, c, out_h, out_w]), &device)
-}
-
-/// `layer.forward(x)`, through [`conv2d`] where the kernels apply and the layer is a plain one
-/// (one group, no dilation, symmetric explicit or no padding).
-pub fn conv2d_layer(layer: &Conv2d, x: Tensor<4>) -> Tensor<4> {
-    let padding = match layer.padding {
-        PaddingConfig2d::Valid => Some([0, 0]),
-        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => {
-            Some([top, left])
-        }
-        _ => None,
-    };
-    match padding {
-        Some(padding)
-            if apply_differentiable(&x.device())
-                && layer.groups == 1
-                && layer.dilation == [1, 1] =>
-        {
-            conv2d(
-                x,
-                layer.weight.val(),
-                layer.bias.as_ref().map(|bias| bias.val()),
-                layer.stride,
-                padding,
-            )
-        }
-        _ => layer.forward(x),
-    }
 }
 
 /// Convolution of `x` `[N, Cin, H, W]` by `weight` `[Cout, Cin, kh, kw]` plus `bias` `[Cout]`,

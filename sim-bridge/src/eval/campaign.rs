@@ -1,0 +1,340 @@
+//! An evaluation campaign: every selected route times every repetition, in the leaderboard's
+//! order (all routes of repetition 0, then of repetition 1, ...), driven by several worker
+//! threads that each make their own agent (its own connection and episode on a gRPC server,
+//! which can batch them). Results are the same as one run at a time.
+//!
+//! The results file is rewritten whole after every run (atomically: a failed write leaves the
+//! previous one), so an interrupted campaign keeps what it scored; with `resume` a campaign
+//! keeps the runs that file already holds for the same plan and drives only the rest, and any
+//! run whose agent crashed. A route that cannot be planned is a failed record, as the
+//! leaderboard counts it.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use ssrdrive_proto::files::write_atomic;
+use thiserror::Error;
+
+use super::{RouteRun, run_route};
+use crate::agent::AgentFactory;
+use crate::map::Map;
+use crate::route::xml::RouteSpec;
+use crate::route::{DenseRoute, RoutePlan};
+use crate::scoring::{Results, ResultsError, RouteEnd, RouteRecord, ScoringConfig};
+use crate::world::WorldConfig;
+
+/// What to evaluate and where the results go.
+pub struct Campaign<'a> {
+    /// The town.
+    pub map: &'a Map,
+    /// The selected routes with their plans (or why they have none), in order.
+    pub routes: &'a [RoutePlan],
+    /// Runs of each route; repetition r runs in `world` with seed `world.seed + r`.
+    pub repetitions: usize,
+    /// The world of repetition 0.
+    pub world: WorldConfig,
+    /// The criteria and timeouts.
+    pub scoring: ScoringConfig,
+    /// The leaderboard results JSON, rewritten after every run.
+    pub out: PathBuf,
+    /// Keep the runs `out` already holds for this plan (see the module doc).
+    pub resume: bool,
+    /// Runs at once, each worker with its own agent.
+    pub jobs: usize,
+}
+
+/// One finished run, as the observer hears of it.
+pub struct RunDone<'r> {
+    /// The route.
+    pub spec: &'r RouteSpec,
+    /// Its repetition, from 0.
+    pub repetition: usize,
+    /// The record saved to the results file.
+    pub record: &'r RouteRecord,
+    /// The dense route and the run itself; none when the route could not be planned.
+    pub driven: Option<(&'r DenseRoute, &'r RouteRun)>,
+}
+
+/// What a caller hears of a campaign as it goes: progress displays, pictures.
+pub trait CampaignObserver: Sync {
+    /// Follows one run from its start to its end (a progress bar, say).
+    type Run;
+
+    /// A resumed campaign found `kept` of its `total` runs already scored in `out`.
+    fn resuming(&self, kept: usize, total: usize, out: &Path);
+
+    /// The first worker's agent is ready; `jobs` workers drive at once.
+    fn agent_ready(&self, name: &str, jobs: usize);
+
+    /// A run starts.
+    fn run_started(&self, spec: &RouteSpec, repetition: usize) -> Self::Run;
+
+    /// A driven run's route completion (percent), every simulated second.
+    fn progress(&self, run: &Self::Run, route_completion: f64);
+
+    /// A run ended and its record is saved; an error stops the campaign.
+    fn run_finished(&self, run: Self::Run, done: &RunDone) -> Result<(), String>;
+}
+
+/// How a campaign went.
+#[derive(Debug)]
+pub struct CampaignReport {
+    /// Every scored run (kept and driven now) as the leaderboard writes them.
+    pub results: Results,
+    /// Runs kept from the earlier results file.
+    pub kept: usize,
+    /// Runs whose agent crashed (to run again with `resume`).
+    pub crashes: usize,
+    /// Selected routes that could not be planned (zero-score records).
+    pub unplannable: usize,
+}
+
+/// Why a campaign stopped or could not start.
+#[derive(Debug, Error)]
+pub enum CampaignError {
+    /// Nothing to run.
+    #[error("a campaign needs at least one route, one repetition and one job")]
+    Empty,
+    /// The earlier results file could not be read.
+    #[error("reading {}: {source}", path.display())]
+    Read {
+        /// The results file.
+        path: PathBuf,
+        /// The failure.
+        source: std::io::Error,
+    },
+    /// The earlier results file is not a results file.
+    #[error("resuming from {}: {source}", path.display())]
+    Results {
+        /// The results file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: ResultsError,
+    },
+    /// The earlier results file holds another plan.
+    #[error(
+        "cannot resume from {}: {reason}; resume with the same --routes, --route-ids, --limit, \
+         --repetitions and --seed, or write to another --out",
+        path.display()
+    )]
+    OtherPlan {
+        /// The results file.
+        path: PathBuf,
+        /// Which run differs, and how.
+        reason: String,
+    },
+    /// The results could not be saved (the previous file is intact).
+    #[error("writing {}: {source}", path.display())]
+    Write {
+        /// The results file.
+        path: PathBuf,
+        /// The failure.
+        source: std::io::Error,
+    },
+    /// A worker could not make its agent.
+    #[error("the agent: {0}")]
+    Agent(String),
+    /// The observer stopped the campaign.
+    #[error("{0}")]
+    Observer(String),
+}
+
+/// Drives every run of `campaign` not already scored, `make_agent` making each worker's agent.
+pub fn run_campaign<O: CampaignObserver>(
+    campaign: &Campaign,
+    make_agent: AgentFactory,
+    observer: &O,
+) -> Result<CampaignReport, CampaignError> {
+    if campaign.routes.is_empty() || campaign.repetitions == 0 || campaign.jobs == 0 {
+        return Err(CampaignError::Empty);
+    }
+    let total = campaign.routes.len() * campaign.repetitions;
+    let records = if campaign.resume {
+        earlier_records(campaign, total)?
+    } else {
+        vec![None; total]
+    };
+    let kept = records.iter().flatten().count();
+    if campaign.resume {
+        observer.resuming(kept, total, &campaign.out);
+    }
+    let jobs = campaign.jobs.min(total - kept).max(1);
+    let scored = Mutex::new(Scored {
+        records,
+        crashes: 0,
+    });
+    let next_run = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let worker = |job: usize| -> Result<(), CampaignError> {
+        let mut agent = make_agent().map_err(CampaignError::Agent)?;
+        if job == 0 {
+            observer.agent_ready(&agent.name(), jobs);
+        }
+        while !failed.load(Ordering::Relaxed) {
+            let index = next_run.fetch_add(1, Ordering::Relaxed);
+            if index >= total {
+                break;
+            }
+            if scored.lock().expect("no worker panics holding it").records[index].is_some() {
+                continue;
+            }
+            let repetition = index / campaign.routes.len();
+            let (spec, dense) = &campaign.routes[index % campaign.routes.len()];
+            let world = WorldConfig {
+                seed: campaign.world.seed.wrapping_add(repetition as u64),
+                ..campaign.world
+            };
+            let run = observer.run_started(spec, repetition);
+            let (record, driven) = match dense {
+                Ok(dense) => {
+                    let driven = run_route(
+                        campaign.map,
+                        spec,
+                        dense,
+                        agent.as_mut(),
+                        world,
+                        campaign.scoring.clone(),
+                        index,
+                        repetition,
+                        |rc| observer.progress(&run, rc),
+                    );
+                    (driven.record.clone(), Some(driven))
+                }
+                Err(reason) => {
+                    let record = RouteRecord::unplannable(
+                        index,
+                        &spec.id,
+                        spec.keypoint_length(),
+                        repetition,
+                        world.seed,
+                        &reason.to_string(),
+                    );
+                    (record, None)
+                }
+            };
+            let done = RunDone {
+                spec,
+                repetition,
+                record: &record,
+                driven: dense.as_ref().ok().zip(driven.as_ref()),
+            };
+            let mut scored = scored.lock().expect("no worker panics holding it");
+            if driven.as_ref().is_some_and(|d| d.agent_error.is_some()) {
+                scored.crashes += 1;
+            }
+            scored.records[index] = Some(record.clone());
+            save(&campaign.out, &scored.done(), total)?;
+            drop(scored);
+            observer
+                .run_finished(run, &done)
+                .map_err(CampaignError::Observer)?;
+        }
+        Ok(())
+    };
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..jobs)
+            .map(|job| {
+                let (worker, failed) = (&worker, &failed);
+                scope.spawn(move || {
+                    let result = worker(job);
+                    if result.is_err() {
+                        failed.store(true, Ordering::Relaxed);
+                    }
+                    result
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .try_for_each(|w| w.join().expect("campaign workers do not panic"))
+    })?;
+    let scored = scored.into_inner().expect("workers are done");
+    Ok(CampaignReport {
+        results: Results::new(scored.done(), total, Vec::new()),
+        kept,
+        crashes: scored.crashes,
+        unplannable: campaign.routes.iter().filter(|(_, d)| d.is_err()).count(),
+    })
+}
+
+/// Runs scored so far, by index.
+struct Scored {
+    records: Vec<Option<RouteRecord>>,
+    crashes: usize,
+}
+
+impl Scored {
+    /// The scored runs in leaderboard order.
+    fn done(&self) -> Vec<RouteRecord> {
+        self.records.iter().flatten().cloned().collect()
+    }
+}
+
+/// Writes the results so far to `path` whole or not at all.
+fn save(path: &Path, records: &[RouteRecord], total: usize) -> Result<(), CampaignError> {
+    let results = Results::new(records.to_vec(), total, Vec::new());
+    write_atomic(path, results.to_json().as_bytes()).map_err(|source| CampaignError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The records an earlier campaign of the same plan wrote to `campaign.out`, by run index
+/// (none if there is no file yet). Runs whose agent crashed are dropped so they run again. A
+/// record of another route, repetition or seed at its index means another plan: an error, as
+/// the file would otherwise mix two evaluations.
+fn earlier_records(
+    campaign: &Campaign,
+    total: usize,
+) -> Result<Vec<Option<RouteRecord>>, CampaignError> {
+    let path = &campaign.out;
+    let mut records = vec![None; total];
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(records),
+        Err(source) => {
+            return Err(CampaignError::Read {
+                path: path.clone(),
+                source,
+            });
+        }
+    };
+    let results = Results::from_json(&text).map_err(|source| CampaignError::Results {
+        path: path.clone(),
+        source,
+    })?;
+    let routes = campaign.routes;
+    for record in results.checkpoint.records {
+        let index = record.index;
+        let repetition = index / routes.len();
+        let spec = &routes[index % routes.len()].0;
+        let expected_seed = campaign.world.seed.wrapping_add(repetition as u64);
+        if index >= total
+            || record.route_id != spec.id
+            || record.meta.repetition != Some(repetition)
+            || record.meta.seed != Some(expected_seed)
+        {
+            let planned = if index < total {
+                format!(
+                    "route {} repetition {repetition} seed {expected_seed}",
+                    spec.id
+                )
+            } else {
+                format!("only {total} runs")
+            };
+            return Err(CampaignError::OtherPlan {
+                path: path.clone(),
+                reason: format!(
+                    "its run {index} is route {} repetition {:?} seed {:?}, but this \
+                     evaluation plans {planned} there",
+                    record.route_id, record.meta.repetition, record.meta.seed
+                ),
+            });
+        }
+        if record.status != RouteEnd::AgentCrashed.status() {
+            records[index] = Some(record);
+        }
+    }
+    Ok(records)
+}
