@@ -43,11 +43,6 @@ impl<M> Fused<M> {
     pub fn inner(&self) -> &M {
         &self.0
     }
-
-    /// The wrapped Burn layer, mutably.
-    pub fn inner_mut(&mut self) -> &mut M {
-        &mut self.0
-    }
 }
 
 macro_rules! wraps {
