@@ -3,13 +3,15 @@
 //! and y = -5.25): a follower keeps off an ego that pokes into its lane, and the expert does not
 //! wait for a car that ran into its rear. And on `maps/lane_add.xodr` (a lane that begins at
 //! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue; traffic
-//! holds back for an ego that waits to change into its lane.
+//! holds back for an ego that waits to change into its lane. And on `maps/signal_junction.xodr`
+//! (a light whose stop line is at x = 100): a red light holds an ego already across the line.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::world::ego::{Ego, EgoParams};
+use sim_bridge::world::state::LightState;
 use sim_bridge::world::traffic::Vehicle;
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::control::Control;
@@ -194,4 +196,48 @@ fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
         world.step(HOLD);
     }
     assert!(world.traffic.vehicles[0].speed > 1.0, "it drives on");
+}
+
+#[test]
+fn a_red_light_holds_an_ego_across_its_stop_line_until_the_tail_would_cross() {
+    let map = load("signal-junction", include_str!("maps/signal_junction.xodr"));
+    let route = route(&map, (50.0, -1.75), (200.0, -1.75));
+    let config = WorldConfig {
+        vehicles: 0,
+        scenarios: false,
+        parked_cars: false,
+        ..WorldConfig::default()
+    };
+    let mut world = World::new(&map, &route, config);
+    let scan_at = |world: &mut World<'_>, x: f64, speed: f64, state: LightState| {
+        world.lights.force(map.lights[0].id, state, f64::INFINITY);
+        world.lights.update(world.time);
+        world.ego = Ego::new(EgoParams::default(), DVec3::new(x, -1.75, 0.0), 0.0);
+        world.ego.speed = speed;
+        let index = ego_index(world, &route);
+        hazards::scan(world, &route, index, &mut HazardMemory::default())
+    };
+    // The route starts with the ego's centre 1 m past the line (a route may start so): its tail
+    // has not crossed, and the leaderboard would count it crossing now.
+    let view = scan_at(&mut world, 101.0, 0.0, LightState::Red);
+    assert_eq!(view.cause, Some(BrakeReason::TrafficLight), "{view:?}");
+    assert_eq!(view.obstacle, Some((0.0, 0.0)));
+    assert_eq!(
+        scan_at(&mut world, 101.0, 0.0, LightState::Green).obstacle,
+        None
+    );
+    // Too fast to stop before the tail crosses: braking would only strand it in the junction.
+    assert_eq!(
+        scan_at(&mut world, 101.0, 8.0, LightState::Red).obstacle,
+        None
+    );
+    // Once the tail is past the line, the light no longer concerns it.
+    assert_eq!(
+        scan_at(&mut world, 104.0, 0.0, LightState::Red).obstacle,
+        None
+    );
+    // Short of the line, the light binds as always.
+    let view = scan_at(&mut world, 90.0, 5.0, LightState::Red);
+    let (gap, _) = view.obstacle.expect("the stop line ahead");
+    assert!((gap - (10.0 - 2.45 - 1.0)).abs() < 1.5, "gap {gap}");
 }

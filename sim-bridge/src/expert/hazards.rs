@@ -19,6 +19,9 @@ const CORRIDOR_MARGIN: f64 = 0.6;
 const STOP_LINE_MARGIN: f64 = 1.0;
 /// Comfortable braking used to decide whether to stop at yellow, m/s^2.
 const YELLOW_DECEL: f64 = 6.0;
+/// How far behind the ego's rear the red-light criterion probes (LB1.0's `RunningRedLightTest`:
+/// the tail segment ends half a length plus this behind the centre), m.
+const TAIL_PROBE: f64 = 1.0;
 /// A vehicle on a lane change's target lane this close along it (centre to centre) is
 /// alongside the ego, m.
 const LANE_CHANGE_ALONGSIDE: f64 = 5.0;
@@ -108,8 +111,10 @@ pub fn scan(
         }
     }
     lane_change_gap(world, route, index, end, memory, &mut view);
-    let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
-    stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
+    // From the tail probe on: a stop line the front has passed binds until the tail has.
+    let tail = behind(route, index, ego.half_extent.x + TAIL_PROBE);
+    let lanes = last_index_per_lane(route, tail, end);
+    stop_lines(world, route, index, &lanes, memory, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
     view
 }
@@ -182,6 +187,12 @@ fn lane_change_gap(
     view.obstacle(gap, 0.0, BrakeReason::LaneChange);
 }
 
+/// Index of the first route point within `distance` behind `index`.
+fn behind(route: &DenseRoute, index: usize, distance: f64) -> usize {
+    let limit = route.cum[index] - distance;
+    route.cum.partition_point(|&c| c < limit).min(index)
+}
+
 /// Index of the last route point within `distance` of `index`.
 fn ahead_end(route: &DenseRoute, index: usize, distance: f64) -> usize {
     let limit = route.cum[index] + distance;
@@ -205,12 +216,17 @@ fn last_index_per_lane(route: &DenseRoute, from: usize, to: usize) -> Vec<(LaneI
     out
 }
 
-/// Red and yellow lights and unserved stop signs whose stop line ends a lane on the path.
+/// Red and yellow lights and unserved stop signs whose stop line ends a lane of `lanes` (the
+/// route's lanes from the tail probe on, each with its last route index). A red light whose
+/// line the front has passed but the tail probe has not still binds while the ego can stop
+/// before the probe reaches the line: the leaderboard counts the tail crossing on red (a route
+/// may start with the ego across a stop line). Past that, braking would only leave it in the
+/// junction.
 fn stop_lines(
     world: &World<'_>,
     route: &DenseRoute,
     index: usize,
-    lanes_ahead: &[(LaneIdx, usize)],
+    lanes: &[(LaneIdx, usize)],
     memory: &mut HazardMemory,
     view: &mut HazardView,
 ) {
@@ -220,23 +236,36 @@ fn stop_lines(
     let ends_in_window =
         |j: usize| j + 1 < route.points.len() && route.points[j + 1].lane != route.points[j].lane;
     let gap_to = |j: usize| along(route, index, j) - ego.half_extent.x - STOP_LINE_MARGIN;
-    for &(lane, j) in lanes_ahead {
+    for &(lane, j) in lanes {
         if !ends_in_window(j) {
             continue;
         }
         let gap = gap_to(j);
+        // Where the front has passed the line, a red light binds while the ego can still stop
+        // before its tail probe reaches it.
+        let tail_to_line = along(route, index, j) + ego.half_extent.x + TAIL_PROBE;
+        let front_past = along(route, index, j) < ego.half_extent.x;
+        let can_stop = ego.speed * ego.speed / (2.0 * YELLOW_DECEL) < tail_to_line;
         for light in map
             .lights
             .iter()
             .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
         {
             match world.light_states()[light.id] {
+                LightState::Red if front_past => {
+                    if can_stop {
+                        view.obstacle(0.0, 0.0, BrakeReason::TrafficLight);
+                    }
+                }
                 LightState::Red => view.obstacle(gap, 0.0, BrakeReason::TrafficLight),
                 LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => {
                     view.obstacle(gap, 0.0, BrakeReason::TrafficLight)
                 }
                 _ => {}
             }
+        }
+        if j < index {
+            continue; // a stop sign binds only ahead of the centre, as before
         }
         for sign in map
             .stop_signs
