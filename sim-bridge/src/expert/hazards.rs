@@ -252,11 +252,10 @@ fn stop_lines(
             .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
         {
             match world.light_states()[light.id] {
-                LightState::Red if front_past => {
-                    if can_stop {
-                        view.obstacle(0.0, 0.0, BrakeReason::TrafficLight);
-                    }
+                LightState::Red if front_past && can_stop => {
+                    view.obstacle(0.0, 0.0, BrakeReason::TrafficLight)
                 }
+                LightState::Red if front_past => {}
                 LightState::Red => view.obstacle(gap, 0.0, BrakeReason::TrafficLight),
                 LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => {
                     view.obstacle(gap, 0.0, BrakeReason::TrafficLight)
