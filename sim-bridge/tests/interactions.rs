@@ -4,7 +4,8 @@
 //! wait for a car that ran into its rear. And on `maps/lane_add.xodr` (a lane that begins at
 //! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue; traffic
 //! holds back for an ego that waits to change into its lane. And on `maps/signal_junction.xodr`
-//! (a light whose stop line is at x = 100): a red light holds an ego already across the line.
+//! (a light whose stop line is at x = 100): red and yellow hold the ego while its tail could
+//! still cross on red.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
@@ -199,23 +200,23 @@ fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
 }
 
 #[test]
-fn a_red_light_holds_an_ego_across_its_stop_line_until_the_tail_would_cross() {
+fn lights_hold_the_ego_while_its_tail_could_still_cross_on_red() {
     let map = load("signal-junction", include_str!("maps/signal_junction.xodr"));
-    let route = route(&map, (50.0, -1.75), (200.0, -1.75));
+    let through = route(&map, (50.0, -1.75), (200.0, -1.75));
     let config = WorldConfig {
         vehicles: 0,
         scenarios: false,
         parked_cars: false,
         ..WorldConfig::default()
     };
-    let mut world = World::new(&map, &route, config);
+    let mut world = World::new(&map, &through, config);
     let scan_at = |world: &mut World<'_>, x: f64, speed: f64, state: LightState| {
         world.lights.force(map.lights[0].id, state, f64::INFINITY);
         world.lights.update(world.time);
         world.ego = Ego::new(EgoParams::default(), DVec3::new(x, -1.75, 0.0), 0.0);
         world.ego.speed = speed;
-        let index = ego_index(world, &route);
-        hazards::scan(world, &route, index, &mut HazardMemory::default())
+        let index = ego_index(world, &through);
+        hazards::scan(world, &through, index, &mut HazardMemory::default())
     };
     // The route starts with the ego's centre 1 m past the line (a route may start so): its tail
     // has not crossed, and the leaderboard would count it crossing now.
@@ -240,4 +241,25 @@ fn a_red_light_holds_an_ego_across_its_stop_line_until_the_tail_would_cross() {
     let view = scan_at(&mut world, 90.0, 5.0, LightState::Red);
     let (gap, _) = view.obstacle.expect("the stop line ahead");
     assert!((gap - (10.0 - 2.45 - 1.0)).abs() < 1.5, "gap {gap}");
+
+    // Yellow: a crawl that could not get its tail over the line before red stops while it can
+    // (the front 1.2 m short of the line at 2.5 m/s), a car that clears the line in time goes
+    // on (3 m short at 8 m/s).
+    let front_short = |short: f64| 100.0 - 2.45 - short;
+    let view = scan_at(&mut world, front_short(1.2), 2.5, LightState::Yellow);
+    assert_eq!(view.cause, Some(BrakeReason::TrafficLight), "{view:?}");
+    let view = scan_at(&mut world, front_short(3.0), 8.0, LightState::Yellow);
+    assert_eq!(view.obstacle, None, "{view:?}");
+
+    // A route that starts inside the junction does not include the lane of the line under the
+    // ego's tail: the light binds all the same.
+    let in_junction = route(&map, (101.5, -1.75), (200.0, -1.75));
+    assert!(map.lane(in_junction.points[0].lane).in_junction());
+    world
+        .lights
+        .force(map.lights[0].id, LightState::Red, f64::INFINITY);
+    world.lights.update(world.time);
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(101.5, -1.75, 0.0), 0.0);
+    let view = hazards::scan(&world, &in_junction, 0, &mut HazardMemory::default());
+    assert_eq!(view.cause, Some(BrakeReason::TrafficLight), "{view:?}");
 }

@@ -6,8 +6,9 @@ use glam::DVec2;
 use ssrdrive_proto::dataset::BrakeReason;
 
 use super::{along, route_dir};
-use crate::map::LaneIdx;
+use crate::map::{LaneIdx, TrafficLight};
 use crate::route::DenseRoute;
+use crate::world::lights::YELLOW_S;
 use crate::world::state::{ActorKind, LightState, Obb};
 use crate::world::{ActorView, World};
 
@@ -19,8 +20,10 @@ const CORRIDOR_MARGIN: f64 = 0.6;
 const STOP_LINE_MARGIN: f64 = 1.0;
 /// Comfortable braking used to decide whether to stop at yellow, m/s^2.
 const YELLOW_DECEL: f64 = 6.0;
-/// How far behind the ego's rear the red-light criterion probes (LB1.0's `RunningRedLightTest`:
-/// the tail segment ends half a length plus this behind the centre), m.
+/// Time kept in hand when the expert counts on clearing a stop line before yellow turns red, s.
+const YELLOW_CLEAR_MARGIN: f64 = 0.5;
+/// How far behind the ego's rear the red-light criterion's tail segment reaches (LB1.0's
+/// `RunningRedLightTest`: from 0.8 half lengths to a half length plus this behind the centre), m.
 const TAIL_PROBE: f64 = 1.0;
 /// A vehicle on a lane change's target lane this close along it (centre to centre) is
 /// alongside the ego, m.
@@ -111,10 +114,9 @@ pub fn scan(
         }
     }
     lane_change_gap(world, route, index, end, memory, &mut view);
-    // From the tail probe on: a stop line the front has passed binds until the tail has.
-    let tail = behind(route, index, ego.half_extent.x + TAIL_PROBE);
-    let lanes = last_index_per_lane(route, tail, end);
-    stop_lines(world, route, index, &lanes, memory, &mut view);
+    let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
+    stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
+    red_light_under_ego(world, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
     view
 }
@@ -187,12 +189,6 @@ fn lane_change_gap(
     view.obstacle(gap, 0.0, BrakeReason::LaneChange);
 }
 
-/// Index of the first route point within `distance` behind `index`.
-fn behind(route: &DenseRoute, index: usize, distance: f64) -> usize {
-    let limit = route.cum[index] - distance;
-    route.cum.partition_point(|&c| c < limit).min(index)
-}
-
 /// Index of the last route point within `distance` of `index`.
 fn ahead_end(route: &DenseRoute, index: usize, distance: f64) -> usize {
     let limit = route.cum[index] + distance;
@@ -216,17 +212,13 @@ fn last_index_per_lane(route: &DenseRoute, from: usize, to: usize) -> Vec<(LaneI
     out
 }
 
-/// Red and yellow lights and unserved stop signs whose stop line ends a lane of `lanes` (the
-/// route's lanes from the tail probe on, each with its last route index). A red light whose
-/// line the front has passed but the tail probe has not still binds while the ego can stop
-/// before the probe reaches the line: the leaderboard counts the tail crossing on red (a route
-/// may start with the ego across a stop line). Past that, braking would only leave it in the
-/// junction.
+/// Red and yellow lights and unserved stop signs whose stop line ends a lane on the path ahead
+/// of the ego's front (a red light whose line is under the ego is [`red_light_under_ego`]'s).
 fn stop_lines(
     world: &World<'_>,
     route: &DenseRoute,
     index: usize,
-    lanes: &[(LaneIdx, usize)],
+    lanes_ahead: &[(LaneIdx, usize)],
     memory: &mut HazardMemory,
     view: &mut HazardView,
 ) {
@@ -236,35 +228,25 @@ fn stop_lines(
     let ends_in_window =
         |j: usize| j + 1 < route.points.len() && route.points[j + 1].lane != route.points[j].lane;
     let gap_to = |j: usize| along(route, index, j) - ego.half_extent.x - STOP_LINE_MARGIN;
-    for &(lane, j) in lanes {
+    for &(lane, j) in lanes_ahead {
         if !ends_in_window(j) {
             continue;
         }
         let gap = gap_to(j);
-        // Where the front has passed the line, a red light binds while the ego can still stop
-        // before its tail probe reaches it.
-        let tail_to_line = along(route, index, j) + ego.half_extent.x + TAIL_PROBE;
         let front_past = along(route, index, j) < ego.half_extent.x;
-        let can_stop = ego.speed * ego.speed / (2.0 * YELLOW_DECEL) < tail_to_line;
         for light in map
             .lights
             .iter()
             .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
         {
             match world.light_states()[light.id] {
-                LightState::Red if front_past && can_stop => {
-                    view.obstacle(0.0, 0.0, BrakeReason::TrafficLight)
-                }
                 LightState::Red if front_past => {}
                 LightState::Red => view.obstacle(gap, 0.0, BrakeReason::TrafficLight),
-                LightState::Yellow if gap > ego.speed * ego.speed / (2.0 * YELLOW_DECEL) => {
-                    view.obstacle(gap, 0.0, BrakeReason::TrafficLight)
+                LightState::Yellow if stops_at_yellow(world, light, lane) => {
+                    view.obstacle(gap.max(0.0), 0.0, BrakeReason::TrafficLight)
                 }
                 _ => {}
             }
-        }
-        if j < index {
-            continue; // a stop sign binds only ahead of the centre, as before
         }
         for sign in map
             .stop_signs
@@ -280,6 +262,62 @@ fn stop_lines(
                 view.obstacle(gap.max(0.0), 0.0, BrakeReason::StopSign);
             }
         }
+    }
+}
+
+/// Whether the ego stops for `light` turning yellow on `lane`: when it can stop comfortably
+/// ([`YELLOW_DECEL`]) short of the stop line, and also when it could not clear the line with
+/// the tail segment of the red-light criterion before the yellow ends at its speed yet can
+/// still stop with full braking (a crawl through yellow ends on red).
+fn stops_at_yellow(world: &World<'_>, light: &TrafficLight, lane: LaneIdx) -> bool {
+    let ego = world.ego_state();
+    let Some(line) = light.stop_lines.iter().find(|s| s.lane == lane) else {
+        return false;
+    };
+    let to_line =
+        (line.position.truncate() - ego.position.truncate()).dot(ego.forward()) - ego.half_extent.x;
+    let v2 = ego.speed * ego.speed;
+    let comfortable = to_line - STOP_LINE_MARGIN > v2 / (2.0 * YELLOW_DECEL);
+    let clear_time = (to_line + 2.0 * ego.half_extent.x + TAIL_PROBE) / ego.speed.max(0.1);
+    let clears = clear_time < YELLOW_S - YELLOW_CLEAR_MARGIN;
+    let can_stop = to_line > v2 / (2.0 * world.ego.params.max_brake);
+    comfortable || (!clears && can_stop)
+}
+
+/// A red light whose stop line lies under the ego, past its front but not yet reached by the
+/// red-light criterion's tail segment (from 0.8 half lengths to a half length plus
+/// [`TAIL_PROBE`] behind the centre; the line's lane is the one under the segment's far end as
+/// the scorer finds it, whether or not the route includes it: a route may start with the ego
+/// across a stop line), holds the ego while it can stop before the segment reaches the line:
+/// the leaderboard counts the tail crossing on red. Past that point braking would only leave it
+/// in the junction.
+fn red_light_under_ego(world: &World<'_>, view: &mut HazardView) {
+    let ego = world.ego_state();
+    let map = world.map;
+    let forward = ego.forward();
+    let half = ego.half_extent.x;
+    let tail_close = ego.position.truncate() - forward * (0.8 * half);
+    let tail_far = ego.position.truncate() - forward * (half + TAIL_PROBE);
+    let Some((tail_lane, _)) = map.lane_for_pose(tail_far.extend(ego.position.z), ego.yaw) else {
+        return;
+    };
+    let tail = map.lane(tail_lane);
+    let stopping = ego.speed * ego.speed / (2.0 * YELLOW_DECEL);
+    let holds = map
+        .lights
+        .iter()
+        .filter(|light| world.light_states()[light.id] == LightState::Red)
+        .flat_map(|light| &light.stop_lines)
+        .any(|line| {
+            let lane = map.lane(line.lane);
+            let ahead_of_tail = (line.position.truncate() - tail_close).dot(forward);
+            lane.road_id == tail.road_id
+                && lane.lane_id == tail.lane_id
+                && ahead_of_tail > stopping
+                && ahead_of_tail < 1.8 * half
+        });
+    if holds {
+        view.obstacle(0.0, 0.0, BrakeReason::TrafficLight);
     }
 }
 
