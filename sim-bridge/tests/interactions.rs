@@ -5,7 +5,8 @@
 //! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue; traffic
 //! holds back for an ego that waits to change into its lane. And on `maps/signal_junction.xodr`
 //! (a light whose stop line is at x = 100): red and yellow hold the ego while its tail could
-//! still cross on red.
+//! still cross on red. And on `maps/short_sections.xodr`: lane sections a few centimetres long
+//! do not hide a standing ego from the traffic behind them.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
@@ -262,4 +263,39 @@ fn lights_hold_the_ego_while_its_tail_could_still_cross_on_red() {
     world.ego = Ego::new(EgoParams::default(), DVec3::new(101.5, -1.75, 0.0), 0.0);
     let view = hazards::scan(&world, &in_junction, 0, &mut HazardMemory::default());
     assert_eq!(view.cause, Some(BrakeReason::TrafficLight), "{view:?}");
+}
+
+#[test]
+fn lanes_a_few_centimetres_long_do_not_hide_the_ego_from_traffic() {
+    let map = load("short-sections", include_str!("maps/short_sections.xodr"));
+    // The ego stands 8 m past road 2's three 5 cm sections, on road 3; a car comes up road 1.
+    let route = route(&map, (58.0, -1.75), (140.0, -1.75));
+    let config = |seed| WorldConfig {
+        vehicles: 1,
+        scenarios: false,
+        parked_cars: false,
+        seed,
+        ..WorldConfig::default()
+    };
+    let mut world = (0..64)
+        .map(|seed| World::new(&map, &route, config(seed)))
+        .find(|w| map.lane(w.traffic.vehicles[0].lane).road_id == "1")
+        .expect("a seed that spawns the car on road 1");
+    let car = &mut world.traffic.vehicles[0];
+    car.s = 10.0;
+    car.speed = 8.0;
+    car.desired_speed = 8.0;
+    let id = car.id;
+    for _ in 0..(15.0 / 0.05) as usize {
+        let contacts = world.step(HOLD);
+        assert!(
+            contacts.iter().all(|c| c.other_id != id),
+            "the car ran into the ego at t = {:.2} s",
+            world.time
+        );
+    }
+    assert!(
+        world.traffic.vehicles[0].speed < 0.1,
+        "it waits behind the ego"
+    );
 }

@@ -624,15 +624,33 @@ fn new_vehicle(map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) ->
 /// How far before the end of a lane that ends a vehicle tries to merge, m.
 const MERGE_AHEAD: f64 = 80.0;
 
+/// Lanes of a vehicle's path ahead that count towards [`PATH_LANES`]: those at least this long,
+/// m. Real maps have lane sections a few centimetres long (three in a row on one of Town03's
+/// junction connectors); counted, they would fill the path and hide what lies beyond them.
+const PATH_LANE_MIN: f64 = 1.0;
+/// Lanes of path a vehicle keeps planned ahead (see [`PATH_LANE_MIN`]).
+const PATH_LANES: usize = 3;
+
+/// How many lanes of `v`'s planned path count towards [`PATH_LANES`].
+fn path_lanes(map: &Map, v: &Vehicle) -> usize {
+    v.next
+        .iter()
+        .filter(|&&lane| map.lane(lane).length() >= PATH_LANE_MIN)
+        .count()
+}
+
 /// Whether the vehicle's path ends in a lane with no successor.
 fn runs_into_lane_end(map: &Map, v: &Vehicle) -> bool {
     let last = *v.next.last().unwrap_or(&v.lane);
-    v.next.len() < 3 && map.lane(last).successors.is_empty() && !map.lane(v.lane).in_junction()
+    path_lanes(map, v) < PATH_LANES
+        && map.lane(last).successors.is_empty()
+        && !map.lane(v.lane).in_junction()
 }
 
-/// Keep at least two lanes of path ahead, choosing successors at random.
+/// Keep [`PATH_LANES`] lanes of path ahead, choosing successors at random (at most four times
+/// as many lanes in all, should short lanes ever form a loop).
 pub(crate) fn extend_path(map: &Map, v: &mut Vehicle, rng: &mut impl Rng) {
-    while v.next.len() < 3 {
+    while path_lanes(map, v) < PATH_LANES && v.next.len() < 4 * PATH_LANES {
         let last = *v.next.last().unwrap_or(&v.lane);
         let options: Vec<LaneIdx> = map
             .lane(last)
