@@ -248,3 +248,36 @@ fn the_expert_drives_routes_on_a_town_it_was_never_tuned_on() {
     eprintln!("Town02: DS {scores:?}, mean {mean:.1}");
     assert!(mean >= 85.0, "Town02: mean DS {mean:.1}: {scores:?}");
 }
+
+/// Scenario crossers wait off every driving lane: where CARLA's roads bend or meet, a spot
+/// beside one road can lie on another, the route's own among them, and a cyclist waiting there
+/// for the ego to reach its trigger held the ego for good (Town03, TCP route 132).
+#[test]
+fn scenario_crossers_wait_off_the_driving_lanes() {
+    let Some(dir) = carla_dir() else { return };
+    let map = Map::load_file(&dir.join("Town03.xodr"), MapOptions::default()).unwrap();
+    let routes = xml::read_file(&dir.join("training_routes/tcp/routes_town03.xml")).unwrap();
+    let mut crossers = 0;
+    for spec in &routes {
+        let Ok(dense) = planner::plan_route(&map, spec) else {
+            continue;
+        };
+        let world = sim_bridge::world::World::new(&map, &dense, WorldConfig::default());
+        for crosser in &world.crossers {
+            crossers += 1;
+            let obb = crosser.obb();
+            let on_lane = map
+                .lanes_near(obb.centre, obb.half.length() + 2.0, |l| {
+                    l.kind == LaneKind::Driving
+                })
+                .into_iter()
+                .any(|(lane, p)| p.distance + 0.3 < map.lane(lane).width / 2.0);
+            assert!(
+                !on_lane,
+                "route {}: crosser {} waits on a driving lane at {:?}",
+                spec.id, crosser.id, obb.centre
+            );
+        }
+    }
+    assert!(crossers > 50, "{crossers} crossers placed");
+}

@@ -170,8 +170,14 @@ pub struct Placement {
 }
 
 impl Placement {
-    /// A crosser that starts when the ego reaches route index `trigger`.
-    fn add_crossing(&mut self, name: &'static str, trigger: usize, crosser: Crosser) {
+    /// A crosser that starts when the ego reaches route index `trigger`, unless the place it
+    /// waits at reaches into a driving lane: where roads bend or meet, a spot beside one road
+    /// can lie on another (the route's own, before the trigger: the ego would wait for it, and
+    /// it for the ego, for good).
+    fn add_crossing(&mut self, map: &Map, name: &'static str, trigger: usize, crosser: Crosser) {
+        if reaches_driving_lane(map, &crosser.obb()) {
+            return;
+        }
         let action = ScenarioAction::StartCrosser(crosser.id);
         self.scenarios.push(Scenario {
             name,
@@ -257,7 +263,7 @@ pub fn place_route_scenarios(
             });
             let walker = (ActorKind::Walker, WALKER_SPEED, DVec2::splat(0.3));
             let crosser = Crosser::waiting_to_cross(ids.next(), walker, edge, right, 2.5, across);
-            out.add_crossing("Scenario3", i, crosser);
+            out.add_crossing(map, "Scenario3", i, crosser);
             next_s3 = route.cum[i] + rng.random_range(0.6..1.4) * S3_SPACING;
             i += ahead + 15;
             continue;
@@ -302,7 +308,7 @@ pub fn place_route_scenarios(
             let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
             let cyclist = (ActorKind::Cyclist, CYCLIST_SPEED, DVec2::new(0.9, 0.35));
             let crosser = Crosser::waiting_to_cross(ids.next(), cyclist, edge, right, 3.0, across);
-            out.add_crossing("Scenario4", start, crosser);
+            out.add_crossing(map, "Scenario4", start, crosser);
         }
     }
     out.scenarios.sort_by_key(|s| s.trigger);
