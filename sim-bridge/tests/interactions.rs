@@ -6,12 +6,14 @@
 //! holds back for an ego that waits to change into its lane. And on `maps/signal_junction.xodr`
 //! (a light whose stop line is at x = 100): red and yellow hold the ego while its tail could
 //! still cross on red. And on `maps/short_sections.xodr`: lane sections a few centimetres long
-//! do not hide a standing ego from the traffic behind them.
+//! do not hide a standing ego from the traffic behind them. And on the bundled town of small
+//! T-junctions: at a junction without lights the ego takes its turn, and traffic gives it.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
-use sim_bridge::map::{Map, MapOptions};
+use sim_bridge::map::{LaneIdx, Map, MapOptions};
 use sim_bridge::route::DenseRoute;
+use sim_bridge::towngen::{self, TownStyle};
 use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::state::LightState;
 use sim_bridge::world::traffic::Vehicle;
@@ -298,4 +300,125 @@ fn lanes_a_few_centimetres_long_do_not_hide_the_ego_from_traffic() {
         world.traffic.vehicles[0].speed < 0.1,
         "it waits behind the ego"
     );
+}
+
+#[test]
+fn the_ego_takes_its_turn_at_a_junction_without_lights() {
+    let map = load("small", towngen::bundled(TownStyle::SmallTJunctions));
+    let conflicts = sim_bridge::world::traffic::conflicts(&map);
+    // A connector `a` entered from a lane without a light, and one `b` from another approach
+    // that conflicts with it.
+    let entered_from = |lane: LaneIdx| map.lane(lane).predecessors.first().copied();
+    let open_approach =
+        |lane: LaneIdx| !map.lane(lane).in_junction() && map.light_ending(lane).is_none();
+    let (a, b) =
+        map.junctions
+            .iter()
+            .flat_map(|j| j.lanes.iter().copied())
+            .find_map(|a| {
+                let from = entered_from(a).filter(|&l| open_approach(l))?;
+                let b =
+                    conflicts.get(&a)?.iter().copied().find(|&b| {
+                        entered_from(b).is_some_and(|l| l != from && open_approach(l))
+                    })?;
+                (map.lane(from).length() > 30.0).then_some((a, b))
+            })
+            .expect("a junction without lights with two conflicting connectors");
+    let approach = map.lane(entered_from(a).unwrap());
+    let exit = map.lane(map.lane(a).successors[0]);
+    let start = approach.pose_at(approach.length() - 25.0).position;
+    let end = exit.pose_at(exit.length().min(15.0)).position;
+    let route = route_through(&map, &[(start.x, start.y), (end.x, end.y)]);
+    let entry = route
+        .points
+        .iter()
+        .position(|p| p.lane == a)
+        .expect("the route takes connector a");
+    // The ego stands 8 m before the junction; a car stands on `b`.
+    let stand = route.points[entry - 8];
+    let config = WorldConfig {
+        vehicles: 1,
+        scenarios: false,
+        parked_cars: false,
+        ..WorldConfig::default()
+    };
+    let mut world = World::new(&map, &route, config);
+    let car = &mut world.traffic.vehicles[0];
+    car.speed = 0.0;
+    car.lane = b;
+    car.s = map.lane(b).length() / 2.0;
+    car.next = map
+        .lane(b)
+        .successors
+        .first()
+        .copied()
+        .into_iter()
+        .collect();
+    world.ego = Ego::new(EgoParams::default(), stand.position, stand.yaw);
+    let index = ego_index(&world, &route);
+    world.trigger_scenarios(index);
+    world.step(HOLD);
+    assert_eq!(world.ego_junction_request().map(|(c, _)| c), Some(a));
+    let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
+    assert_eq!(
+        view.cause,
+        Some(BrakeReason::Vehicle),
+        "it waits its turn: {view:?}"
+    );
+    // With `b` clear the way is free.
+    let far = (map.lanes.iter())
+        .find(|l| !l.in_junction() && (l.points[0] - stand.position).length() > 200.0)
+        .expect("a lane far away");
+    world.traffic.vehicles[0].lane = far.idx;
+    world.traffic.vehicles[0].s = 0.0;
+    let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
+    assert_eq!(view.obstacle, None, "{view:?}");
+
+    // A car that comes to `b` after the ego waits for it.
+    let b_approach = map.lane(entered_from(b).unwrap());
+    let car = &mut world.traffic.vehicles[0];
+    car.lane = b_approach.idx;
+    car.s = b_approach.length() - 5.0;
+    car.next = vec![b];
+    car.arrival = None;
+    for _ in 0..(5.0 / 0.05) as usize {
+        world.trigger_scenarios(index);
+        world.step(HOLD);
+    }
+    let car = &world.traffic.vehicles[0];
+    assert_eq!(
+        car.lane, b_approach.idx,
+        "it leaves the turn to the ego: {car:?}"
+    );
+}
+
+#[test]
+fn a_light_held_green_by_a_scenario_shows_yellow_before_red() {
+    let map = load("signal-junction", include_str!("maps/signal_junction.xodr"));
+    let route = route(&map, (50.0, -1.75), (200.0, -1.75));
+    let id = map.lights[0].id;
+    let mut held_through_red = 0;
+    for seed in 0..20 {
+        let config = WorldConfig {
+            vehicles: 0,
+            seed,
+            ..WorldConfig::default()
+        };
+        let mut world = World::new(&map, &route, config);
+        // Scenario 7 holds the ego's light green for a while, whatever its cycle says.
+        world.lights.force(id, LightState::Green, 7.0);
+        let mut previous = LightState::Green;
+        for tick in 0..400 {
+            let t = tick as f64 * 0.05;
+            world.lights.update(t);
+            let state = world.light_states()[id];
+            assert!(
+                !(previous == LightState::Green && state == LightState::Red),
+                "seed {seed}: green turned red at t = {t:.2} s without yellow"
+            );
+            held_through_red += usize::from(t < 7.0 && state == LightState::Red);
+            previous = state;
+        }
+    }
+    assert_eq!(held_through_red, 0);
 }

@@ -18,8 +18,9 @@ const SCAN_AHEAD: f64 = 50.0;
 const CORRIDOR_MARGIN: f64 = 0.6;
 /// Stop this far before a stop line, m.
 const STOP_LINE_MARGIN: f64 = 1.0;
-/// Comfortable braking used to decide whether to stop at yellow, m/s^2.
-const YELLOW_DECEL: f64 = 6.0;
+/// The firmest braking the expert plans on to stop for a yellow light, a red light under it or
+/// its turn at a junction, m/s^2 (beyond that it goes on).
+const STOP_DECEL: f64 = 6.0;
 /// Time kept in hand when the expert counts on clearing a stop line before yellow turns red, s.
 const YELLOW_CLEAR_MARGIN: f64 = 0.5;
 /// How far behind the ego's rear the red-light criterion's tail segment reaches (LB1.0's
@@ -117,6 +118,7 @@ pub fn scan(
     let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
     stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
     red_light_under_ego(world, &mut view);
+    junction_turn(world, route, index, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
     view
 }
@@ -265,8 +267,34 @@ fn stop_lines(
     }
 }
 
+/// Before a junction without a light on its approach, the ego takes its turn as traffic does:
+/// it holds at the entry while a conflicting connector is occupied or a conflicting vehicle that arrived earlier waits
+/// ([`crate::world::traffic::Traffic::ego_may_enter`]), unless it could no longer stop
+/// short of the junction. Entering out of turn ends in a deadlock inside the junction: each
+/// waiting for the other's box on its path.
+fn junction_turn(world: &World<'_>, route: &DenseRoute, index: usize, view: &mut HazardView) {
+    let Some((connector, arrival)) = world.ego_junction_request() else {
+        return;
+    };
+    if world
+        .traffic
+        .ego_may_enter(world.map, world.light_states(), connector, arrival)
+    {
+        return;
+    }
+    let Some(entry) = (index..route.points.len()).find(|&j| route.points[j].lane == connector)
+    else {
+        return;
+    };
+    let ego = world.ego_state();
+    let gap = along(route, index, entry) - ego.half_extent.x - STOP_LINE_MARGIN;
+    if gap > ego.speed * ego.speed / (2.0 * STOP_DECEL) {
+        view.obstacle(gap, 0.0, BrakeReason::Vehicle);
+    }
+}
+
 /// Whether the ego stops for `light` turning yellow on `lane`: when it can stop comfortably
-/// ([`YELLOW_DECEL`]) short of the stop line, and also when it could not clear the line with
+/// ([`STOP_DECEL`]) short of the stop line, and also when it could not clear the line with
 /// the tail segment of the red-light criterion before the yellow ends at its speed yet can
 /// still stop with full braking (a crawl through yellow ends on red).
 fn stops_at_yellow(world: &World<'_>, light: &TrafficLight, lane: LaneIdx) -> bool {
@@ -277,7 +305,7 @@ fn stops_at_yellow(world: &World<'_>, light: &TrafficLight, lane: LaneIdx) -> bo
     let to_line =
         (line.position.truncate() - ego.position.truncate()).dot(ego.forward()) - ego.half_extent.x;
     let v2 = ego.speed * ego.speed;
-    let comfortable = to_line - STOP_LINE_MARGIN > v2 / (2.0 * YELLOW_DECEL);
+    let comfortable = to_line - STOP_LINE_MARGIN > v2 / (2.0 * STOP_DECEL);
     let clear_time = (to_line + 2.0 * ego.half_extent.x + TAIL_PROBE) / ego.speed.max(0.1);
     let clears = clear_time < YELLOW_S - YELLOW_CLEAR_MARGIN;
     let can_stop = to_line > v2 / (2.0 * world.ego.params.max_brake);
@@ -302,7 +330,7 @@ fn red_light_under_ego(world: &World<'_>, view: &mut HazardView) {
         return;
     };
     let tail = map.lane(tail_lane);
-    let stopping = ego.speed * ego.speed / (2.0 * YELLOW_DECEL);
+    let stopping = ego.speed * ego.speed / (2.0 * STOP_DECEL);
     let holds = map
         .lights
         .iter()

@@ -164,6 +164,13 @@ impl Map {
         &self.lanes[idx.get()]
     }
 
+    /// The traffic light with a stop line at the end of `lane`, if any.
+    pub fn light_ending(&self, lane: LaneIdx) -> Option<&TrafficLight> {
+        self.lights
+            .iter()
+            .find(|light| light.stop_lines.iter().any(|line| line.lane == lane))
+    }
+
     /// The driving lane whose centre line is nearest `p`, however far (CARLA's `get_waypoint`
     /// projects to the road from anywhere: route files hold keypoints up to 100 m off the map).
     pub fn nearest_driving(&self, p: DVec2) -> Option<(LaneIdx, Projection)> {

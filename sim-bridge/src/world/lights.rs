@@ -72,13 +72,20 @@ impl LightController {
         for (id, force) in self.forced.iter_mut().enumerate() {
             match *force {
                 Some((state, until)) if t < until => self.states[id] = state,
+                // A light held green that its cycle has moved past shows yellow first, as
+                // any green does before red.
+                Some((LightState::Green, until)) if self.states[id] != LightState::Green => {
+                    *force = Some((LightState::Yellow, until + YELLOW_S));
+                    self.states[id] = LightState::Yellow;
+                }
                 Some(_) => *force = None,
                 None => {}
             }
         }
     }
 
-    /// Hold light `id` at `state` until sim time `until` (scenarios S7-S9 do this).
+    /// Hold light `id` at `state` until sim time `until` (scenarios S7-S9 do this); a green
+    /// hold that ends while the cycle shows red ends with [`YELLOW_S`] of yellow.
     pub fn force(&mut self, id: usize, state: LightState, until: f64) {
         if let Some(f) = self.forced.get_mut(id) {
             *f = Some((state, until));

@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
 use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
-use traffic::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, Traffic};
+use traffic::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, REQUEST_DISTANCE, Traffic};
 
 use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;
@@ -110,6 +110,11 @@ pub struct World<'m> {
     /// The route's lane changes: where each starts (distance along the route, m) and the lane
     /// it changes into.
     lane_changes: Vec<(f64, LaneIdx)>,
+    /// Where the route enters each junction from an approach without a light (distance along
+    /// the route, m) and the connector.
+    junction_entries: Vec<(f64, LaneIdx)>,
+    /// The connector the ego is about to enter and since when it has been waiting its turn.
+    junction_request: Option<(LaneIdx, f64)>,
     rng: ChaCha8Rng,
     ids: IdSource,
 }
@@ -157,6 +162,8 @@ impl<'m> World<'m> {
             route_progress: 0,
             route_distance: route.cum.clone(),
             lane_changes: lane_changes(map, route),
+            junction_entries: junction_entries(map, route),
+            junction_request: None,
             rng,
             ids,
         };
@@ -253,6 +260,37 @@ impl<'m> World<'m> {
             .map(|&(_, lane)| lane)
     }
 
+    /// The junction connector the ego's route enters next from an approach without a light and
+    /// since when (sim time) the ego has been within [`REQUEST_DISTANCE`] of it, while the ego
+    /// is not in a junction: its turn at the junction, which traffic respects and the expert
+    /// takes ([`Traffic::ego_may_enter`]).
+    pub fn ego_junction_request(&self) -> Option<(LaneIdx, f64)> {
+        self.junction_request
+    }
+
+    /// Updates [`Self::ego_junction_request`] for the ego's progress; `in_junction` says
+    /// whether the ego is on a junction lane.
+    fn update_junction_request(&mut self, in_junction: bool) {
+        let next = self
+            .route_distance
+            .get(self.route_progress)
+            .and_then(|here| {
+                self.junction_entries
+                    .iter()
+                    .find(|(at, _)| *at > *here)
+                    .filter(|(at, _)| at - here <= REQUEST_DISTANCE)
+            })
+            .map(|&(_, connector)| connector)
+            .filter(|_| !in_junction);
+        self.junction_request = match (next, self.junction_request) {
+            (Some(connector), Some((waiting, since))) if connector == waiting => {
+                Some((connector, since))
+            }
+            (Some(connector), _) => Some((connector, self.time)),
+            (None, _) => None,
+        };
+    }
+
     /// Apply `control` to the ego and advance everything by [`DT`]; returns the ego's contacts.
     pub fn step(&mut self, control: Control) -> Vec<CollisionEvent> {
         self.ego.step(control, DT);
@@ -267,12 +305,14 @@ impl<'m> World<'m> {
             .then(|| self.lane_change_ahead())
             .flatten()
             .map(|lane| (lane, self.map.lane(lane).project(ego.position.truncate()).s));
+        self.update_junction_request(on_lane.is_some_and(|(l, _)| self.map.lane(l).in_junction()));
         let presence = EgoPresence {
             on_lane,
             obb: ego.obb(),
             z: ego.position.z,
             speed: ego.speed,
             merging_into,
+            junction_request: self.junction_request,
         };
         self.time += DT;
         self.lights.update(self.time);
@@ -335,6 +375,21 @@ impl<'m> World<'m> {
 
 /// Where the route changes lanes: the distance along it at which each change starts (its first
 /// point commanded to change lanes) and the lane it changes into.
+/// Where `route` enters each junction from an approach without a light (distance along it, m)
+/// and the connector it enters: where a light controls the approach, the light gives the turn.
+fn junction_entries(map: &Map, route: &DenseRoute) -> Vec<(f64, LaneIdx)> {
+    let points = &route.points;
+    (1..points.len())
+        .filter(|&j| {
+            let approach = points[j - 1].lane;
+            map.lane(points[j].lane).in_junction()
+                && !map.lane(approach).in_junction()
+                && map.light_ending(approach).is_none()
+        })
+        .map(|j| (route.cum[j], points[j].lane))
+        .collect()
+}
+
 fn lane_changes(map: &Map, route: &DenseRoute) -> Vec<(f64, LaneIdx)> {
     let points = &route.points;
     (1..points.len())

@@ -6,7 +6,10 @@
 //! end in the same lane (through any further pieces of the junction). A vehicle within
 //! [`REQUEST_DISTANCE`] of a junction may enter when no conflicting connector is occupied (by a
 //! vehicle or the ego) and no conflicting vehicle that arrived earlier is waiting to enter;
-//! otherwise it holds at the stop line. A vehicle whose path runs into a lane that ends (a lane
+//! otherwise it holds at the stop line. The ego waiting to enter a junction from an approach
+//! without a light takes its turn among those requests ([`EgoPresence::junction_request`]),
+//! and the expert asks [`Traffic::ego_may_enter`] before it goes: out of turn, both would end
+//! up inside the junction, each waiting for the other. A vehicle whose path runs into a lane that ends (a lane
 //! drop, as on CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic
 //! manager does. A vehicle near the ego also checks the corridor its path sweeps
 //! ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego is on, and stops short of
@@ -63,6 +66,8 @@ const DIVERGE_LENGTH: f64 = 12.0;
 const LATERAL_SPEED: f64 = 1.0;
 /// Most pieces a junction connector is followed through when looking for where it leads.
 const MAX_CONNECTOR_PIECES: usize = 4;
+/// The id the ego goes by in junction requests (vehicles have ids from 1000).
+const EGO_ID: u32 = 0;
 /// How far ahead of its front a vehicle checks its path for the ego's box, m.
 const EGO_WATCH: f64 = 30.0;
 /// Spacing of that check, m.
@@ -115,6 +120,9 @@ pub struct EgoPresence {
     /// The lane the ego waits to change into and the ego's arc length projected on it, while
     /// it stands before a lane change of its route.
     pub merging_into: Option<(LaneIdx, f64)>,
+    /// The junction connector the ego's route enters next and since when the ego has been
+    /// within [`REQUEST_DISTANCE`] of it, while it is not yet in the junction.
+    pub junction_request: Option<(LaneIdx, f64)>,
 }
 
 impl EgoPresence {
@@ -375,12 +383,7 @@ impl Traffic {
 
     /// Which vehicles may enter the junction ahead now.
     fn junction_grants(&self, map: &Map, lights: &[LightState], ego: &EgoPresence) -> Vec<bool> {
-        let mut occupied: Vec<LaneIdx> = self
-            .vehicles
-            .iter()
-            .map(|v| v.lane)
-            .filter(|l| map.lane(*l).in_junction())
-            .collect();
+        let mut occupied = self.junction_occupants(map);
         // The ego blocks the connector it is on, and, while it approaches a junction at speed,
         // every connector it could take: traffic gives way to an ego about to enter.
         if let Some((lane, s)) = ego.on_lane {
@@ -391,8 +394,67 @@ impl Traffic {
                 occupied.extend(l.successors.iter().filter(|c| map.lane(**c).in_junction()));
             }
         }
-        let requests: Vec<Option<(LaneIdx, f64, u32)>> = self
-            .vehicles
+        let requests = self.junction_requests(map, lights);
+        // The ego waiting to enter takes its turn among them.
+        let ego_request = ego
+            .junction_request
+            .map(|(connector, arrival)| (connector, arrival, EGO_ID));
+        let all: Vec<(LaneIdx, f64, u32)> = requests
+            .iter()
+            .flatten()
+            .copied()
+            .chain(ego_request)
+            .collect();
+        // Red-light runners (scenario vehicles) go regardless.
+        self.vehicles
+            .iter()
+            .zip(&requests)
+            .map(|(v, request)| match *request {
+                Some(request) if !v.ignores_lights => self.may_go(request, &occupied, &all),
+                _ => true,
+            })
+            .collect()
+    }
+
+    /// Whether the ego, waiting since `arrival` to enter the junction connector `connector`, may
+    /// go now by the rule traffic follows (see the module doc): no conflicting connector is
+    /// occupied and no conflicting vehicle that arrived earlier waits to enter.
+    pub fn ego_may_enter(
+        &self,
+        map: &Map,
+        lights: &[LightState],
+        connector: LaneIdx,
+        arrival: f64,
+    ) -> bool {
+        let requests: Vec<(LaneIdx, f64, u32)> = self
+            .junction_requests(map, lights)
+            .into_iter()
+            .flatten()
+            .collect();
+        self.may_go(
+            (connector, arrival, EGO_ID),
+            &self.junction_occupants(map),
+            &requests,
+        )
+    }
+
+    /// Connectors (junction lanes) with a vehicle on them.
+    fn junction_occupants(&self, map: &Map) -> Vec<LaneIdx> {
+        self.vehicles
+            .iter()
+            .map(|v| v.lane)
+            .filter(|l| map.lane(*l).in_junction())
+            .collect()
+    }
+
+    /// Per vehicle, its request to enter the junction ahead: (connector, arrival, id), when it
+    /// has arrived within [`REQUEST_DISTANCE`] and no light holds it.
+    fn junction_requests(
+        &self,
+        map: &Map,
+        lights: &[LightState],
+    ) -> Vec<Option<(LaneIdx, f64, u32)>> {
+        self.vehicles
             .iter()
             .map(|v| {
                 let connector = *v.next.first()?;
@@ -404,28 +466,26 @@ impl Traffic {
                 (map.lane(connector).in_junction() && !held_by_light && v.arrival.is_some())
                     .then(|| (connector, v.arrival.unwrap_or(0.0), v.id))
             })
-            .collect();
-        requests
-            .iter()
-            .map(|req| {
-                let Some((connector, arrival, id)) = *req else {
-                    return true;
-                };
-                if self.vehicles.iter().any(|v| v.id == id && v.ignores_lights) {
-                    return true;
-                }
-                let conflicts = self
-                    .conflicts
-                    .get(&connector)
-                    .map(Vec::as_slice)
-                    .unwrap_or(&[]);
-                let busy = occupied.iter().any(|o| conflicts.contains(o));
-                let earlier = requests.iter().flatten().any(|&(c, a, other)| {
-                    other != id && conflicts.contains(&c) && (a, other) < (arrival, id)
-                });
-                !busy && !earlier
-            })
             .collect()
+    }
+
+    /// The junction rule for one request among `requests` (which may include it).
+    fn may_go(
+        &self,
+        (connector, arrival, id): (LaneIdx, f64, u32),
+        occupied: &[LaneIdx],
+        requests: &[(LaneIdx, f64, u32)],
+    ) -> bool {
+        let conflicts = self
+            .conflicts
+            .get(&connector)
+            .map(Vec::as_slice)
+            .unwrap_or(&[]);
+        let busy = occupied.iter().any(|o| conflicts.contains(o));
+        let earlier = requests.iter().any(|&(c, a, other)| {
+            other != id && conflicts.contains(&c) && (a, other) < (arrival, id)
+        });
+        !busy && !earlier
     }
 
     /// Integrate one vehicle and move it across lane ends.
