@@ -7,7 +7,8 @@
 //! (a light whose stop line is at x = 100): red and yellow hold the ego while its tail could
 //! still cross on red. And on `maps/short_sections.xodr`: lane sections a few centimetres long
 //! do not hide a standing ego from the traffic behind them. And on the bundled town of small
-//! T-junctions: at a junction without lights the ego takes its turn, and traffic gives it.
+//! T-junctions: at a junction without lights the ego takes its turn, and traffic gives it. And
+//! on `maps/cut_connector.xodr`: connectors conflict by their whole path through the junction.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
@@ -421,4 +422,25 @@ fn a_light_held_green_by_a_scenario_shows_yellow_before_red() {
         }
     }
     assert_eq!(held_through_red, 0);
+}
+
+#[test]
+fn connectors_conflict_by_their_whole_path_through_the_junction() {
+    let map = load("cut-connector", include_str!("maps/cut_connector.xodr"));
+    let piece = |road: &str, section: usize| {
+        (map.lanes.iter())
+            .find(|l| l.road_id == road && l.section == section && l.in_junction())
+            .unwrap_or_else(|| panic!("road {road} section {section}"))
+            .idx
+    };
+    let (east, north_first, north_second) = (piece("10", 0), piece("11", 0), piece("11", 1));
+    let conflicts = sim_bridge::world::traffic::conflicts(&map);
+    let of = |lane| conflicts.get(&lane).cloned().unwrap_or_default();
+    // Only road 11's second piece crosses road 10, but a car asking for its first piece must
+    // wait for whoever is on road 10, and the ego there for a car on either piece.
+    assert!(of(north_second).contains(&east));
+    assert!(of(north_first).contains(&east), "{:?}", of(north_first));
+    assert!(of(east).contains(&north_first) && of(east).contains(&north_second));
+    // The two pieces of one path do not conflict with each other.
+    assert!(!of(north_first).contains(&north_second));
 }

@@ -750,12 +750,28 @@ fn curve_limited_speed(map: &Map, v: &Vehicle) -> f64 {
     limit
 }
 
-/// Connector lanes that conflict: centre lines cross or end in the same lane.
+/// Connector lanes that conflict: their paths through the junction (the lane and the further
+/// pieces of the same junction it leads into) cross or end in the same lane. Comparing whole
+/// paths matters where CARLA cuts connectors into pieces: a vehicle asking for the first
+/// piece of its path must see the ego on a later piece of another that its path crosses.
 pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
     let mut out: BTreeMap<LaneIdx, Vec<LaneIdx>> = BTreeMap::new();
     for j in &map.junctions {
         let exits: HashMap<LaneIdx, Vec<LaneIdx>> =
             j.lanes.iter().map(|&l| (l, exits(map, l))).collect();
+        let path = |lane: LaneIdx| {
+            std::iter::once(lane).chain(
+                exits[&lane]
+                    .iter()
+                    .copied()
+                    .filter(|&e| map.lane(e).junction == Some(j.idx)),
+            )
+        };
+        let paths_cross = |a: LaneIdx, b: LaneIdx| {
+            path(a).any(|pa| {
+                path(b).any(|pb| polylines_cross(&map.lane(pa).points, &map.lane(pb).points))
+            })
+        };
         for (a_i, &a) in j.lanes.iter().enumerate() {
             for &b in &j.lanes[a_i + 1..] {
                 let (la, lb) = (map.lane(a), map.lane(b));
@@ -765,7 +781,7 @@ pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
                 let chained = ea.contains(&b) || eb.contains(&a);
                 let same_start = la.predecessors.iter().any(|p| lb.predecessors.contains(p));
                 let merge = !chained && ea.iter().any(|e| eb.contains(e));
-                if merge || (!chained && !same_start && polylines_cross(&la.points, &lb.points)) {
+                if merge || (!chained && !same_start && paths_cross(a, b)) {
                     out.entry(a).or_default().push(b);
                     out.entry(b).or_default().push(a);
                 }
