@@ -52,6 +52,17 @@ fn outer_lane_route(map: &Map) -> DenseRoute {
     route(map, (20.0, -5.25), (250.0, -5.25))
 }
 
+/// A world with `vehicles` background vehicles and no scenarios or parked cars.
+fn quiet_world<'m>(map: &'m Map, route: &DenseRoute, vehicles: usize) -> World<'m> {
+    let config = WorldConfig {
+        vehicles,
+        scenarios: false,
+        parked_cars: false,
+        ..WorldConfig::default()
+    };
+    World::new(map, route, config)
+}
+
 /// A world holding exactly one background vehicle, on lane `lane_id` of road `road` at `s`.
 fn world_with_one_vehicle<'m>(
     map: &'m Map,
@@ -60,13 +71,7 @@ fn world_with_one_vehicle<'m>(
     s: f64,
     speed: f64,
 ) -> World<'m> {
-    let config = WorldConfig {
-        vehicles: 1,
-        scenarios: false,
-        parked_cars: false,
-        ..WorldConfig::default()
-    };
-    let mut world = World::new(map, route, config);
+    let mut world = quiet_world(map, route, 1);
     let lane = map
         .lanes
         .iter()
@@ -207,13 +212,7 @@ fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
 fn lights_hold_the_ego_while_its_tail_could_still_cross_on_red() {
     let map = load("signal-junction", include_str!("maps/signal_junction.xodr"));
     let through = route(&map, (50.0, -1.75), (200.0, -1.75));
-    let config = WorldConfig {
-        vehicles: 0,
-        scenarios: false,
-        parked_cars: false,
-        ..WorldConfig::default()
-    };
-    let mut world = World::new(&map, &through, config);
+    let mut world = quiet_world(&map, &through, 0);
     let scan_at = |world: &mut World<'_>, x: f64, speed: f64, state: LightState| {
         world.lights.force(map.lights[0].id, state, f64::INFINITY);
         world.lights.update(world.time);
@@ -337,13 +336,7 @@ fn the_ego_takes_its_turn_at_a_junction_without_lights() {
         .expect("the route takes connector a");
     // The ego stands 8 m before the junction; a car stands on `b`.
     let stand = route.points[entry - 8];
-    let config = WorldConfig {
-        vehicles: 1,
-        scenarios: false,
-        parked_cars: false,
-        ..WorldConfig::default()
-    };
-    let mut world = World::new(&map, &route, config);
+    let mut world = quiet_world(&map, &route, 1);
     let car = &mut world.traffic.vehicles[0];
     car.speed = 0.0;
     car.lane = b;

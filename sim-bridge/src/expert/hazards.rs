@@ -8,6 +8,7 @@ use ssrdrive_proto::dataset::BrakeReason;
 use super::{along, route_dir};
 use crate::map::{LaneIdx, TrafficLight};
 use crate::route::DenseRoute;
+use crate::scoring::lights::tail_segment;
 use crate::world::lights::YELLOW_S;
 use crate::world::state::{ActorKind, LightState, Obb};
 use crate::world::{ActorView, World};
@@ -23,9 +24,6 @@ const STOP_LINE_MARGIN: f64 = 1.0;
 const STOP_DECEL: f64 = 6.0;
 /// Time kept in hand when the expert counts on clearing a stop line before yellow turns red, s.
 const YELLOW_CLEAR_MARGIN: f64 = 0.5;
-/// How far behind the ego's rear the red-light criterion's tail segment reaches (LB1.0's
-/// `RunningRedLightTest`: from 0.8 half lengths to a half length plus this behind the centre), m.
-const TAIL_PROBE: f64 = 1.0;
 /// A vehicle on a lane change's target lane this close along it (centre to centre) is
 /// alongside the ego, m.
 const LANE_CHANGE_ALONGSIDE: f64 = 5.0;
@@ -268,9 +266,9 @@ fn stop_lines(
 }
 
 /// Before a junction without a light on its approach, the ego takes its turn as traffic does:
-/// it holds at the entry while a conflicting connector is occupied or a conflicting vehicle that arrived earlier waits
-/// ([`crate::world::traffic::Traffic::ego_may_enter`]), unless it could no longer stop
-/// short of the junction. Entering out of turn ends in a deadlock inside the junction: each
+/// it holds at the entry while a conflicting connector is occupied or a conflicting vehicle
+/// that arrived earlier waits ([`crate::world::traffic::Traffic::ego_may_enter`]), unless it
+/// could no longer stop short of the junction. Entering out of turn ends in a deadlock inside the junction: each
 /// waiting for the other's box on its path.
 fn junction_turn(world: &World<'_>, route: &DenseRoute, index: usize, view: &mut HazardView) {
     let Some((connector, arrival)) = world.ego_junction_request() else {
@@ -306,26 +304,27 @@ fn stops_at_yellow(world: &World<'_>, light: &TrafficLight, lane: LaneIdx) -> bo
         (line.position.truncate() - ego.position.truncate()).dot(ego.forward()) - ego.half_extent.x;
     let v2 = ego.speed * ego.speed;
     let comfortable = to_line - STOP_LINE_MARGIN > v2 / (2.0 * STOP_DECEL);
-    let clear_time = (to_line + 2.0 * ego.half_extent.x + TAIL_PROBE) / ego.speed.max(0.1);
+    // The far end of the criterion's tail segment must pass the line.
+    let (_, tail_far) = tail_segment(&ego);
+    let tail_to_line = (line.position.truncate() - tail_far).dot(ego.forward());
+    let clear_time = tail_to_line / ego.speed.max(0.1);
     let clears = clear_time < YELLOW_S - YELLOW_CLEAR_MARGIN;
     let can_stop = to_line > v2 / (2.0 * world.ego.params.max_brake);
     comfortable || (!clears && can_stop)
 }
 
 /// A red light whose stop line lies under the ego, past its front but not yet reached by the
-/// red-light criterion's tail segment (from 0.8 half lengths to a half length plus
-/// [`TAIL_PROBE`] behind the centre; the line's lane is the one under the segment's far end as
-/// the scorer finds it, whether or not the route includes it: a route may start with the ego
-/// across a stop line), holds the ego while it can stop before the segment reaches the line:
-/// the leaderboard counts the tail crossing on red. Past that point braking would only leave it
-/// in the junction.
+/// red-light criterion's tail segment ([`tail_segment`]; the line's lane is the one under the
+/// segment's far end as the scorer finds it, whether or not the route includes it: a route
+/// may start with the ego across a stop line), holds the ego while it can stop before the
+/// segment reaches the line: the leaderboard counts the tail crossing on red. Past that point
+/// braking would only leave it in the junction.
 fn red_light_under_ego(world: &World<'_>, view: &mut HazardView) {
     let ego = world.ego_state();
     let map = world.map;
     let forward = ego.forward();
-    let half = ego.half_extent.x;
-    let tail_close = ego.position.truncate() - forward * (0.8 * half);
-    let tail_far = ego.position.truncate() - forward * (half + TAIL_PROBE);
+    let (tail_close, tail_far) = tail_segment(&ego);
+    let front_to_tail = (ego.position.truncate() - tail_close).dot(forward) + ego.half_extent.x;
     let Some((tail_lane, _)) = map.lane_for_pose(tail_far.extend(ego.position.z), ego.yaw) else {
         return;
     };
@@ -342,7 +341,7 @@ fn red_light_under_ego(world: &World<'_>, view: &mut HazardView) {
             lane.road_id == tail.road_id
                 && lane.lane_id == tail.lane_id
                 && ahead_of_tail > stopping
-                && ahead_of_tail < 1.8 * half
+                && ahead_of_tail < front_to_tail
         });
     if holds {
         view.obstacle(0.0, 0.0, BrakeReason::TrafficLight);

@@ -54,9 +54,7 @@ impl RedLights {
     ) {
         let p = ego.position.truncate();
         let forward = ego.forward();
-        let half_length = ego.half_extent.x;
-        let tail_close = p - forward * (0.8 * half_length);
-        let tail_far = p - forward * (half_length + 1.0);
+        let (tail_close, tail_far) = tail_segment(ego);
         let mut tail_lane = None;
         for light in &map.lights {
             if self.last == Some(light.id)
@@ -88,6 +86,16 @@ impl RedLights {
             }
         }
     }
+}
+
+/// The ego's tail segment the red-light criterion tests against stop lines: from 0.8 half
+/// lengths to a half length plus 1 m behind the centre, as (near end, far end).
+pub(crate) fn tail_segment(ego: &EgoState) -> (DVec2, DVec2) {
+    let (p, forward, half_length) = (ego.position.truncate(), ego.forward(), ego.half_extent.x);
+    (
+        p - forward * (0.8 * half_length),
+        p - forward * (half_length + 1.0),
+    )
 }
 
 fn red_light_event(light: &TrafficLight, t: f64, cfg: &ScoringConfig) -> Infraction {
