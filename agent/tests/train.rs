@@ -134,22 +134,39 @@ fn special_functions_match_known_values() {
 }
 
 #[test]
-fn validation_situations_follow_the_command_and_count_start_ups() {
+fn validation_situations_follow_the_command_start_ups_and_brake_causes() {
     use ssr_agent::train::validation::situations;
     let one_hot = |i: usize| {
         let mut v = [0.0f32; 6];
         v[i] = 1.0;
         v
     };
-    assert_eq!(situations(&one_hot(0), 5.0, 0.5), ["left"]);
-    assert_eq!(situations(&one_hot(1), 5.0, 0.0), ["right"]);
-    assert_eq!(situations(&one_hot(3), 0.2, 0.6), ["follow", "start"]);
+    assert_eq!(situations(&one_hot(0), 5.0, 0.5, None), ["left"]);
+    assert_eq!(situations(&one_hot(1), 5.0, 0.0, None), ["right"]);
+    assert_eq!(situations(&one_hot(3), 0.2, 0.6, None), ["follow", "start"]);
     assert_eq!(
-        situations(&one_hot(3), 0.2, 0.0),
+        situations(&one_hot(3), 0.2, 0.0, None),
         ["follow"],
         "standing, not starting"
     );
-    assert_eq!(situations(&one_hot(5), 8.0, 0.3), ["change-lane"]);
+    assert_eq!(situations(&one_hot(5), 8.0, 0.3, None), ["change-lane"]);
+    // What the expert brakes for.
+    use ssrdrive_proto::dataset::BrakeReason;
+    let light = Some(BrakeReason::TrafficLight);
+    assert_eq!(
+        situations(&one_hot(2), 0.0, 0.0, light),
+        ["straight", "brake:light"]
+    );
+    let walker = Some(BrakeReason::Walker);
+    assert_eq!(
+        situations(&one_hot(3), 4.0, 0.0, walker),
+        ["follow", "brake:road-user"]
+    );
+    let sign = Some(BrakeReason::StopSign);
+    assert_eq!(
+        situations(&one_hot(3), 4.0, 0.0, sign),
+        ["follow", "brake:sign"]
+    );
 }
 
 #[test]

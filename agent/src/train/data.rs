@@ -23,7 +23,7 @@ use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::{Dataset, DatasetError, FUTURE_STEP, FrameRecord};
+use ssrdrive_proto::dataset::{BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord};
 
 use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
@@ -365,6 +365,7 @@ impl TrainingData {
                 batch.actions.extend(action_of(control));
             }
             batch.expert.push(now.control);
+            batch.brake_reasons.push(now.brake_reason);
         }
         batch.context_images.append(&mut future_images);
         batch.context_geometry.append(&mut future_geometry);
@@ -447,6 +448,8 @@ pub struct Batch {
     pub actions: Vec<f32>,
     /// The expert's control now.
     pub expert: Vec<Control>,
+    /// Why the expert brakes now, if it does.
+    brake_reasons: Vec<Option<BrakeReason>>,
 }
 
 impl Batch {
@@ -458,6 +461,11 @@ impl Batch {
     /// Sample `i`'s speed label, m/s.
     pub fn speed_label(&self, i: usize) -> f32 {
         self.speed[i]
+    }
+
+    /// Why the expert brakes in sample `i`, if it does.
+    pub fn brake_reason(&self, i: usize) -> Option<BrakeReason> {
+        self.brake_reasons[i]
     }
 
     fn input(

@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::dataset::BrakeReason;
 
 use super::data::{Batch, SampleRef};
 use crate::control::beta::control_from_beta;
@@ -67,9 +68,16 @@ impl ValidationMetrics {
 }
 
 /// The situations a validation sample counts in: its command (`left`, `right`, `straight`,
-/// `follow`, `change-lane`) and `start` when the car stands (below 1 m/s) and the expert
-/// accelerates.
-pub fn situations(command: &[f32], speed: f32, expert_throttle: f32) -> Vec<&'static str> {
+/// `follow`, `change-lane`); `start` when the car stands (below 1 m/s) and the expert
+/// accelerates; and, when the expert brakes or holds, what for: `brake:light` (a red or
+/// yellow light), `brake:sign`, `brake:road-user` (a vehicle, walker, obstacle or forecast
+/// collision) or `brake:lane-change`, so the brake error shows which causes the network reads.
+pub fn situations(
+    command: &[f32],
+    speed: f32,
+    expert_throttle: f32,
+    brake_reason: Option<BrakeReason>,
+) -> Vec<&'static str> {
     let index = command
         .iter()
         .position(|&v| v > 0.5)
@@ -84,6 +92,15 @@ pub fn situations(command: &[f32], speed: f32, expert_throttle: f32) -> Vec<&'st
     if speed < 1.0 && expert_throttle > 0.1 {
         out.push("start");
     }
+    out.extend(brake_reason.map(|reason| match reason {
+        BrakeReason::TrafficLight => "brake:light",
+        BrakeReason::StopSign => "brake:sign",
+        BrakeReason::LaneChange => "brake:lane-change",
+        BrakeReason::Vehicle
+        | BrakeReason::Walker
+        | BrakeReason::Obstacle
+        | BrakeReason::PredictedCollision => "brake:road-user",
+    }));
     out
 }
 
@@ -181,7 +198,8 @@ impl ValidationSums {
             one.throttle = f64::from((control.throttle - expert.throttle).abs());
             one.brake = f64::from((control.brake - expert.brake).abs());
             self.all.accumulate(&one);
-            for group in situations(commands[i], batch.speed_label(i), expert.throttle) {
+            let speed = batch.speed_label(i);
+            for group in situations(commands[i], speed, expert.throttle, batch.brake_reason(i)) {
                 self.by_situation.entry(group).or_default().accumulate(&one);
             }
         }
