@@ -82,6 +82,7 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
             &output.head,
             &targets,
             Some((predicted, future_bev.clone())),
+            None,
             &weights,
         )
     };

@@ -130,6 +130,10 @@ fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
     let follow = &validation.by_situation["follow"];
     assert_eq!(follow.samples, validation.all.samples);
     assert_eq!(follow.l2_m, validation.all.l2_m);
+    // The hazard probe (on by default) trains beside the network and is validated.
+    assert!(step_lines(&out).iter().all(|s| s.hazard.is_some()));
+    let accuracy = validation.all.hazard_accuracy.expect("a probe");
+    assert!((0.0..=1.0).contains(&accuracy), "{accuracy}");
 
     // The final checkpoint loads back into the same network, with the rig and notes.
     assert_eq!(summary.checkpoint, out.join("final.safetensors"));
@@ -203,6 +207,45 @@ fn resuming_redraws_the_same_loss_curve() {
             y.loss
         );
     }
+}
+
+#[test]
+fn the_hazard_probe_resumes_with_the_run_and_can_be_left_out() {
+    let _rng = device_rng();
+    let tmp = Scratch::new();
+    let data = tmp.fixture("probe");
+    let config = config(4);
+    let stop_at = |out: &Path| TrainOptions {
+        stop_at: Some(3),
+        ..options(&data, out)
+    };
+    let resume = |out: &Path| TrainOptions {
+        resume: true,
+        ..options(&data, out)
+    };
+
+    // Without its saved probe the run cannot go on as it was: the error names the file.
+    let lost = tmp.dir("probe-lost");
+    train(config.clone(), stop_at(&lost), open(&data, &config)).unwrap();
+    std::fs::remove_file(lost.join("resume/hazard.bpk")).unwrap();
+    let error = train(config.clone(), resume(&lost), open(&data, &config))
+        .err()
+        .unwrap();
+    assert!(
+        matches!(error, TrainError::Resume { .. }) && error.to_string().contains("hazard.bpk"),
+        "{error}"
+    );
+
+    // Weight 0: no probe, no probe loss, nothing saved for it; the run still resumes.
+    let mut plain = config.clone();
+    plain.loss.hazard = 0.0;
+    let out = tmp.dir("probe-off");
+    train(plain.clone(), stop_at(&out), open(&data, &plain)).unwrap();
+    assert!(!out.join("resume/hazard.bpk").exists());
+    let done = train(plain.clone(), resume(&out), open(&data, &plain)).unwrap();
+    assert_eq!(done.steps_done, 4);
+    assert!(step_lines(&out).iter().all(|s| s.hazard.is_none()));
+    assert_eq!(done.validation.unwrap().all.hazard_accuracy, None);
 }
 
 #[test]

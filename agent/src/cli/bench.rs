@@ -276,6 +276,7 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
             &output.head,
             &targets,
             Some((predicted, future.clone())),
+            None,
             &weights,
         );
         record(0);

@@ -87,6 +87,10 @@ pub struct TrainArgs {
     /// Weight of the future-BEV loss (SSR: 1).
     #[arg(long, default_value_t = 1.0)]
     bev_weight: f32,
+    /// Weight of the hazard probe's loss: a training-only classifier of what the expert brakes
+    /// for (a light, a sign, a road user, a lane change) from the scene tokens; 0 = no probe.
+    #[arg(long, default_value_t = 0.5)]
+    hazard_weight: f32,
     /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
     #[arg(long)]
     no_stl: bool,
@@ -157,6 +161,7 @@ impl TrainArgs {
         config.balanced = !self.uniform_sampling;
         config.init = self.init.clone();
         config.loss.bev = self.bev_weight;
+        config.loss.hazard = self.hazard_weight;
         config.future_bev = !self.no_ffp;
         config.validation_fraction = self.validation_fraction;
         config.validate_every = self.validate_every;

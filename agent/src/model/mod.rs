@@ -12,7 +12,7 @@ pub mod config;
 pub mod cpu_kernels;
 pub mod ffp;
 pub mod fused;
-mod init;
+pub(crate) mod init;
 mod norm;
 pub mod sampling;
 pub mod stl;

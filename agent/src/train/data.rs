@@ -26,6 +26,7 @@ use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord};
 
 use super::augment::Photometric;
+use super::hazard::Hazard;
 use super::loss::{BetaTargets, ImitationTargets};
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
@@ -466,6 +467,11 @@ impl Batch {
     /// Why the expert brakes in sample `i`, if it does.
     pub fn brake_reason(&self, i: usize) -> Option<BrakeReason> {
         self.brake_reasons[i]
+    }
+
+    /// What the expert brakes for in each sample: the hazard probe's labels.
+    pub fn hazards(&self) -> Vec<Hazard> {
+        self.brake_reasons.iter().map(|&r| Hazard::of(r)).collect()
     }
 
     fn input(

@@ -6,15 +6,18 @@
 //!   x in [-1, 1] becomes Beta(1 + k v, 1 + k (1 - v)) with v = (x + 1) / 2 (mode v,
 //!   concentration k = [`LossWeights::target_concentration`]);
 //! - speed: L1 of the speed head to speed / 12;
-//! - BEV: MSE of the FFP's predicted BEV to the detached BEV of the future frame.
+//! - BEV: MSE of the FFP's predicted BEV to the detached BEV of the future frame;
+//! - hazard: cross-entropy of the hazard probe ([`super::hazard`]) to what the expert brakes
+//!   for.
 
 use burn::tensor::{Device, Tensor};
 
+use super::hazard::{Hazard, hazard_loss};
 use super::special::{digamma, ln_gamma, ln_gamma_f64};
 use crate::model::float_tensor;
 use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
 
-/// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1).
+/// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1), plus the hazard probe's.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LossWeights {
     /// Weight of the waypoint L1.
@@ -27,6 +30,9 @@ pub struct LossWeights {
     pub speed: f32,
     /// Weight of the future-BEV MSE.
     pub bev: f32,
+    /// Weight of the hazard probe's cross-entropy; 0 = no probe (runs from before it existed).
+    #[serde(default)]
+    pub hazard: f32,
     /// Concentration k of the Beta targets made from the expert's deterministic actions.
     pub target_concentration: f32,
 }
@@ -39,6 +45,7 @@ impl Default for LossWeights {
             future_action: 1.0,
             speed: 0.05,
             bev: 1.0,
+            hazard: 0.5,
             target_concentration: 10.0,
         }
     }
@@ -122,14 +129,18 @@ pub struct Losses {
     pub speed: Tensor<1>,
     /// Future-BEV MSE; `None` without an FFP prediction.
     pub bev: Option<Tensor<1>>,
+    /// Hazard cross-entropy; `None` without a hazard probe.
+    pub hazard: Option<Tensor<1>>,
 }
 
 /// Imitation loss of the head's outputs, plus the BEV loss when a prediction and a future BEV
-/// are given (the future BEV is detached here).
+/// are given (the future BEV is detached here) and the hazard loss when the probe's logits and
+/// the labels are.
 pub fn losses(
     head: &HeadOutput,
     targets: &ImitationTargets,
     bev: Option<(Tensor<3>, Tensor<3>)>,
+    hazard: Option<(Tensor<2>, &[Hazard])>,
     weights: &LossWeights,
 ) -> Losses {
     let waypoints = (head.waypoints.clone() - targets.waypoints.clone())
@@ -154,6 +165,10 @@ pub fn losses(
     if let Some(bev) = &bev {
         total = total + bev.clone().mul_scalar(weights.bev);
     }
+    let hazard = hazard.map(|(logits, labels)| hazard_loss(logits, labels));
+    if let Some(hazard) = &hazard {
+        total = total + hazard.clone().mul_scalar(weights.hazard);
+    }
     Losses {
         total,
         waypoints,
@@ -161,6 +176,7 @@ pub fn losses(
         future_action,
         speed,
         bev,
+        hazard,
     }
 }
 

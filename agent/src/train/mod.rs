@@ -1,11 +1,12 @@
 //! Training: expert datasets to SSR samples ([`data`], [`augment`], [`loader`]), TCP's
-//! imitation losses plus SSR's future-BEV loss ([`loss`]), the loop with AdamW, schedule,
-//! checkpoints and resume ([`run`]), configured by [`config`], and its open-loop validation
-//! metrics ([`validation`]).
+//! imitation losses plus SSR's future-BEV loss and the hazard probe's ([`loss`], [`hazard`]),
+//! the loop with AdamW, schedule, checkpoints and resume ([`run`]), configured by [`config`],
+//! and its open-loop validation metrics ([`validation`]).
 
 pub mod augment;
 pub mod config;
 pub mod data;
+pub mod hazard;
 pub mod loader;
 pub mod loss;
 pub mod run;

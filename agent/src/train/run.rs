@@ -7,7 +7,8 @@
 //! <out>/metrics.jsonl              a line per step ("kind": "step") and per validation
 //! <out>/checkpoints/step-NNNNNN.safetensors   servable checkpoints (config, rig, notes)
 //! <out>/final.safetensors          the last step's weights
-//! <out>/resume/                    weights with parameter ids, AdamW state, progress
+//! <out>/resume/                    weights with parameter ids (and the hazard probe's),
+//!                                  AdamW state, progress
 //! ```
 //! Guarantees: resuming a run continues from its last checkpoint with the same batches,
 //! augmentation and optimiser state, so its loss curve is the one the uninterrupted run would
@@ -31,6 +32,7 @@ use ssrdrive_proto::dataset::DatasetError;
 
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
+use super::hazard::{HazardProbe, HazardProbeConfig, predicted};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
@@ -130,6 +132,9 @@ pub struct StepMetrics {
     pub speed: f32,
     /// Future-BEV MSE; `None` without the FFP.
     pub bev: Option<f32>,
+    /// Hazard cross-entropy; `None` without the hazard probe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hazard: Option<f32>,
     /// Training throughput of this sitting so far, samples per second (validation excluded).
     pub samples_per_s: f64,
 }
@@ -180,6 +185,9 @@ struct Trainer {
     inner: Device,
     /// Always set between steps (taken for the optimiser's update).
     model: Option<SsrModel>,
+    /// The hazard probe when the run trains one (taken for the update like the model); the
+    /// optimiser keeps both modules' state, by parameter id.
+    probe: Option<HazardProbe>,
     optimizer: ModuleOptimizer,
     step: u64,
     metrics: std::fs::File,
@@ -232,6 +240,17 @@ fn initial_weights(
     Ok(weights)
 }
 
+/// The run's hazard probe, fresh; `None` when its loss weight is 0.
+fn new_probe(config: &TrainConfig, device: &Device) -> Option<HazardProbe> {
+    (config.loss.hazard > 0.0).then(|| {
+        HazardProbeConfig {
+            channels: config.model.channels,
+            hidden: config.model.head.hidden_dim,
+        }
+        .init(device)
+    })
+}
+
 fn optimizer_for(config: &TrainConfig) -> ModuleOptimizer {
     let mut adamw = AdamWConfig::new().with_weight_decay(config.weight_decay);
     if config.clip_norm > 0.0 {
@@ -250,7 +269,7 @@ impl Trainer {
         std::fs::create_dir_all(&out).map_err(io_error(&out))?;
         let device = Device::flex().autodiff();
         let metrics_path = out.join("metrics.jsonl");
-        let (config, model, optimizer, step) = if options.resume {
+        let (config, model, probe, optimizer, step) = if options.resume {
             let resume_dir = out.join("resume");
             let progress = read_progress(&out)?;
             let fail = |problem: String| TrainError::Resume {
@@ -265,11 +284,20 @@ impl Trainer {
             model
                 .load_from(&mut store)
                 .map_err(|e| fail(format!("model.bpk: {e}")))?;
+            let mut probe = new_probe(&config, &device);
+            if let Some(probe) = &mut probe {
+                let mut store = BurnpackStore::from_file(resume_dir.join("hazard.bpk"))
+                    .validate(true)
+                    .allow_partial(false);
+                probe
+                    .load_from(&mut store)
+                    .map_err(|e| fail(format!("hazard.bpk: {e}")))?;
+            }
             let record = OptimizerRecord::load(resume_dir.join("optimizer.bpk"))
                 .map_err(|e| fail(format!("optimizer.bpk: {e}")))?;
             let optimizer = optimizer_for(&config).load_record(record);
             keep_metrics_until(&metrics_path, progress.step)?;
-            (config, model, optimizer, progress.step)
+            (config, model, probe, optimizer, progress.step)
         } else {
             config.validate().map_err(TrainError::Config)?;
             device.seed(config.seed);
@@ -283,8 +311,9 @@ impl Trainer {
             )
             .map_err(io_error(&out))?;
             std::fs::write(&metrics_path, b"").map_err(io_error(&metrics_path))?;
+            let probe = new_probe(&config, &device);
             let optimizer = optimizer_for(&config);
-            (config, model, optimizer, 0)
+            (config, model, probe, optimizer, 0)
         };
         let metrics = std::fs::OpenOptions::new()
             .append(true)
@@ -297,6 +326,7 @@ impl Trainer {
             device,
             inner: Device::flex(),
             model: Some(model),
+            probe,
             optimizer,
             step,
             metrics,
@@ -392,8 +422,9 @@ impl Trainer {
     fn optimise(&mut self, batch: &Batch) -> Result<StepMetrics, TrainError> {
         let config = &self.config;
         let frozen = self.model().valid();
-        let (terms, _) = batch_losses(
+        let (terms, _, _) = batch_losses(
             self.model(),
+            self.probe.as_ref(),
             &frozen,
             batch,
             config,
@@ -407,12 +438,17 @@ impl Trainer {
                 value: metrics.loss,
             });
         }
-        let grads = GradientsParams::from_grads(terms.total.backward(), self.model());
+        let mut grads = terms.total.backward();
+        let model_grads = GradientsParams::from_module(&mut grads, self.model());
         let model = self
             .model
             .take()
             .expect("the model is back after every step");
-        self.model = Some(self.optimizer.step(metrics.lr, model, grads));
+        self.model = Some(self.optimizer.step(metrics.lr, model, model_grads));
+        if let Some(probe) = self.probe.take() {
+            let probe_grads = GradientsParams::from_module(&mut grads, &probe);
+            self.probe = Some(self.optimizer.step(metrics.lr, probe, probe_grads));
+        }
         self.step += 1;
         Ok(metrics)
     }
@@ -422,6 +458,7 @@ impl Trainer {
         let config = &self.config;
         let samples = spread(&self.data.validation, config.validation_samples);
         let model = self.model().valid();
+        let probe = self.probe.as_ref().map(|p| p.valid());
         let device = &self.inner;
         let p = config.model.head.pred_len;
         let mut sums = ValidationSums::default();
@@ -429,8 +466,23 @@ impl Trainer {
             let batch = self
                 .data
                 .batch(chunk, &config.model, |_| SampleDraw::default())?;
-            let (terms, head) = batch_losses(&model, &model, &batch, config, device, device);
-            sums.add(&batch, &head, p, float_values(terms.total)[0]);
+            let (terms, head, hazard_logits) = batch_losses(
+                &model,
+                probe.as_ref(),
+                &model,
+                &batch,
+                config,
+                device,
+                device,
+            );
+            let hazards = hazard_logits.map(|logits| predicted(&float_values(logits)));
+            sums.add(
+                &batch,
+                &head,
+                hazards.as_deref(),
+                p,
+                float_values(terms.total)[0],
+            );
         }
         Ok(sums.finish(self.step, p))
     }
@@ -488,6 +540,12 @@ impl Trainer {
         self.model()
             .save_into(&mut store)
             .map_err(|e| fail(e.to_string()))?;
+        if let Some(probe) = &self.probe {
+            let mut store = BurnpackStore::from_file(partial.join("hazard.bpk")).overwrite(true);
+            probe
+                .save_into(&mut store)
+                .map_err(|e| fail(e.to_string()))?;
+        }
         self.optimizer
             .to_record()
             .save(partial.join("optimizer.bpk"))
@@ -507,17 +565,19 @@ impl Trainer {
     }
 }
 
-/// The losses of a batch and the head's output. `context_model` (without gradients, on
-/// `inner`) gives the history BEVs (each from its own history frame, as serving does) and the
-/// FFP's targets; `model` (on `device`) runs the current frames.
+/// The losses of a batch, the head's output and the hazard probe's logits (with a probe).
+/// `context_model` (without gradients, on `inner`) gives the history BEVs (each from its own
+/// history frame, as serving does) and the FFP's targets; `model` (on `device`) runs the
+/// current frames.
 fn batch_losses(
     model: &SsrModel,
+    probe: Option<&HazardProbe>,
     context_model: &SsrModel,
     batch: &Batch,
     config: &TrainConfig,
     inner: &Device,
     device: &Device,
-) -> (Losses, HeadOutput) {
+) -> (Losses, HeadOutput, Option<Tensor<2>>) {
     let b = batch.size;
     let deep = batch.deep_input(&config.model, inner);
     let deep_bev =
@@ -539,9 +599,15 @@ fn batch_losses(
         config.loss.target_concentration,
         device,
     );
+    let hazard_logits = probe.map(|probe| probe.forward(output.scene.tokens.clone()));
+    let hazards = batch.hazards();
+    let hazard = hazard_logits
+        .clone()
+        .map(|logits| (logits, hazards.as_slice()));
     (
-        losses(&output.head, &targets, bev, &config.loss),
+        losses(&output.head, &targets, bev, hazard, &config.loss),
         output.head,
+        hazard_logits,
     )
 }
 
@@ -556,6 +622,7 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
         future_action: value(&terms.future_action),
         speed: value(&terms.speed),
         bev: terms.bev.as_ref().map(value),
+        hazard: terms.hazard.as_ref().map(value),
         samples_per_s: 0.0,
     }
 }

@@ -1,7 +1,8 @@
 //! Open-loop validation metrics over the held-out routes: the loss, the L2 of the planned
 //! waypoints at 1, 2 and 3 s, the control branch's errors, and the same per situation (each
-//! command, and start-ups from standstill), since a mean over a validation set that is half
-//! lane following hides the turns and starts closed-loop driving depends on.
+//! command, start-ups from standstill, and what the expert brakes for), since a mean over a
+//! validation set that is half lane following hides the turns, starts and stops closed-loop
+//! driving depends on; with the hazard probe on, how often it names that cause.
 
 use std::collections::BTreeMap;
 
@@ -9,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use ssrdrive_proto::dataset::BrakeReason;
 
 use super::data::{Batch, SampleRef};
+use super::hazard::Hazard;
 use crate::control::beta::control_from_beta;
 use crate::model::float_values;
 use crate::model::tcp_head::HeadOutput;
@@ -30,6 +32,10 @@ pub struct GroupMetrics {
     pub throttle_mae: f32,
     /// Mean absolute error of the control branch's brake against the expert's.
     pub brake_mae: f32,
+    /// Share of the samples whose cause of braking ([`Hazard`], `clear` included) the hazard
+    /// probe names; `None` in runs without the probe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hazard_accuracy: Option<f32>,
 }
 
 /// Open-loop metrics over the validation routes.
@@ -48,7 +54,8 @@ pub struct ValidationMetrics {
 }
 
 impl ValidationMetrics {
-    /// One line: L2 and steer error over all samples, then the 2 s L2 per situation.
+    /// One line: L2 and steer error over all samples, then the 2 s L2 per situation, then
+    /// the hazard probe's accuracy (with a probe).
     pub fn summary(&self) -> String {
         let per: Vec<String> = self
             .by_situation
@@ -58,8 +65,19 @@ impl ValidationMetrics {
                 format!("{name} {}", l2.map_or("-".into(), |v| format!("{v:.2}")))
             })
             .collect();
+        let probe = self.all.hazard_accuracy.map_or(String::new(), |all| {
+            let lights = self
+                .by_situation
+                .get("brake:light")
+                .and_then(|g| g.hazard_accuracy);
+            format!(
+                "; hazard probe right on {:.0} % ({} of light stops)",
+                100.0 * all,
+                lights.map_or("-".into(), |v| format!("{:.0} %", 100.0 * v))
+            )
+        });
         format!(
-            "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}",
+            "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}{probe}",
             format_l2(&self.all.l2_m),
             self.all.steer_mae,
             per.join(", ")
@@ -92,15 +110,7 @@ pub fn situations(
     if speed < 1.0 && expert_throttle > 0.1 {
         out.push("start");
     }
-    out.extend(brake_reason.map(|reason| match reason {
-        BrakeReason::TrafficLight => "brake:light",
-        BrakeReason::StopSign => "brake:sign",
-        BrakeReason::LaneChange => "brake:lane-change",
-        BrakeReason::Vehicle
-        | BrakeReason::Walker
-        | BrakeReason::Obstacle
-        | BrakeReason::PredictedCollision => "brake:road-user",
-    }));
+    out.extend(Hazard::of(brake_reason).situation());
     out
 }
 
@@ -128,6 +138,8 @@ struct GroupSums {
     steer: f64,
     throttle: f64,
     brake: f64,
+    /// Samples the hazard probe named the cause of (counted only with a probe).
+    hazard_hits: Option<usize>,
 }
 
 impl GroupSums {
@@ -139,6 +151,9 @@ impl GroupSums {
         self.steer += other.steer;
         self.throttle += other.throttle;
         self.brake += other.brake;
+        if let Some(hits) = other.hazard_hits {
+            *self.hazard_hits.get_or_insert(0) += hits;
+        }
     }
 
     fn finish(&self, p: usize) -> GroupMetrics {
@@ -156,6 +171,7 @@ impl GroupSums {
             steer_mae: mean(self.steer),
             throttle_mae: mean(self.throttle),
             brake_mae: mean(self.brake),
+            hazard_accuracy: self.hazard_hits.map(|hits| mean(hits as f64)),
         }
     }
 }
@@ -169,8 +185,16 @@ pub struct ValidationSums {
 }
 
 impl ValidationSums {
-    /// Adds a batch's head output (with `p` waypoints) and mean loss.
-    pub fn add(&mut self, batch: &Batch, head: &HeadOutput, p: usize, loss: f32) {
+    /// Adds a batch's head output (with `p` waypoints), the hazard probe's classes (with a
+    /// probe) and mean loss.
+    pub fn add(
+        &mut self,
+        batch: &Batch,
+        head: &HeadOutput,
+        hazards: Option<&[Hazard]>,
+        p: usize,
+        loss: f32,
+    ) {
         let waypoints = float_values(head.waypoints.clone());
         let alpha = float_values(head.alpha.clone());
         let beta = float_values(head.beta.clone());
@@ -197,6 +221,8 @@ impl ValidationSums {
             one.steer = f64::from((control.steer - expert.steer).abs());
             one.throttle = f64::from((control.throttle - expert.throttle).abs());
             one.brake = f64::from((control.brake - expert.brake).abs());
+            one.hazard_hits =
+                hazards.map(|h| usize::from(h[i] == Hazard::of(batch.brake_reason(i))));
             self.all.accumulate(&one);
             let speed = batch.speed_label(i);
             for group in situations(commands[i], speed, expert.throttle, batch.brake_reason(i)) {
