@@ -11,6 +11,11 @@
 //! - A stop sign is a `<signal>` of type 206 (stop); its stop lines are the ends of the lanes it
 //!   applies to.
 //! - A stop line lies across the end of an incoming lane, where the lane enters the junction.
+//! - A light's head (what cameras see) stands where the file's signal does, its centre
+//!   [`HEAD_HEIGHT`] above the road unless the file mounts it at least [`MIN_MOUNTED_HEIGHT`]
+//!   up ([`mounted_head`]); a placed light's head stands beside the rightmost stop line. Every
+//!   head faces the traffic of its approach: CARLA's exports give the post's yaw, which for
+//!   about half their lights points away from the lanes the light controls.
 
 use std::collections::BTreeMap;
 
@@ -22,6 +27,11 @@ use super::{JunctionIdx, LaneIdx, LaneKind, Map, MapOptions};
 const TRAFFIC_LIGHT_TYPE: &str = "1000001";
 /// OpenDRIVE (German catalogue) signal type for a stop sign.
 const STOP_SIGN_TYPE: &str = "206";
+/// Height of a light head's centre above the road, m: the heads the simulator places, those
+/// of its own towns, and those of files that give only the post's foot.
+const HEAD_HEIGHT: f64 = 3.0;
+/// A traffic-light signal lower than this above the road (m) marks its post's foot, not its head.
+const MIN_MOUNTED_HEIGHT: f64 = 2.0;
 
 /// A stop line across the end of one lane.
 #[derive(Debug, Clone, Copy)]
@@ -98,9 +108,10 @@ pub struct TrafficLight {
     pub approach: usize,
     /// One stop line per incoming lane.
     pub stop_lines: Vec<StopLine>,
-    /// Where the head stands (the file's signal, else beside the rightmost stop line, 3 m up).
+    /// Where the head's centre stands ([`mounted_head`] for a file's signal, else beside the
+    /// rightmost stop line), [`HEAD_HEIGHT`] above the road unless the file mounts it higher.
     pub head: DVec3,
-    /// The direction the head faces (towards the traffic it addresses).
+    /// The direction the head faces: towards the traffic of its approach.
     pub head_yaw: f64,
     /// Whether the map file placed it (false: placed by the simulator).
     pub from_map: bool,
@@ -136,14 +147,14 @@ pub(super) fn derive(
 ) {
     map.junctions = build_junctions(map, junction_ids);
     let file_lights = file_signals(net, TRAFFIC_LIGHT_TYPE, true);
-    let mut heads: BTreeMap<(usize, usize), (DVec3, f64)> = BTreeMap::new();
+    let mut heads: BTreeMap<(usize, usize), DVec3> = BTreeMap::new();
     let lane_of = lane_lookup(&map.lanes, net);
     for signal in &file_lights {
         let lanes: Vec<LaneIdx> = signal.lanes.iter().filter_map(|l| lane_of(*l)).collect();
         for lane in lanes {
             if let Some((j, a)) = approach_of(map, lane) {
-                let head = to_dvec3(signal.position);
-                heads.entry((j, a)).or_insert((head, signal.heading as f64));
+                let head = mounted_head(signal);
+                heads.entry((j, a)).or_insert(head);
                 map.junctions[j].signalized = true;
             }
         }
@@ -168,12 +179,10 @@ pub(super) fn derive(
                 .iter()
                 .map(|&l| StopLine::at_end_of(map, l))
                 .collect();
-            let (head, head_yaw, from_map) = match heads.get(&(j, a)) {
-                Some(&(pos, yaw)) => (pos, yaw, true),
-                None => {
-                    let (pos, yaw) = beside_rightmost(&stop_lines);
-                    (pos, yaw, false)
-                }
+            let (placed, head_yaw) = beside_rightmost(&stop_lines);
+            let (head, from_map) = match heads.get(&(j, a)) {
+                Some(&file) => (file, true),
+                None => (placed, false),
             };
             let id = map.lights.len();
             map.lights.push(TrafficLight {
@@ -206,6 +215,22 @@ pub(super) fn derive(
             position: to_dvec3(signal.position),
             yaw: signal.heading as f64,
         });
+    }
+}
+
+/// Where a file's traffic light shows its lamps. OpenDRIVE puts a signal's bottom edge
+/// `zOffset` above the road, and this simulator's towns write the head 3 m up; CARLA's exports
+/// instead give the foot of the light's post (`zOffset` about -0.55 m, with the 1.16 m housing
+/// as `height`), which drawn as is buries the head under the road, out of every camera's view.
+/// A signal lower than [`MIN_MOUNTED_HEIGHT`] above the road is therefore read as a post's foot
+/// and its head raised to [`HEAD_HEIGHT`] above the road there.
+fn mounted_head(signal: &xodr::Signal) -> DVec3 {
+    let position = to_dvec3(signal.position);
+    let road = signal.applies_at.first().map_or(position.z, |p| p.z as f64);
+    if position.z - road >= MIN_MOUNTED_HEIGHT {
+        position
+    } else {
+        DVec3::new(position.x, position.y, road + HEAD_HEIGHT)
     }
 }
 
@@ -317,7 +342,7 @@ fn build_junctions(map: &Map, junction_ids: Vec<String>) -> Vec<Junction> {
     junctions
 }
 
-/// A head beside the rightmost stop line, 3 m up, facing the traffic.
+/// A head beside the rightmost stop line, [`HEAD_HEIGHT`] up, facing the traffic.
 fn beside_rightmost(lines: &[StopLine]) -> (DVec3, f64) {
     let rightmost = lines
         .iter()
@@ -329,7 +354,7 @@ fn beside_rightmost(lines: &[StopLine]) -> (DVec3, f64) {
     match rightmost {
         Some(s) => {
             let right = -DVec2::from_angle(s.yaw).perp() * (s.half_width + 1.5);
-            let p = s.position + DVec3::new(right.x, right.y, 3.0);
+            let p = s.position + DVec3::new(right.x, right.y, HEAD_HEIGHT);
             (p, s.yaw + std::f64::consts::PI)
         }
         None => (DVec3::ZERO, 0.0),
