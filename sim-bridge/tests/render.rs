@@ -1,6 +1,10 @@
 //! The camera renderer: projection through a rolled, pitched and yawed camera, occlusion
-//! order, traffic-light colours in the pixels, and determinism.
+//! order, traffic-light colours in the pixels, lights seen from their stop lines, and
+//! determinism.
 
+mod common;
+
+use common::lights_unseen_from;
 use glam::{DVec2, DVec3};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::render::{Appearance, CameraRenderer, SceneState};
@@ -214,4 +218,40 @@ fn the_same_seed_renders_the_same_bytes() {
     let canonical = render(&mut renderer, &rig, ego, &[car], &lights);
     assert_eq!(canonical, render(&mut renderer, &rig, ego, &[car], &lights));
     assert_eq!(canonical.len(), 320 * 96 * 3);
+}
+
+/// The bundled towns stand their lights US-style, across the junction: a car waiting at the
+/// stop line sees its light (a head beside the line, as these towns first had, is out of the
+/// camera's view there, so the green could not be seen). T-junction stems keep theirs beside
+/// the line.
+#[test]
+fn a_car_at_the_stop_line_sees_its_light_across_the_junction() {
+    for style in TownStyle::ALL {
+        let map = Map::from_str(style.name(), bundled(style), MapOptions::default()).unwrap();
+        let across: Vec<_> = map
+            .lights
+            .iter()
+            .filter(|l| {
+                let line = l.stop_lines[0];
+                (l.head - line.position)
+                    .truncate()
+                    .dot(DVec2::from_angle(line.yaw))
+                    > 5.0
+            })
+            .collect();
+        assert!(
+            across.len() * 4 > map.lights.len() * 3,
+            "{}: {} of {} across",
+            style.name(),
+            across.len(),
+            map.lights.len()
+        );
+        // The ego's centre 3 m before the line: its front at the line.
+        let unseen = lights_unseen_from(&map, across.into_iter(), 3.0);
+        assert!(
+            unseen.is_empty(),
+            "{}: lights {unseen:?} unseen from their stop line",
+            style.name()
+        );
+    }
 }

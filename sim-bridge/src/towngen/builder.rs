@@ -6,12 +6,10 @@ use glam::DVec2;
 
 use super::elevation::{self, Cubic};
 use super::geometry::{Frame, Path};
-use super::junction::{LaneLink, Leg, default_links};
-use super::model::{
-    Connection, Contact, Controller, Junction, Link, Road, Signal, SignalKind, Town,
-};
+use super::junction::{LaneLink, Leg, default_links, straight_on_from_rightmost};
+use super::model::{Connection, Contact, Controller, Junction, Link, Road, SignalKind, Town};
 use super::profile::{LANE_WIDTH, Profile};
-use super::signals::approach_signal;
+use super::signals::{approach_signal, far_side_light};
 
 /// A junction being declared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -238,7 +236,7 @@ impl TownBuilder {
         }
         let mut controllers = Vec::new();
         for (j, junction) in junctions.iter_mut().enumerate() {
-            let signals = self.place_signals(JunctionId(j), &mut ids, &mut roads);
+            let signals = self.place_signals(JunctionId(j), junction, &mut ids, &mut roads);
             if !signals.is_empty() {
                 let id = ids.take();
                 junction.controller = Some(id);
@@ -340,29 +338,54 @@ impl TownBuilder {
         }
     }
 
-    /// Place junction `j`'s signals on its approaches; the traffic lights'
-    /// ids.
-    fn place_signals(&self, j: JunctionId, ids: &mut Ids, roads: &mut [Road]) -> Vec<u32> {
+    /// Place junction `j`'s signals (see [`super::signals`] for where), given
+    /// its built connecting roads; the traffic lights' ids.
+    fn place_signals(
+        &self,
+        j: JunctionId,
+        junction: &Junction,
+        ids: &mut Ids,
+        roads: &mut [Road],
+    ) -> Vec<u32> {
         let legs = self.legs(j);
-        let (kind, approaches): (SignalKind, Vec<&Leg>) = match &self.junctions[j.0].control {
+        let (kind, approaches): (SignalKind, Vec<usize>) = match &self.junctions[j.0].control {
             Control::Free => return Vec::new(),
             Control::Lights => (
                 SignalKind::TrafficLight,
-                legs.iter().filter(|l| l.n_in() > 0).collect(),
+                (0..legs.len()).filter(|&a| legs[a].n_in() > 0).collect(),
             ),
             Control::Stops(from) => (
                 SignalKind::StopSign,
-                legs.iter()
-                    .filter(|l| from.contains(&RoadId(l.road)))
+                (0..legs.len())
+                    .filter(|&a| from.contains(&RoadId(legs[a].road)))
                     .collect(),
             ),
         };
+        let links = self.links(j, &legs);
         let mut lights = Vec::new();
-        for leg in approaches {
+        for a in approaches {
+            let leg = &legs[a];
             let id = ids.take();
-            let length = self.streets[leg.road].path.length();
-            let signal: Signal = approach_signal(id, kind, leg, length);
-            roads[leg.road].signals.push(signal);
+            let straight_on = straight_on_from_rightmost(&links, &legs, a)
+                .filter(|_| kind == SignalKind::TrafficLight);
+            match straight_on {
+                Some((k, link)) => {
+                    let connecting = junction.connections[k].connecting;
+                    let road = roads
+                        .iter_mut()
+                        .find(|r| r.id == connecting)
+                        .expect("every link has its connecting road");
+                    let length = road.path.length();
+                    road.signals
+                        .push(far_side_light(id, length, &legs[link.to], link.to_lane));
+                }
+                None => {
+                    let length = self.streets[leg.road].path.length();
+                    roads[leg.road]
+                        .signals
+                        .push(approach_signal(id, kind, leg, length));
+                }
+            }
             if kind == SignalKind::TrafficLight {
                 lights.push(id);
             }

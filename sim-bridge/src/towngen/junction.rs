@@ -114,6 +114,19 @@ fn turn(from: &Leg, to: &Leg) -> Turn {
     }
 }
 
+/// The link that carries leg `a`'s rightmost incoming lane straight on, with its index in
+/// `links` (none where the leg only turns, as a T-junction's stem does).
+pub fn straight_on_from_rightmost(
+    links: &[LaneLink],
+    legs: &[Leg],
+    a: usize,
+) -> Option<(usize, LaneLink)> {
+    let n_in = legs[a].n_in();
+    links.iter().copied().enumerate().find(|(_, l)| {
+        l.from == a && l.from_lane == n_in && turn(&legs[a], &legs[l.to]) == Turn::Straight
+    })
+}
+
 /// The default connections of a junction of `legs`:
 ///
 /// - straight on, lane `j` to lane `j`; where the outgoing road has fewer

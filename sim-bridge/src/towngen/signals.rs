@@ -1,8 +1,18 @@
 //! Traffic control: where a junction approach's traffic light or stop sign
-//! stands on its incoming road, and which lanes it governs.
+//! stands, and which lanes it governs.
+//!
+//! Traffic lights stand US-style, as in CARLA's Town03-07 and 10: across the
+//! junction, on the far right corner, where a car waiting at the stop line
+//! still sees them (a head beside the stop line is out of a forward camera's
+//! view there). The signal sits at the end of the connecting road that
+//! carries the approach's rightmost lane straight on, governing that road's
+//! lane, which the simulator traces back to the approach. An approach with no
+//! straight-on connection (a T-junction's stem) and every stop sign stand
+//! just before the junction on the right edge of the incoming road.
 
 use super::junction::Leg;
 use super::model::{Contact, Signal, SignalKind};
+use super::profile::Side;
 
 /// How far before the junction a signal stands, in metres.
 const BEFORE_JUNCTION: f64 = 1.0;
@@ -26,5 +36,21 @@ pub fn approach_signal(id: u32, kind: SignalKind, leg: &Leg, length: f64) -> Sig
         side,
         lanes: (side.od_id(1), side.od_id(n)),
         kind,
+    }
+}
+
+/// The traffic light, across the junction, for the traffic on the connecting road of length
+/// `length` that carries an approach straight on into outgoing lane `to_lane` of leg `to`: at
+/// the road's end, on the far road's right edge.
+pub fn far_side_light(id: u32, length: f64, to: &Leg, to_lane: usize) -> Signal {
+    let side = to.out_side();
+    let edge = to.profile.side_width(side) - to.profile.center_offset(side, to_lane);
+    Signal {
+        id,
+        s: length,
+        t: Side::Right.sign() * edge,
+        side: Side::Right,
+        lanes: (Side::Right.od_id(1), Side::Right.od_id(1)),
+        kind: SignalKind::TrafficLight,
     }
 }

@@ -259,22 +259,28 @@ fn signals_govern_exactly_their_approach_lanes() {
     }
 }
 
-/// The traffic lights and stop signs, and the junctions each leads into.
+/// The junctions the traffic lights or stop signs of `kind` control: the one a governed lane
+/// leads into, or lies in (a light across the junction governs a connecting road).
 fn controlled_junctions(net: &RoadNetwork, kind: &str) -> BTreeSet<String> {
     net.signals()
         .iter()
         .filter(|s| s.kind == kind)
         .flat_map(|s| s.lanes.iter())
-        .flat_map(|&l| net.lane(l).expect("a lane").successors.iter())
-        .filter_map(|&l| junction_of(net, l))
+        .filter_map(|&l| {
+            junction_of(net, l).or_else(|| {
+                let lane = net.lane(l).expect("a lane");
+                lane.successors.iter().find_map(|&n| junction_of(net, n))
+            })
+        })
         .collect()
 }
 
 #[test]
-fn signals_govern_the_incoming_driving_lanes() {
+fn signals_govern_their_approach_and_stand_where_its_drivers_see_them() {
     for style in TownStyle::ALL {
         let (net, _) = load(style);
         assert!(!net.signals().is_empty(), "{}", style.name());
+        let mut far_side = 0;
         for signal in net.signals() {
             let name = style.name();
             assert!(
@@ -290,20 +296,29 @@ fn signals_govern_the_incoming_driving_lanes() {
                     "{name}: signal {:?}",
                     signal.id
                 );
-                assert!(
-                    junction_of(net, id).is_none(),
-                    "{name}: signal inside a junction"
-                );
-                assert!(
-                    lane.successors
-                        .iter()
-                        .all(|&n| junction_of(net, n).is_some()),
-                    "{name}: signal {:?} lane {id:?} doesn't lead into a junction",
-                    signal.id
-                );
-                // At the stop line: level with the lane's end along the
-                // road, at most a road's half width across it.
-                let lane = net.lane(id).expect("a lane");
+                if junction_of(net, id).is_some() {
+                    // A US-style light across the junction: it governs the connecting road its
+                    // approach goes straight on by, entered from that approach's lane.
+                    far_side += 1;
+                    assert_eq!(signal.kind, "1000001", "{name}: a sign inside a junction");
+                    assert!(
+                        lane.predecessors
+                            .iter()
+                            .all(|&p| junction_of(net, p).is_none()),
+                        "{name}: signal {:?} lane {id:?} is not entered from an approach",
+                        signal.id
+                    );
+                } else {
+                    assert!(
+                        lane.successors
+                            .iter()
+                            .all(|&n| junction_of(net, n).is_some()),
+                        "{name}: signal {:?} lane {id:?} doesn't lead into a junction",
+                        signal.id
+                    );
+                }
+                // Level with the lane's end along the road (the stop line, or the far side
+                // of the junction for a connecting road), at most a road's width across it.
                 let t = lane.center.tangents();
                 let along = match lane.direction {
                     Direction::Backward => -t[0],
@@ -324,6 +339,7 @@ fn signals_govern_the_incoming_driving_lanes() {
                 "{name}: board {up} m above the road"
             );
         }
+        assert!(far_side > 0, "{}: no light across a junction", style.name());
     }
 }
 

@@ -1,6 +1,13 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests (each test crate uses some of them).
+#![allow(dead_code)]
 
 use std::path::PathBuf;
+
+use glam::DVec2;
+use sim_bridge::map::{Map, TrafficLight};
+use sim_bridge::render::{Appearance, CameraRenderer, SceneState};
+use sim_bridge::world::state::{EgoState, LightState};
+use ssrdrive_proto::camera::Rig;
 
 /// ../shared/carla beside the checkout, if present; prints a skip notice otherwise (the CARLA
 /// maps and routes are never copied into the repository).
@@ -15,4 +22,43 @@ pub fn carla_dir() -> Option<PathBuf> {
         );
         None
     }
+}
+
+/// The lights of `map` (among `lights`) whose red lamp TCP's camera does not see from `back` m
+/// before the light's first stop line, looking down its lane: more pure-red pixels with the
+/// light red than green, every other light green.
+pub fn lights_unseen_from<'a>(
+    map: &Map,
+    lights: impl Iterator<Item = &'a TrafficLight>,
+    back: f64,
+) -> Vec<usize> {
+    let rig = Rig::tcp();
+    let mut renderer = CameraRenderer::new(map, Appearance::default());
+    let mut unseen = Vec::new();
+    for light in lights {
+        let line = light.stop_lines[0];
+        let ego = EgoState {
+            position: line.position - (DVec2::from_angle(line.yaw) * back).extend(0.0),
+            yaw: line.yaw,
+            speed: 0.0,
+            half_extent: DVec2::new(2.4, 1.0),
+        };
+        let mut red_pixels = |state: LightState| {
+            let mut states = vec![LightState::Green; map.lights.len()];
+            states[light.id] = state;
+            let scene = SceneState {
+                ego,
+                actors: &[],
+                lights: &states,
+            };
+            let rgb = renderer.render(&rig, &scene, 0).remove(0).rgb;
+            rgb.chunks_exact(3)
+                .filter(|p| p[0] > 200 && p[1] < 60 && p[2] < 60)
+                .count()
+        };
+        if red_pixels(LightState::Red) <= red_pixels(LightState::Green) {
+            unseen.push(light.id);
+        }
+    }
+    unseen
 }
