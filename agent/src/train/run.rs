@@ -240,6 +240,23 @@ fn initial_weights(
     Ok(weights)
 }
 
+/// Loads a module's weights, with their parameter ids, from `file` in the resume folder `dir`.
+fn load_weights<M: Module>(module: &mut M, dir: &Path, file: &str) -> Result<(), String> {
+    let mut store = BurnpackStore::from_file(dir.join(file))
+        .validate(true)
+        .allow_partial(false);
+    module
+        .load_from(&mut store)
+        .map(|_| ())
+        .map_err(|e| format!("{file}: {e}"))
+}
+
+/// Saves a module's weights, with their parameter ids, as `file` in the folder `dir`.
+fn save_weights<M: Module>(module: &M, dir: &Path, file: &str) -> Result<(), String> {
+    let mut store = BurnpackStore::from_file(dir.join(file)).overwrite(true);
+    module.save_into(&mut store).map_err(|e| e.to_string())
+}
+
 /// The run's hazard probe, fresh; `None` when its loss weight is 0.
 fn new_probe(config: &TrainConfig, device: &Device) -> Option<HazardProbe> {
     (config.loss.hazard > 0.0).then(|| {
@@ -278,20 +295,10 @@ impl Trainer {
             };
             let config = progress.config;
             let mut model = config.model.init(&device);
-            let mut store = BurnpackStore::from_file(resume_dir.join("model.bpk"))
-                .validate(true)
-                .allow_partial(false);
-            model
-                .load_from(&mut store)
-                .map_err(|e| fail(format!("model.bpk: {e}")))?;
+            load_weights(&mut model, &resume_dir, "model.bpk").map_err(fail)?;
             let mut probe = new_probe(&config, &device);
             if let Some(probe) = &mut probe {
-                let mut store = BurnpackStore::from_file(resume_dir.join("hazard.bpk"))
-                    .validate(true)
-                    .allow_partial(false);
-                probe
-                    .load_from(&mut store)
-                    .map_err(|e| fail(format!("hazard.bpk: {e}")))?;
+                load_weights(probe, &resume_dir, "hazard.bpk").map_err(fail)?;
             }
             let record = OptimizerRecord::load(resume_dir.join("optimizer.bpk"))
                 .map_err(|e| fail(format!("optimizer.bpk: {e}")))?;
@@ -536,15 +543,9 @@ impl Trainer {
             path: partial.clone(),
             source: std::io::Error::other(problem),
         };
-        let mut store = BurnpackStore::from_file(partial.join("model.bpk")).overwrite(true);
-        self.model()
-            .save_into(&mut store)
-            .map_err(|e| fail(e.to_string()))?;
+        save_weights(self.model(), &partial, "model.bpk").map_err(fail)?;
         if let Some(probe) = &self.probe {
-            let mut store = BurnpackStore::from_file(partial.join("hazard.bpk")).overwrite(true);
-            probe
-                .save_into(&mut store)
-                .map_err(|e| fail(e.to_string()))?;
+            save_weights(probe, &partial, "hazard.bpk").map_err(fail)?;
         }
         self.optimizer
             .to_record()
