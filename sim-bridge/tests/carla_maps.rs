@@ -5,6 +5,7 @@ mod common;
 
 use common::{carla_dir, lights_unseen_from};
 use sim_bridge::map::{LaneKind, Map, MapOptions};
+use ssrdrive_proto::camera::Rig;
 
 #[test]
 fn carla_towns_load_with_lights_and_a_connected_lane_graph() {
@@ -60,10 +61,20 @@ fn carla_light_heads_stand_above_the_road_and_show_their_state_on_the_approach()
             let towards = (light.head_yaw - (line.yaw + std::f64::consts::PI)).cos();
             assert!(towards > 0.5, "{town} light {}: faces away", light.id);
         }
-        let unseen = lights_unseen_from(&map, map.lights.iter(), 12.0);
+        let unseen = lights_unseen_from(&map, &Rig::tcp(), map.lights.iter(), 12.0);
         assert!(
             unseen.is_empty(),
             "{town}: lights {unseen:?} show no red lamp 12 m before their stop line"
+        );
+        // The model's 320x96 camera from 30 m, where braking starts: the lamps are under a
+        // pixel there and show through their bloom. A few heads stand behind a bend or behind
+        // another head from there (Town04 has three).
+        let unseen = lights_unseen_from(&map, &Rig::tcp_small(), map.lights.iter(), 30.0);
+        assert!(
+            unseen.len() * 10 <= map.lights.len(),
+            "{town}: lights {unseen:?} of {} show no red lamp to the small camera 30 m before \
+             their stop line",
+            map.lights.len()
         );
     }
 }

@@ -57,7 +57,19 @@ pub fn push_actor(out: &mut Vec<Tri>, actor: &ActorView, app: &Appearance, eye: 
 }
 
 /// Add the three lamps of a light head: the one for `state` lit, the others dark.
-pub fn push_lamps(out: &mut Vec<Tri>, head: &LightHead, state: LightState, app: &Appearance) {
+///
+/// The lit lamp blooms, as an emissive light does through a camera (CARLA's RGB camera has
+/// bloom on by default): it is drawn at least `bloom` metres in radius, as a disc facing the eye
+/// at `eye` and set that far toward it, so its own housing never hides it. The caller sizes
+/// `bloom` to a few pixels, which keeps a distant lamp from falling between pixel centres.
+pub fn push_lamps(
+    out: &mut Vec<Tri>,
+    head: &LightHead,
+    state: LightState,
+    app: &Appearance,
+    eye: Vec2,
+    bloom: f32,
+) {
     let lit = match state {
         LightState::Red => 0,
         LightState::Yellow => 1,
@@ -69,11 +81,17 @@ pub fn push_lamps(out: &mut Vec<Tri>, head: &LightHead, state: LightState, app: 
         Vec3::new(0.1, 1.0, 0.35),
     ];
     for (k, (&centre, colour)) in head.lamps.iter().zip(colours).enumerate() {
-        let shown = if k == lit {
-            app.emissive(colour)
-        } else {
-            app.emissive(colour * 0.18)
-        };
-        push_vertical_disc(out, centre, head.facing, LAMP_RADIUS, 8, shown);
+        if k != lit {
+            let dark = app.emissive(colour * 0.18);
+            push_vertical_disc(out, centre, head.facing, LAMP_RADIUS, 8, dark);
+        }
+    }
+    let (centre, colour) = (head.lamps[lit], app.emissive(colours[lit]));
+    if bloom > LAMP_RADIUS {
+        let toward_eye = (eye - centre.truncate()).normalize_or(head.facing);
+        let centre = centre + (toward_eye * bloom).extend(0.0);
+        push_vertical_disc(out, centre, toward_eye, bloom, 8, colour);
+    } else {
+        push_vertical_disc(out, centre, head.facing, LAMP_RADIUS, 8, colour);
     }
 }

@@ -4,8 +4,8 @@
 //! Each frame starts from a precomputed sky-and-terrain background (it depends only on the
 //! camera's pitch and roll, since the ego stays level), then draws the static scene within
 //! [`DRAW_DISTANCE`] and the field of view, then the actors within [`ACTOR_DISTANCE`] and the
-//! traffic-light lamps, all with a depth test; sensor noise, if the appearance asks for it,
-//! comes last. The projection is exactly [`CameraSpec::project`]'s.
+//! traffic-light lamps (the lit one blooming to [`LAMP_BLOOM_PIXELS`]), all with a depth test;
+//! sensor noise, if the appearance asks for it, comes last. The projection is exactly [`CameraSpec::project`]'s.
 
 use glam::{DVec3, Vec3};
 use ssrdrive_proto::camera::{CameraSpec, Rig};
@@ -24,6 +24,11 @@ use crate::world::state::{EgoState, LightState};
 pub const DRAW_DISTANCE: f32 = 150.0;
 /// How far actors are drawn, metres.
 pub const ACTOR_DISTANCE: f32 = 100.0;
+/// Radius, in pixels, that a lit traffic-light lamp seen head-on covers at any distance (its
+/// bloom; less toward the side, with the cosine of the angle off its axis): a 0.13 m lamp is
+/// under a pixel across beyond about 35 m at 320 pixels and 100 degrees, where a point-sampled
+/// lamp would flicker in and out between pixel centres.
+pub const LAMP_BLOOM_PIXELS: f32 = 1.2;
 
 /// What a camera sees of the world at one instant.
 #[derive(Debug, Clone, Copy)]
@@ -111,12 +116,16 @@ impl CameraRenderer {
         }
         for head in &self.scene.heads {
             let toward_eye = eye - head.lamps[1].truncate();
+            let distance = toward_eye.length();
+            // The cosine of the eye's angle off the lamps' axis: their glow fades toward the side.
+            let on_axis = toward_eye.dot(head.facing) / distance;
             let state = state.lights.get(head.light).copied();
             if let Some(light) = state
-                && toward_eye.length() <= DRAW_DISTANCE
-                && toward_eye.dot(head.facing) > 0.0
+                && distance <= DRAW_DISTANCE
+                && on_axis > 0.0
             {
-                push_lamps(&mut self.dynamic, head, light, &self.appearance);
+                let bloom = LAMP_BLOOM_PIXELS * on_axis * distance / camera.focal();
+                push_lamps(&mut self.dynamic, head, light, &self.appearance, eye, bloom);
             }
         }
         for t in &self.dynamic {

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use glam::DVec2;
-use sim_bridge::map::{Map, TrafficLight};
+use sim_bridge::map::{LaneIdx, LanePose, Map, TrafficLight};
 use sim_bridge::render::{Appearance, CameraRenderer, SceneState};
 use sim_bridge::world::state::{EgoState, LightState};
 use ssrdrive_proto::camera::Rig;
@@ -24,22 +24,23 @@ pub fn carla_dir() -> Option<PathBuf> {
     }
 }
 
-/// The lights of `map` (among `lights`) whose red lamp TCP's camera does not see from `back` m
-/// before the light's first stop line, looking down its lane: more pure-red pixels with the
-/// light red than green, every other light green.
+/// The lights of `map` (among `lights`) whose red lamp the front camera of `rig` does not see
+/// from `back` m before the light's first stop line, on its lane (followed back through first
+/// predecessors) and looking along it: more pure-red pixels with the light red than green,
+/// every other light green.
 pub fn lights_unseen_from<'a>(
     map: &Map,
+    rig: &Rig,
     lights: impl Iterator<Item = &'a TrafficLight>,
     back: f64,
 ) -> Vec<usize> {
-    let rig = Rig::tcp();
     let mut renderer = CameraRenderer::new(map, Appearance::default());
     let mut unseen = Vec::new();
     for light in lights {
-        let line = light.stop_lines[0];
+        let pose = upstream(map, light.stop_lines[0].lane, back);
         let ego = EgoState {
-            position: line.position - (DVec2::from_angle(line.yaw) * back).extend(0.0),
-            yaw: line.yaw,
+            position: pose.position,
+            yaw: pose.yaw,
             speed: 0.0,
             half_extent: DVec2::new(2.4, 1.0),
         };
@@ -51,7 +52,7 @@ pub fn lights_unseen_from<'a>(
                 actors: &[],
                 lights: &states,
             };
-            let rgb = renderer.render(&rig, &scene, 0).remove(0).rgb;
+            let rgb = renderer.render(rig, &scene, 0).remove(0).rgb;
             rgb.chunks_exact(3)
                 .filter(|p| p[0] > 200 && p[1] < 60 && p[2] < 60)
                 .count()
@@ -61,4 +62,19 @@ pub fn lights_unseen_from<'a>(
         }
     }
     unseen
+}
+
+/// The pose `back` m before the end of `lane`, following first predecessors (or the start of
+/// the first lane that has none).
+fn upstream(map: &Map, mut lane: LaneIdx, mut back: f64) -> LanePose {
+    loop {
+        let l = map.lane(lane);
+        match l.predecessors.first() {
+            Some(&previous) if back > l.length() => {
+                back -= l.length();
+                lane = previous;
+            }
+            _ => return l.pose_at((l.length() - back).max(0.0)),
+        }
+    }
 }
