@@ -5,7 +5,8 @@
 //! camera's pitch and roll, since the ego stays level), then draws the static scene within
 //! [`DRAW_DISTANCE`] and the field of view, then the actors within [`ACTOR_DISTANCE`] and the
 //! traffic-light lamps (the lit one blooming to [`LAMP_BLOOM_PIXELS`]), all with a depth test;
-//! sensor noise, if the appearance asks for it, comes last. The projection is exactly [`CameraSpec::project`]'s.
+//! sensor noise, if the appearance asks for it, comes last. The projection is exactly
+//! [`CameraSpec::project`]'s.
 
 use glam::{DVec3, Vec3};
 use ssrdrive_proto::camera::{CameraSpec, Rig};
