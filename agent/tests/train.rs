@@ -171,9 +171,9 @@ fn validation_situations_follow_the_command_start_ups_and_brake_causes() {
 }
 
 #[test]
-fn balanced_sampling_favours_starts_slowing_turns_recoveries_and_the_learners_states() {
+fn balanced_sampling_favours_starts_slowing_light_waits_turns_recoveries_and_the_learners_states() {
     use ssr_agent::train::data::sampling_weight;
-    use ssrdrive_proto::dataset::FrameRecord;
+    use ssrdrive_proto::dataset::{BrakeReason, FrameRecord};
     let record = |speed: f64, throttle: f32, brake: f32, command: i32, noise: bool| {
         let mut f: FrameRecord = serde_json::from_str(
             r#"{"index":0,"tick":0,"time":0,"speed":0,"position":[0,0,0],"yaw":0,"command":4,
@@ -194,6 +194,12 @@ fn balanced_sampling_favours_starts_slowing_turns_recoveries_and_the_learners_st
     };
     let cruising = frame(8.0, 0.5, 0.0, 4, false);
     let standing = frame(0.0, 0.0, 1.0, 4, false);
+    let mut at_red = record(0.0, 0.0, 1.0, 4, false);
+    at_red.brake_reason = Some(BrakeReason::TrafficLight);
+    assert!(
+        sampling_weight(&at_red, false) > standing,
+        "waiting at a red light"
+    );
     let slowing = frame(6.0, 0.0, 0.5, 4, false);
     let starting = frame(0.5, 0.6, 0.0, 4, false);
     assert!(standing < cruising, "{standing} vs {cruising}");

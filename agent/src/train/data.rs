@@ -380,19 +380,22 @@ impl TrainingData {
 pub const LEARNER_DROVE_WEIGHT: f32 = 3.0;
 
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying
-/// still) is a fifth of the data and teaches little, so it is drawn a third as often; starting
-/// from standstill, slowing down for a light, a sign or a road user, turns, lane changes and
-/// perturbed frames (recoveries) are rare and decide closed-loop driving, so they are drawn more
-/// often, and so are the frames of episodes the learner drove ([`LEARNER_DROVE_WEIGHT`]).
+/// still) is a fifth of the data and teaches little, so it is drawn a third as often, except
+/// waiting at a red light, the frames that pair with the starts at green to teach the lamp;
+/// starting from standstill, slowing down for a light, a sign or a road user, turns, lane
+/// changes and perturbed frames (recoveries) are rare and decide closed-loop driving, so they
+/// are drawn more often, and so are the frames of episodes the learner drove
+/// ([`LEARNER_DROVE_WEIGHT`]).
 pub fn sampling_weight(frame: &FrameRecord, learner_drove: bool) -> f32 {
     let still = frame.speed < 0.1;
     let starting = frame.speed < 1.0 && frame.control.throttle > 0.1;
     let slowing = !still && frame.control.brake > 0.0;
+    let at_light = frame.brake_reason == Some(BrakeReason::TrafficLight);
     let mut weight: f32 = if starting {
         3.0
     } else if slowing {
         2.0
-    } else if still {
+    } else if still && !at_light {
         0.3
     } else {
         1.0
