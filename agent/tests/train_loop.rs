@@ -210,7 +210,7 @@ fn resuming_redraws_the_same_loss_curve() {
 }
 
 #[test]
-fn the_hazard_probe_resumes_with_the_run_and_can_be_left_out() {
+fn the_probes_resume_with_the_run_and_can_be_left_out() {
     let _rng = device_rng();
     let tmp = Scratch::new();
     let data = tmp.fixture("probe");
@@ -224,28 +224,53 @@ fn the_hazard_probe_resumes_with_the_run_and_can_be_left_out() {
         ..options(&data, out)
     };
 
-    // Without its saved probe the run cannot go on as it was: the error names the file.
-    let lost = tmp.dir("probe-lost");
-    train(config.clone(), stop_at(&lost), open(&data, &config)).unwrap();
-    std::fs::remove_file(lost.join("resume/hazard.bpk")).unwrap();
-    let error = train(config.clone(), resume(&lost), open(&data, &config))
-        .err()
-        .unwrap();
+    // Both probes train by default: their losses are logged and validation reports them.
+    let out = tmp.dir("probe-on");
+    let done = train(config.clone(), options(&data, &out), open(&data, &config)).unwrap();
     assert!(
-        matches!(error, TrainError::Resume { .. }) && error.to_string().contains("hazard.bpk"),
-        "{error}"
+        step_lines(&out).iter().all(|s| {
+            s.hazard.is_some_and(f32::is_finite) && s.occupancy.is_some_and(|v| v > 0.0)
+        })
     );
+    let validation = done.validation.unwrap();
+    assert!(validation.all.hazard_accuracy.is_some());
+    assert!(
+        validation.occupancy_iou.contains_key("vehicle"),
+        "{validation:?}"
+    );
+
+    // Without a saved probe the run cannot go on as it was: the error names the file.
+    for file in ["hazard.bpk", "occupancy.bpk"] {
+        let lost = tmp.dir(&format!("probe-lost-{file}"));
+        train(config.clone(), stop_at(&lost), open(&data, &config)).unwrap();
+        std::fs::remove_file(lost.join("resume").join(file)).unwrap();
+        let error = train(config.clone(), resume(&lost), open(&data, &config))
+            .err()
+            .unwrap();
+        assert!(
+            matches!(error, TrainError::Resume { .. }) && error.to_string().contains(file),
+            "{error}"
+        );
+    }
 
     // Weight 0: no probe, no probe loss, nothing saved for it; the run still resumes.
     let mut plain = config.clone();
     plain.loss.hazard = 0.0;
+    plain.loss.occupancy = 0.0;
     let out = tmp.dir("probe-off");
     train(plain.clone(), stop_at(&out), open(&data, &plain)).unwrap();
     assert!(!out.join("resume/hazard.bpk").exists());
+    assert!(!out.join("resume/occupancy.bpk").exists());
     let done = train(plain.clone(), resume(&out), open(&data, &plain)).unwrap();
     assert_eq!(done.steps_done, 4);
-    assert!(step_lines(&out).iter().all(|s| s.hazard.is_none()));
-    assert_eq!(done.validation.unwrap().all.hazard_accuracy, None);
+    assert!(
+        step_lines(&out)
+            .iter()
+            .all(|s| s.hazard.is_none() && s.occupancy.is_none())
+    );
+    let validation = done.validation.unwrap();
+    assert_eq!(validation.all.hazard_accuracy, None);
+    assert!(validation.occupancy_iou.is_empty());
 }
 
 #[test]

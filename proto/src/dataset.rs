@@ -98,6 +98,42 @@ pub struct FrameRecord {
     pub future_complete: bool,
     /// Image files relative to the episode folder, in rig order.
     pub images: Vec<String>,
+    /// The road users and obstacles within [`ACTOR_RANGE`] of the ego (privileged ground
+    /// truth, a training aid: BEV occupancy targets). `None` in datasets recorded before it
+    /// existed, which is not the same as none near.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actors: Option<Vec<ActorRecord>>,
+}
+
+/// How far from the ego's centre [`FrameRecord::actors`] reaches, m (the default BEV's corners
+/// are 47 m away).
+pub const ACTOR_RANGE: f64 = 50.0;
+
+/// What a recorded actor is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActorClass {
+    /// A car, moving or parked.
+    Vehicle,
+    /// A cyclist.
+    Cyclist,
+    /// A pedestrian.
+    Walker,
+    /// A static prop or obstacle.
+    Static,
+}
+
+/// An actor's ground box in the ego frame of a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ActorRecord {
+    /// What it is.
+    pub class: ActorClass,
+    /// Box centre, ego frame (x forward, y left), m.
+    pub centre: [f64; 2],
+    /// Heading of the box's length axis relative to the ego's, rad counter-clockwise.
+    pub yaw: f64,
+    /// Half length and half width, m.
+    pub half: [f64; 2],
 }
 
 /// Noise injection: now and then the executed control is pushed off the expert's for a short

@@ -16,7 +16,7 @@ use sim_bridge::towngen::bundled;
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::{Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
+use ssrdrive_proto::dataset::{ACTOR_RANGE, Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
 
 fn small_town() -> (Map, RouteSet) {
     let set = RouteSet::find("train-small").expect("bundled set");
@@ -115,6 +115,20 @@ fn a_collection_reads_back_with_consistent_futures() {
     }
     assert_eq!(total, m.frames);
     assert!(noisy > 0, "noise at 0.5 per second must show up");
+    // Every frame records the actors around the ego (its BEV occupancy labels), within range.
+    let mut near = 0;
+    for entry in &m.episode_list {
+        for frame in data.frames(&entry.name).unwrap() {
+            let actors = frame.actors.expect("every frame records its actors");
+            for actor in &actors {
+                let [x, y] = actor.centre;
+                assert!(x.hypot(y) <= ACTOR_RANGE + 1e-6, "{actor:?}");
+                assert!(actor.half[0] > 0.0 && actor.half[1] > 0.0, "{actor:?}");
+            }
+            near += actors.len();
+        }
+    }
+    assert!(near > 0, "the town's traffic is somewhere near");
 }
 
 /// The expert with a camera, keeping every frame it is shown at 2 Hz.

@@ -91,6 +91,11 @@ pub struct TrainArgs {
     /// for (a light, a sign, a road user, a lane change) from the scene tokens; 0 = no probe.
     #[arg(long, default_value_t = 0.5)]
     hazard_weight: f32,
+    /// Weight of the occupancy probe's loss: a training-only per-cell classifier of where the
+    /// road users are, from the BEV (labels: the actors each frame records; frames of datasets
+    /// from before that are left out of it); 0 = no probe.
+    #[arg(long, default_value_t = 1.0)]
+    occupancy_weight: f32,
     /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
     #[arg(long)]
     no_stl: bool,
@@ -162,6 +167,7 @@ impl TrainArgs {
         config.init = self.init.clone();
         config.loss.bev = self.bev_weight;
         config.loss.hazard = self.hazard_weight;
+        config.loss.occupancy = self.occupancy_weight;
         config.future_bev = !self.no_ffp;
         config.validation_fraction = self.validation_fraction;
         config.validate_every = self.validate_every;

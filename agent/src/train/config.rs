@@ -155,6 +155,7 @@ impl TrainConfig {
             ("clip_norm", self.clip_norm),
             ("augment", self.augment),
             ("loss.hazard", self.loss.hazard),
+            ("loss.occupancy", self.loss.occupancy),
         ];
         if let Some((field, value)) = finite.iter().find(|(_, v)| !v.is_finite() || *v < 0.0) {
             return Err(format!("{field} must be finite and >= 0, got {value}"));

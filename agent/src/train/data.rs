@@ -23,7 +23,9 @@ use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::{BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord};
+use ssrdrive_proto::dataset::{
+    ActorRecord, BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord,
+};
 
 use super::augment::Photometric;
 use super::hazard::Hazard;
@@ -367,6 +369,7 @@ impl TrainingData {
             }
             batch.expert.push(now.control);
             batch.brake_reasons.push(now.brake_reason);
+            batch.actors.push(now.actors.clone());
         }
         batch.context_images.append(&mut future_images);
         batch.context_geometry.append(&mut future_geometry);
@@ -454,6 +457,8 @@ pub struct Batch {
     pub expert: Vec<Control>,
     /// Why the expert brakes now, if it does.
     brake_reasons: Vec<Option<BrakeReason>>,
+    /// The actors around the ego now (`None`: the frame records none).
+    actors: Vec<Option<Vec<ActorRecord>>>,
 }
 
 impl Batch {
@@ -475,6 +480,11 @@ impl Batch {
     /// What the expert brakes for in each sample: the hazard probe's labels.
     pub fn hazards(&self) -> Vec<Hazard> {
         self.brake_reasons.iter().map(|&r| Hazard::of(r)).collect()
+    }
+
+    /// The actors around the ego in each sample: the occupancy probe's labels.
+    pub fn actors(&self) -> &[Option<Vec<ActorRecord>>] {
+        &self.actors
     }
 
     fn input(

@@ -8,16 +8,17 @@
 //! - speed: L1 of the speed head to speed / 12;
 //! - BEV: MSE of the FFP's predicted BEV to the detached BEV of the future frame;
 //! - hazard: cross-entropy of the hazard probe ([`super::hazard`]) to what the expert brakes
-//!   for.
+//!   for;
+//! - occupancy: balanced binary cross-entropy of the occupancy probe ([`super::occupancy`]) to
+//!   the cells road users cover.
 
 use burn::tensor::{Device, Tensor};
 
-use super::hazard::{Hazard, hazard_loss};
 use super::special::{digamma, ln_gamma, ln_gamma_f64};
 use crate::model::float_tensor;
 use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
 
-/// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1), plus the hazard probe's.
+/// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1), plus the probes'.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LossWeights {
     /// Weight of the waypoint L1.
@@ -33,6 +34,10 @@ pub struct LossWeights {
     /// Weight of the hazard probe's cross-entropy; 0 = no probe (runs from before it existed).
     #[serde(default)]
     pub hazard: f32,
+    /// Weight of the occupancy probe's cross-entropy; 0 = no probe (runs from before it
+    /// existed).
+    #[serde(default)]
+    pub occupancy: f32,
     /// Concentration k of the Beta targets made from the expert's deterministic actions.
     pub target_concentration: f32,
 }
@@ -46,6 +51,7 @@ impl Default for LossWeights {
             speed: 0.05,
             bev: 1.0,
             hazard: 0.5,
+            occupancy: 1.0,
             target_concentration: 10.0,
         }
     }
@@ -131,16 +137,26 @@ pub struct Losses {
     pub bev: Option<Tensor<1>>,
     /// Hazard cross-entropy; `None` without a hazard probe.
     pub hazard: Option<Tensor<1>>,
+    /// Occupancy cross-entropy; `None` without an occupancy probe.
+    pub occupancy: Option<Tensor<1>>,
+}
+
+/// The training-only probes' losses on a batch, each `None` without its probe.
+#[derive(Debug, Clone, Default)]
+pub struct ProbeLosses {
+    /// The hazard probe's cross-entropy.
+    pub hazard: Option<Tensor<1>>,
+    /// The occupancy probe's cross-entropy.
+    pub occupancy: Option<Tensor<1>>,
 }
 
 /// Imitation loss of the head's outputs, plus the BEV loss when a prediction and a future BEV
-/// are given (the future BEV is detached here) and the hazard loss when the probe's logits and
-/// the labels are.
+/// are given (the future BEV is detached here) and the probes' losses, weighted.
 pub fn losses(
     head: &HeadOutput,
     targets: &ImitationTargets,
     bev: Option<(Tensor<3>, Tensor<3>)>,
-    hazard: Option<(Tensor<2>, &[Hazard])>,
+    probes: ProbeLosses,
     weights: &LossWeights,
 ) -> Losses {
     let waypoints = (head.waypoints.clone() - targets.waypoints.clone())
@@ -165,9 +181,11 @@ pub fn losses(
     if let Some(bev) = &bev {
         total = total + bev.clone().mul_scalar(weights.bev);
     }
-    let hazard = hazard.map(|(logits, labels)| hazard_loss(logits, labels));
-    if let Some(hazard) = &hazard {
-        total = total + hazard.clone().mul_scalar(weights.hazard);
+    let ProbeLosses { hazard, occupancy } = probes;
+    for (term, weight) in [(&hazard, weights.hazard), (&occupancy, weights.occupancy)] {
+        if let Some(term) = term {
+            total = total + term.clone().mul_scalar(weight);
+        }
     }
     Losses {
         total,
@@ -177,6 +195,7 @@ pub fn losses(
         speed,
         bev,
         hazard,
+        occupancy,
     }
 }
 

@@ -1,5 +1,6 @@
 //! Training: expert datasets to SSR samples ([`data`], [`augment`], [`loader`]), TCP's
-//! imitation losses plus SSR's future-BEV loss and the hazard probe's ([`loss`], [`hazard`]),
+//! imitation losses plus SSR's future-BEV loss and the training-only probes' ([`loss`],
+//! [`probes`]: [`hazard`], [`occupancy`]),
 //! the loop with AdamW, schedule, checkpoints and resume ([`run`]), configured by [`config`],
 //! and its open-loop validation metrics ([`validation`]).
 
@@ -9,6 +10,8 @@ pub mod data;
 pub mod hazard;
 pub mod loader;
 pub mod loss;
+pub mod occupancy;
+pub mod probes;
 pub mod run;
 pub mod special;
 pub mod validation;

@@ -7,8 +7,8 @@
 //! <out>/metrics.jsonl              a line per step ("kind": "step") and per validation
 //! <out>/checkpoints/step-NNNNNN.safetensors   servable checkpoints (config, rig, notes)
 //! <out>/final.safetensors          the last step's weights
-//! <out>/resume/                    weights with parameter ids (and the hazard probe's),
-//!                                  AdamW state, progress
+//! <out>/resume/                    weights with parameter ids (and the probes', see
+//!                                  [`super::probes`]), AdamW state, progress
 //! ```
 //! Guarantees: resuming a run continues from its last checkpoint with the same batches,
 //! augmentation and optimiser state, so its loss curve is the one the uninterrupted run would
@@ -25,16 +25,17 @@ use burn::optim::{
     AdamWConfig, GradientsParams, ModuleOptimizer, OptimizerRecord,
     grad_clipping::GradientClippingConfig,
 };
-use burn::store::{BurnpackStore, ModuleSnapshot};
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::dataset::DatasetError;
 
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
-use super::hazard::{HazardProbe, HazardProbeConfig, predicted};
+use super::hazard::predicted;
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
+use super::occupancy::overlap_counts;
+use super::probes::{ProbeOutputs, Probes, load_weights, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::ControlConfig;
@@ -135,6 +136,9 @@ pub struct StepMetrics {
     /// Hazard cross-entropy; `None` without the hazard probe.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hazard: Option<f32>,
+    /// Occupancy cross-entropy; `None` without the occupancy probe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub occupancy: Option<f32>,
     /// Training throughput of this sitting so far, samples per second (validation excluded).
     pub samples_per_s: f64,
 }
@@ -185,9 +189,9 @@ struct Trainer {
     inner: Device,
     /// Always set between steps (taken for the optimiser's update).
     model: Option<SsrModel>,
-    /// The hazard probe when the run trains one (taken for the update like the model); the
-    /// optimiser keeps both modules' state, by parameter id.
-    probe: Option<HazardProbe>,
+    /// The probes the run trains (taken for the update like the model); the optimiser keeps
+    /// both modules' state, by parameter id. Always set between steps.
+    probes: Option<Probes>,
     optimizer: ModuleOptimizer,
     step: u64,
     metrics: std::fs::File,
@@ -240,34 +244,6 @@ fn initial_weights(
     Ok(weights)
 }
 
-/// Loads a module's weights, with their parameter ids, from `file` in the resume folder `dir`.
-fn load_weights<M: Module>(module: &mut M, dir: &Path, file: &str) -> Result<(), String> {
-    let mut store = BurnpackStore::from_file(dir.join(file))
-        .validate(true)
-        .allow_partial(false);
-    module
-        .load_from(&mut store)
-        .map(|_| ())
-        .map_err(|e| format!("{file}: {e}"))
-}
-
-/// Saves a module's weights, with their parameter ids, as `file` in the folder `dir`.
-fn save_weights<M: Module>(module: &M, dir: &Path, file: &str) -> Result<(), String> {
-    let mut store = BurnpackStore::from_file(dir.join(file)).overwrite(true);
-    module.save_into(&mut store).map_err(|e| e.to_string())
-}
-
-/// The run's hazard probe, fresh; `None` when its loss weight is 0.
-fn new_probe(config: &TrainConfig, device: &Device) -> Option<HazardProbe> {
-    (config.loss.hazard > 0.0).then(|| {
-        HazardProbeConfig {
-            channels: config.model.channels,
-            hidden: config.model.head.hidden_dim,
-        }
-        .init(device)
-    })
-}
-
 fn optimizer_for(config: &TrainConfig) -> ModuleOptimizer {
     let mut adamw = AdamWConfig::new().with_weight_decay(config.weight_decay);
     if config.clip_norm > 0.0 {
@@ -286,7 +262,7 @@ impl Trainer {
         std::fs::create_dir_all(&out).map_err(io_error(&out))?;
         let device = Device::flex().autodiff();
         let metrics_path = out.join("metrics.jsonl");
-        let (config, model, probe, optimizer, step) = if options.resume {
+        let (config, model, probes, optimizer, step) = if options.resume {
             let resume_dir = out.join("resume");
             let progress = read_progress(&out)?;
             let fail = |problem: String| TrainError::Resume {
@@ -296,15 +272,13 @@ impl Trainer {
             let config = progress.config;
             let mut model = config.model.init(&device);
             load_weights(&mut model, &resume_dir, "model.bpk").map_err(fail)?;
-            let mut probe = new_probe(&config, &device);
-            if let Some(probe) = &mut probe {
-                load_weights(probe, &resume_dir, "hazard.bpk").map_err(fail)?;
-            }
+            let mut probes = Probes::new(&config, &device);
+            probes.load(&resume_dir).map_err(fail)?;
             let record = OptimizerRecord::load(resume_dir.join("optimizer.bpk"))
                 .map_err(|e| fail(format!("optimizer.bpk: {e}")))?;
             let optimizer = optimizer_for(&config).load_record(record);
             keep_metrics_until(&metrics_path, progress.step)?;
-            (config, model, probe, optimizer, progress.step)
+            (config, model, probes, optimizer, progress.step)
         } else {
             config.validate().map_err(TrainError::Config)?;
             device.seed(config.seed);
@@ -318,9 +292,9 @@ impl Trainer {
             )
             .map_err(io_error(&out))?;
             std::fs::write(&metrics_path, b"").map_err(io_error(&metrics_path))?;
-            let probe = new_probe(&config, &device);
+            let probes = Probes::new(&config, &device);
             let optimizer = optimizer_for(&config);
-            (config, model, probe, optimizer, 0)
+            (config, model, probes, optimizer, 0)
         };
         let metrics = std::fs::OpenOptions::new()
             .append(true)
@@ -333,7 +307,7 @@ impl Trainer {
             device,
             inner: Device::flex(),
             model: Some(model),
-            probe,
+            probes: Some(probes),
             optimizer,
             step,
             metrics,
@@ -345,6 +319,12 @@ impl Trainer {
         self.model
             .as_ref()
             .expect("the model is back after every step")
+    }
+
+    fn probes(&self) -> &Probes {
+        self.probes
+            .as_ref()
+            .expect("the probes are back after every step")
     }
 
     fn log(&mut self, line: &MetricsLine) -> Result<(), TrainError> {
@@ -431,7 +411,7 @@ impl Trainer {
         let frozen = self.model().valid();
         let (terms, _, _) = batch_losses(
             self.model(),
-            self.probe.as_ref(),
+            self.probes(),
             &frozen,
             batch,
             config,
@@ -452,10 +432,12 @@ impl Trainer {
             .take()
             .expect("the model is back after every step");
         self.model = Some(self.optimizer.step(metrics.lr, model, model_grads));
-        if let Some(probe) = self.probe.take() {
-            let probe_grads = GradientsParams::from_module(&mut grads, &probe);
-            self.probe = Some(self.optimizer.step(metrics.lr, probe, probe_grads));
-        }
+        let probes = self
+            .probes
+            .take()
+            .expect("the probes are back after every step");
+        let probe_grads = GradientsParams::from_module(&mut grads, &probes);
+        self.probes = Some(self.optimizer.step(metrics.lr, probes, probe_grads));
         self.step += 1;
         Ok(metrics)
     }
@@ -465,7 +447,7 @@ impl Trainer {
         let config = &self.config;
         let samples = spread(&self.data.validation, config.validation_samples);
         let model = self.model().valid();
-        let probe = self.probe.as_ref().map(|p| p.valid());
+        let probes = self.probes().valid();
         let device = &self.inner;
         let p = config.model.head.pred_len;
         let mut sums = ValidationSums::default();
@@ -473,20 +455,23 @@ impl Trainer {
             let batch = self
                 .data
                 .batch(chunk, &config.model, |_| SampleDraw::default())?;
-            let (terms, head, hazard_logits) = batch_losses(
-                &model,
-                probe.as_ref(),
-                &model,
-                &batch,
-                config,
-                device,
-                device,
-            );
-            let hazards = hazard_logits.map(|logits| predicted(&float_values(logits)));
+            let (terms, head, outputs) =
+                batch_losses(&model, &probes, &model, &batch, config, device, device);
+            let hazards = outputs
+                .hazard
+                .map(|logits| predicted(&float_values(logits)));
+            let occupancy = outputs.occupancy.map(|(logits, targets, recorded)| {
+                overlap_counts(
+                    &float_values(logits),
+                    &float_values(targets),
+                    &float_values(recorded),
+                )
+            });
             sums.add(
                 &batch,
                 &head,
                 hazards.as_deref(),
+                occupancy,
                 p,
                 float_values(terms.total)[0],
             );
@@ -544,9 +529,7 @@ impl Trainer {
             source: std::io::Error::other(problem),
         };
         save_weights(self.model(), &partial, "model.bpk").map_err(fail)?;
-        if let Some(probe) = &self.probe {
-            save_weights(probe, &partial, "hazard.bpk").map_err(fail)?;
-        }
+        self.probes().save(&partial).map_err(fail)?;
         self.optimizer
             .to_record()
             .save(partial.join("optimizer.bpk"))
@@ -566,19 +549,18 @@ impl Trainer {
     }
 }
 
-/// The losses of a batch, the head's output and the hazard probe's logits (with a probe).
-/// `context_model` (without gradients, on `inner`) gives the history BEVs (each from its own
-/// history frame, as serving does) and the FFP's targets; `model` (on `device`) runs the
-/// current frames.
+/// The losses of a batch, the head's output and the probes' outputs. `context_model` (without
+/// gradients, on `inner`) gives the history BEVs (each from its own history frame, as serving
+/// does) and the FFP's targets; `model` (on `device`) runs the current frames.
 fn batch_losses(
     model: &SsrModel,
-    probe: Option<&HazardProbe>,
+    probes: &Probes,
     context_model: &SsrModel,
     batch: &Batch,
     config: &TrainConfig,
     inner: &Device,
     device: &Device,
-) -> (Losses, HeadOutput, Option<Tensor<2>>) {
+) -> (Losses, HeadOutput, ProbeOutputs) {
     let b = batch.size;
     let deep = batch.deep_input(&config.model, inner);
     let deep_bev =
@@ -600,15 +582,17 @@ fn batch_losses(
         config.loss.target_concentration,
         device,
     );
-    let hazard_logits = probe.map(|probe| probe.forward(output.scene.tokens.clone()));
-    let hazards = batch.hazards();
-    let hazard = hazard_logits
-        .clone()
-        .map(|logits| (logits, hazards.as_slice()));
+    let outputs = probes.run(&output, batch, config, device);
     (
-        losses(&output.head, &targets, bev, hazard, &config.loss),
+        losses(
+            &output.head,
+            &targets,
+            bev,
+            outputs.losses(batch),
+            &config.loss,
+        ),
         output.head,
-        hazard_logits,
+        outputs,
     )
 }
 
@@ -624,6 +608,7 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
         speed: value(&terms.speed),
         bev: terms.bev.as_ref().map(value),
         hazard: terms.hazard.as_ref().map(value),
+        occupancy: terms.occupancy.as_ref().map(value),
         samples_per_s: 0.0,
     }
 }

@@ -2,7 +2,8 @@
 //! waypoints at 1, 2 and 3 s, the control branch's errors, and the same per situation (each
 //! command, start-ups from standstill, and what the expert brakes for), since a mean over a
 //! validation set that is half lane following hides the turns, starts and stops closed-loop
-//! driving depends on; with the hazard probe on, how often it names that cause.
+//! driving depends on; with the hazard probe on, how often it names that cause; with the
+//! occupancy probe on, the IoU of the BEV cells it marks occupied.
 
 use std::collections::BTreeMap;
 
@@ -11,6 +12,7 @@ use ssrdrive_proto::dataset::BrakeReason;
 
 use super::data::{Batch, SampleRef};
 use super::hazard::Hazard;
+use super::occupancy::OCCUPANCY_CHANNELS;
 use crate::control::beta::control_from_beta;
 use crate::model::float_values;
 use crate::model::tcp_head::HeadOutput;
@@ -51,6 +53,11 @@ pub struct ValidationMetrics {
     /// The same per situation ([`situations`]); empty in runs from before it was reported.
     #[serde(default)]
     pub by_situation: BTreeMap<String, GroupMetrics>,
+    /// Per occupancy channel ([`OCCUPANCY_CHANNELS`]) with any occupied or predicted cell, the
+    /// IoU of the cells the occupancy probe marks occupied, over the samples that record their
+    /// actors; empty without the probe.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub occupancy_iou: BTreeMap<String, f32>,
 }
 
 impl ValidationMetrics {
@@ -76,8 +83,13 @@ impl ValidationMetrics {
                 lights.map_or("-".into(), |v| format!("{:.0} %", 100.0 * v))
             )
         });
+        let occupancy: String = self
+            .occupancy_iou
+            .iter()
+            .map(|(channel, iou)| format!("; {channel} occupancy IoU {iou:.2}"))
+            .collect();
         format!(
-            "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}{probe}",
+            "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}{probe}{occupancy}",
             format_l2(&self.all.l2_m),
             self.all.steer_mae,
             per.join(", ")
@@ -182,19 +194,27 @@ pub struct ValidationSums {
     loss: f64,
     all: GroupSums,
     by_situation: BTreeMap<&'static str, GroupSums>,
+    /// Per occupancy channel: (intersection, union) cell counts.
+    occupancy: [(usize, usize); OCCUPANCY_CHANNELS.len()],
 }
 
 impl ValidationSums {
-    /// Adds a batch's head output (with `p` waypoints), the hazard probe's classes (with a
-    /// probe) and mean loss.
+    /// Adds a batch's head output (with `p` waypoints), the hazard probe's classes and the
+    /// occupancy probe's (intersection, union) counts per channel (each with its probe) and
+    /// mean loss.
     pub fn add(
         &mut self,
         batch: &Batch,
         head: &HeadOutput,
         hazards: Option<&[Hazard]>,
+        occupancy: Option<[(usize, usize); OCCUPANCY_CHANNELS.len()]>,
         p: usize,
         loss: f32,
     ) {
+        for (sum, (inter, union)) in self.occupancy.iter_mut().zip(occupancy.unwrap_or_default()) {
+            sum.0 += inter;
+            sum.1 += union;
+        }
         let waypoints = float_values(head.waypoints.clone());
         let alpha = float_values(head.alpha.clone());
         let beta = float_values(head.beta.clone());
@@ -242,6 +262,12 @@ impl ValidationSums {
                 .by_situation
                 .iter()
                 .map(|(name, sums)| (name.to_string(), sums.finish(p)))
+                .collect(),
+            occupancy_iou: OCCUPANCY_CHANNELS
+                .iter()
+                .zip(self.occupancy)
+                .filter(|(_, (_, union))| *union > 0)
+                .map(|(channel, (inter, union))| (channel.to_string(), inter as f32 / union as f32))
                 .collect(),
         }
     }

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{
-    EpisodeEntry, EpisodeInfo, EpisodeOutcome, FrameRecord, Manifest, NoiseConfig, TownCount,
-    safe_name,
+    ActorClass, ActorRecord, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FrameRecord, Manifest,
+    NoiseConfig, TownCount, safe_name,
 };
 use ssrdrive_proto::image::encode_png;
 
@@ -63,6 +63,16 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
                 future_controls: vec![control; 6],
                 future_complete: true,
                 images: vec![image],
+                // A car ahead in the even routes; the odd ones record no actors, as datasets
+                // from before they were recorded.
+                actors: (route % 2 == 0).then(|| {
+                    vec![ActorRecord {
+                        class: ActorClass::Vehicle,
+                        centre: [12.0 - index as f64, 0.0],
+                        yaw: 0.0,
+                        half: [2.4, 1.0],
+                    }]
+                }),
             };
             lines.push_str(&serde_json::to_string(&record).unwrap());
             lines.push('\n');

@@ -19,12 +19,16 @@ use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::{FUTURE_COUNT, FUTURE_STEP, FrameRecord, NoiseConfig};
+use ssrdrive_proto::dataset::{
+    ACTOR_RANGE, ActorClass, ActorRecord, FUTURE_COUNT, FUTURE_STEP, FrameRecord, NoiseConfig,
+};
 use ssrdrive_proto::image::encode_png;
 
 use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::expert::Expert;
+use crate::map::angle_diff;
 use crate::route::plan::to_ego_frame;
+use crate::world::state::ActorKind;
 use crate::world::{DT, World};
 
 /// The ego on one tick, kept to compute earlier frames' futures.
@@ -228,6 +232,7 @@ impl<'d> EpisodeRecorder<'d> {
     fn record_tick(
         &mut self,
         obs: &Observation,
+        world: &World<'_>,
         label: Control,
         executed: Control,
         noise: bool,
@@ -257,6 +262,7 @@ impl<'d> EpisodeRecorder<'d> {
                 future_controls: Vec::new(),
                 future_complete: false,
                 images,
+                actors: Some(actors_near(obs, world)),
             });
             self.frames += 1;
         }
@@ -271,6 +277,29 @@ impl<'d> EpisodeRecorder<'d> {
         }
         Ok(())
     }
+}
+
+/// The actors whose centre is within [`ACTOR_RANGE`] of the ego, in its frame.
+fn actors_near(obs: &Observation, world: &World<'_>) -> Vec<ActorRecord> {
+    world
+        .actors()
+        .iter()
+        .filter(|a| a.obb.centre.distance(obs.position.truncate()) <= ACTOR_RANGE)
+        .map(|a| {
+            let centre = to_ego_frame(a.obb.centre.extend(0.0), obs.position, obs.yaw);
+            ActorRecord {
+                class: match a.kind {
+                    ActorKind::Vehicle => ActorClass::Vehicle,
+                    ActorKind::Cyclist => ActorClass::Cyclist,
+                    ActorKind::Walker => ActorClass::Walker,
+                    ActorKind::Static => ActorClass::Static,
+                },
+                centre: [centre.x, centre.y],
+                yaw: angle_diff(a.obb.yaw, obs.yaw),
+                half: a.obb.half.to_array(),
+            }
+        })
+        .collect()
 }
 
 impl Agent for EpisodeRecorder<'_> {
@@ -327,7 +356,7 @@ impl Agent for EpisodeRecorder<'_> {
             None => self.perturb(label),
         };
         if self.error.is_none()
-            && let Err(e) = self.record_tick(obs, label, executed, noise)
+            && let Err(e) = self.record_tick(obs, world, label, executed, noise)
         {
             self.error = Some(e);
         }

@@ -1,0 +1,277 @@
+//! The occupancy probe, a training aid: from the BEV the encoder builds, predict which cells a
+//! road user or obstacle covers, with a balanced binary cross-entropy beside TCP's losses.
+//!
+//! Imitation gives the BEV the gradient of six waypoints and a control per frame, and a car
+//! stopped ahead explains only part of the brake label (speed and history explain the rest):
+//! the learner drove into stopped cars it had seen for two seconds. Dense labels of where the
+//! road users are (TransFuser's and InterFuser's BEV auxiliary tasks) ask every BEV cell for
+//! them. The labels come from the actors each stored frame records
+//! ([`ssrdrive_proto::dataset::FrameRecord::actors`]); frames recorded before that have none
+//! and are left out of the loss. The probe lives beside the network in a training run
+//! (`resume/occupancy.bpk`), never in a checkpoint: the served network is the same.
+
+use burn::module::Module;
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+use ssrdrive_proto::dataset::{ActorClass, ActorRecord};
+
+use crate::model::bev::BevGrid;
+use crate::model::float_tensor;
+use crate::model::fused::FusedLinear;
+use crate::model::init::xavier_linear;
+
+/// The probe's channels, in logit order: what the car must not hit on the road (vehicles,
+/// cyclists, obstacles) and walkers.
+pub const OCCUPANCY_CHANNELS: [&str; 2] = ["vehicle", "walker"];
+
+/// The channel an actor class marks.
+pub fn channel_of(class: ActorClass) -> usize {
+    match class {
+        ActorClass::Vehicle | ActorClass::Cyclist | ActorClass::Static => 0,
+        ActorClass::Walker => 1,
+    }
+}
+
+/// Size of an [`OccupancyProbe`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OccupancyProbeConfig {
+    /// Channels of the BEV (the network's `channels`).
+    pub channels: usize,
+    /// Width of the hidden layer.
+    pub hidden: usize,
+}
+
+impl OccupancyProbeConfig {
+    /// A randomly initialised probe.
+    pub fn init(&self, device: &Device) -> OccupancyProbe {
+        OccupancyProbe {
+            hidden: xavier_linear(self.channels, self.hidden, device),
+            out: xavier_linear(self.hidden, OCCUPANCY_CHANNELS.len(), device),
+        }
+    }
+}
+
+/// One hidden layer per BEV cell, a logit per channel of [`OCCUPANCY_CHANNELS`].
+#[derive(Module, Debug)]
+pub struct OccupancyProbe {
+    hidden: FusedLinear,
+    out: FusedLinear,
+}
+
+impl OccupancyProbe {
+    /// Occupancy logits of each BEV cell.
+    ///
+    /// # Shapes
+    /// - bev: `[B, Q, C]`
+    /// - output: `[B, Q, 2]` (in [`OCCUPANCY_CHANNELS`] order)
+    pub fn forward(&self, bev: Tensor<3>) -> Tensor<3> {
+        self.out.forward(relu(self.hidden.forward(bev)))
+    }
+}
+
+/// The occupancy of one frame's BEV cells, `[Q, 2]` row-major, 1 where an actor's box covers
+/// the cell's centre or the actor's centre lies in the cell (so a walker, narrower than a
+/// cell, always marks one).
+pub fn occupancy_targets(actors: &[ActorRecord], grid: &BevGrid) -> Vec<f32> {
+    let k = OCCUPANCY_CHANNELS.len();
+    let mut targets = vec![0.0; grid.cells() * k];
+    for actor in actors {
+        let channel = channel_of(actor.class);
+        let centre = actor.centre.map(|v| v as f32);
+        if let Some(cell) = grid.cell_of(centre) {
+            targets[cell * k + channel] = 1.0;
+        }
+        let (sin, cos) = (actor.yaw as f32).sin_cos();
+        let [half_length, half_width] = actor.half.map(|v| v as f32);
+        for cell in 0..grid.cells() {
+            let [x, y] = grid.cell_centre(cell);
+            let (dx, dy) = (x - centre[0], y - centre[1]);
+            let along = dx * cos + dy * sin;
+            let across = -dx * sin + dy * cos;
+            if along.abs() <= half_length && across.abs() <= half_width {
+                targets[cell * k + channel] = 1.0;
+            }
+        }
+    }
+    targets
+}
+
+/// Balanced binary cross-entropy of `logits` to `targets` (both `[B, Q, 2]`) over the samples
+/// whose `recorded` entry (`[B]`) is 1: the mean over occupied cells plus the mean over empty
+/// ones, halved, so the few occupied cells weigh as much as the many empty ones. 0 when no
+/// sample in the batch has actors recorded.
+pub fn occupancy_loss(logits: Tensor<3>, targets: Tensor<3>, recorded: Tensor<1>) -> Tensor<1> {
+    let [b, _, _] = logits.dims();
+    // log(1 + e^x) - y x, written to stay finite for large |x|.
+    let softplus = relu(logits.clone()) + logits.clone().abs().neg().exp().log1p();
+    let per_cell = softplus - logits * targets.clone();
+    let recorded: Tensor<3> = recorded.reshape([b, 1, 1]);
+    let occupied = targets.clone() * recorded.clone();
+    let empty = (targets.neg() + 1.0) * recorded;
+    let mean_over = |mask: Tensor<3>| {
+        let count = mask.clone().sum().clamp_min(1.0);
+        (per_cell.clone() * mask).sum() / count
+    };
+    (mean_over(occupied) + mean_over(empty)).mul_scalar(0.5)
+}
+
+/// Targets `[B, Q, 2]` and the recorded mask `[B]` of a batch's frames (`None`: the frame
+/// records no actors).
+pub fn batch_targets(
+    frames: &[Option<Vec<ActorRecord>>],
+    grid: &BevGrid,
+    device: &Device,
+) -> (Tensor<3>, Tensor<1>) {
+    let (b, q, k) = (frames.len(), grid.cells(), OCCUPANCY_CHANNELS.len());
+    let mut targets = Vec::with_capacity(b * q * k);
+    let mut recorded = Vec::with_capacity(b);
+    for actors in frames {
+        match actors {
+            Some(actors) => {
+                targets.extend(occupancy_targets(actors, grid));
+                recorded.push(1.0);
+            }
+            None => {
+                targets.extend(std::iter::repeat_n(0.0, q * k));
+                recorded.push(0.0);
+            }
+        }
+    }
+    (
+        float_tensor(targets, [b, q, k], device),
+        float_tensor(recorded, [b], device),
+    )
+}
+
+/// Cells predicted occupied (logit > 0) and labelled occupied, per channel, over the recorded
+/// samples: (intersection, union) counts for an IoU.
+pub fn overlap_counts(logits: &[f32], targets: &[f32], recorded: &[f32]) -> [(usize, usize); 2] {
+    let k = OCCUPANCY_CHANNELS.len();
+    let per_sample = logits.len() / recorded.len().max(1);
+    let mut counts = [(0, 0); 2];
+    for (i, (&logit, &target)) in logits.iter().zip(targets).enumerate() {
+        if recorded[i / per_sample] == 0.0 {
+            continue;
+        }
+        let (predicted, labelled) = (logit > 0.0, target > 0.5);
+        let (inter, union) = &mut counts[i % k];
+        *inter += usize::from(predicted && labelled);
+        *union += usize::from(predicted || labelled);
+    }
+    counts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::float_values;
+
+    fn grid() -> BevGrid {
+        BevGrid {
+            rows: 32,
+            cols: 32,
+            x_min: -8.0,
+            x_max: 40.0,
+            y_min: -24.0,
+            y_max: 24.0,
+        }
+    }
+
+    fn actor(class: ActorClass, centre: [f64; 2], yaw: f64, half: [f64; 2]) -> ActorRecord {
+        ActorRecord {
+            class,
+            centre,
+            yaw,
+            half,
+        }
+    }
+
+    fn marked(targets: &[f32], channel: usize) -> Vec<usize> {
+        (0..targets.len() / 2)
+            .filter(|cell| targets[cell * 2 + channel] > 0.0)
+            .collect()
+    }
+
+    #[test]
+    fn a_car_marks_the_cells_its_box_covers_and_a_walker_its_own_cell() {
+        let grid = grid();
+        // A car 10 m ahead, lengthwise: 4.8 x 2 m over cells of 1.5 m.
+        let car = actor(ActorClass::Vehicle, [10.0, 0.0], 0.0, [2.4, 1.0]);
+        let cells = marked(&occupancy_targets(&[car], &grid), 0);
+        assert!((2..=8).contains(&cells.len()), "{cells:?}");
+        for &cell in &cells {
+            let [x, y] = grid.cell_centre(cell);
+            assert!(
+                (x - 10.0).abs() <= 2.4 && y.abs() <= 1.0,
+                "cell at ({x}, {y})"
+            );
+        }
+        // Turned across the road it covers cells to both sides instead.
+        let across = actor(
+            ActorClass::Vehicle,
+            [10.0, 0.0],
+            std::f64::consts::FRAC_PI_2,
+            [2.4, 1.0],
+        );
+        let turned = marked(&occupancy_targets(&[across], &grid), 0);
+        assert!(turned.iter().any(|&c| grid.cell_centre(c)[1] > 1.0));
+        let walker = actor(ActorClass::Walker, [5.2, -3.1], 0.3, [0.25, 0.25]);
+        let targets = occupancy_targets(&[walker], &grid);
+        assert_eq!(
+            marked(&targets, 1),
+            vec![grid.cell_of([5.2, -3.1]).unwrap()]
+        );
+        assert!(marked(&targets, 0).is_empty());
+        let behind_the_grid = actor(ActorClass::Vehicle, [-30.0, 0.0], 0.0, [2.4, 1.0]);
+        assert!(marked(&occupancy_targets(&[behind_the_grid], &grid), 0).is_empty());
+    }
+
+    #[test]
+    fn the_loss_balances_occupied_and_empty_cells_and_skips_unrecorded_frames() {
+        let device = Device::flex();
+        let grid = grid();
+        let car = actor(ActorClass::Vehicle, [10.0, 0.0], 0.0, [2.4, 1.0]);
+        let (targets, recorded) = batch_targets(&[Some(vec![car]), None], &grid, &device);
+        assert_eq!(float_values(recorded.clone()), vec![1.0, 0.0]);
+        let q = grid.cells();
+        // Logits of 0 everywhere: log 2 on both halves.
+        let zeros = float_tensor(vec![0.0; 2 * q * 2], [2, q, 2], &device);
+        let loss = float_values(occupancy_loss(zeros, targets.clone(), recorded.clone()))[0];
+        assert!((loss - 2f32.ln()).abs() < 1e-5, "{loss}");
+        // The right answer in the recorded frame, nonsense in the other: a small loss.
+        let labels = float_values(targets.clone());
+        let mut logits: Vec<f32> = labels
+            .iter()
+            .map(|&t| if t > 0.5 { 8.0 } else { -8.0 })
+            .collect();
+        for v in &mut logits[q * 2..] {
+            *v = 8.0;
+        }
+        let right = float_tensor(logits.clone(), [2, q, 2], &device);
+        let loss = float_values(occupancy_loss(right, targets, recorded.clone()))[0];
+        assert!(loss < 1e-3, "{loss}");
+        let counts = overlap_counts(&logits, &labels, &float_values(recorded));
+        assert!(counts[0].0 > 0 && counts[0].0 == counts[0].1, "{counts:?}");
+        assert_eq!(counts[1], (0, 0));
+        // Nothing recorded: no loss.
+        let (none, nothing) = batch_targets(&[None], &grid, &device);
+        let zeros = float_tensor(vec![3.0; q * 2], [1, q, 2], &device);
+        assert_eq!(float_values(occupancy_loss(zeros, none, nothing))[0], 0.0);
+    }
+
+    #[test]
+    fn probe_maps_each_cell_to_a_logit_per_channel() {
+        let device = Device::flex();
+        let probe = OccupancyProbeConfig {
+            channels: 8,
+            hidden: 16,
+        }
+        .init(&device);
+        let bev = float_tensor(
+            (0..2 * 5 * 8).map(|v| v as f32 * 0.01).collect(),
+            [2, 5, 8],
+            &device,
+        );
+        assert_eq!(probe.forward(bev).dims(), [2, 5, 2]);
+    }
+}
