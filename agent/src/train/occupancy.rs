@@ -166,15 +166,9 @@ mod tests {
     use super::*;
     use crate::model::float_values;
 
+    /// The cpu-default BEV: 32 x 32 cells of 1.5 m, from 8 m behind to 40 m ahead.
     fn grid() -> BevGrid {
-        BevGrid {
-            rows: 32,
-            cols: 32,
-            x_min: -8.0,
-            x_max: 40.0,
-            y_min: -24.0,
-            y_max: 24.0,
-        }
+        crate::model::config::SsrConfig::cpu_default().bev.grid
     }
 
     fn actor(class: ActorClass, centre: [f64; 2], yaw: f64, half: [f64; 2]) -> ActorRecord {
