@@ -235,7 +235,7 @@ fn the_probes_resume_with_the_run_and_can_be_left_out() {
     let validation = done.validation.unwrap();
     assert!(validation.all.hazard_accuracy.is_some());
     assert!(
-        validation.occupancy_iou.contains_key("vehicle"),
+        validation.occupancy_accuracy.contains_key("vehicle"),
         "{validation:?}"
     );
 
@@ -270,7 +270,7 @@ fn the_probes_resume_with_the_run_and_can_be_left_out() {
     );
     let validation = done.validation.unwrap();
     assert_eq!(validation.all.hazard_accuracy, None);
-    assert!(validation.occupancy_iou.is_empty());
+    assert!(validation.occupancy_accuracy.is_empty());
 }
 
 #[test]

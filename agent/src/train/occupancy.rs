@@ -143,20 +143,63 @@ pub fn batch_targets(
     )
 }
 
-/// Cells predicted occupied (logit > 0) and labelled occupied, per channel, over the recorded
-/// samples: (intersection, union) counts for an IoU.
-pub fn overlap_counts(logits: &[f32], targets: &[f32], recorded: &[f32]) -> [(usize, usize); 2] {
+/// How a probe's cells (occupied where the logit is above 0) compare with the labels, per
+/// channel.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Confusion {
+    /// Labelled occupied.
+    pub occupied: usize,
+    /// Labelled occupied and predicted so.
+    pub occupied_hit: usize,
+    /// Labelled empty.
+    pub empty: usize,
+    /// Labelled empty and predicted so.
+    pub empty_hit: usize,
+}
+
+impl Confusion {
+    /// Adds `other`'s counts.
+    pub fn add(&mut self, other: &Confusion) {
+        self.occupied += other.occupied;
+        self.occupied_hit += other.occupied_hit;
+        self.empty += other.empty;
+        self.empty_hit += other.empty_hit;
+    }
+
+    /// The mean of the shares of occupied and of empty cells predicted right (0.5 is chance,
+    /// whatever the share of occupied cells; the balanced loss optimises it); `None` without
+    /// both kinds of cell.
+    pub fn balanced_accuracy(&self) -> Option<f32> {
+        (self.occupied > 0 && self.empty > 0).then(|| {
+            0.5 * (self.occupied_hit as f32 / self.occupied as f32
+                + self.empty_hit as f32 / self.empty as f32)
+        })
+    }
+}
+
+/// The probe's [`Confusion`] per channel over the samples whose `recorded` entry is 1, from
+/// `[B, Q, 2]` logits and targets and `[B]` recorded flags (row-major values).
+pub fn confusion(
+    logits: &[f32],
+    targets: &[f32],
+    recorded: &[f32],
+) -> [Confusion; OCCUPANCY_CHANNELS.len()] {
     let k = OCCUPANCY_CHANNELS.len();
     let per_sample = logits.len() / recorded.len().max(1);
-    let mut counts = [(0, 0); 2];
+    let mut counts = [Confusion::default(); OCCUPANCY_CHANNELS.len()];
     for (i, (&logit, &target)) in logits.iter().zip(targets).enumerate() {
         if recorded[i / per_sample] == 0.0 {
             continue;
         }
         let (predicted, labelled) = (logit > 0.0, target > 0.5);
-        let (inter, union) = &mut counts[i % k];
-        *inter += usize::from(predicted && labelled);
-        *union += usize::from(predicted || labelled);
+        let c = &mut counts[i % k];
+        if labelled {
+            c.occupied += 1;
+            c.occupied_hit += usize::from(predicted);
+        } else {
+            c.empty += 1;
+            c.empty_hit += usize::from(!predicted);
+        }
     }
     counts
 }
@@ -244,9 +287,18 @@ mod tests {
         let right = float_tensor(logits.clone(), [2, q, 2], &device);
         let loss = float_values(occupancy_loss(right, targets, recorded.clone()))[0];
         assert!(loss < 1e-3, "{loss}");
-        let counts = overlap_counts(&logits, &labels, &float_values(recorded));
-        assert!(counts[0].0 > 0 && counts[0].0 == counts[0].1, "{counts:?}");
-        assert_eq!(counts[1], (0, 0));
+        let counts = confusion(&logits, &labels, &float_values(recorded));
+        assert_eq!(counts[0].balanced_accuracy(), Some(1.0), "{counts:?}");
+        assert_eq!(
+            counts[0].empty,
+            q - counts[0].occupied,
+            "the unrecorded frame is left out"
+        );
+        // No walker: no accuracy for that channel.
+        assert_eq!(counts[1].balanced_accuracy(), None);
+        // Everything called occupied: chance.
+        let all = confusion(&vec![1.0; logits.len()], &labels, &[1.0, 0.0]);
+        assert_eq!(all[0].balanced_accuracy(), Some(0.5));
         // Nothing recorded: no loss.
         let (none, nothing) = batch_targets(&[None], &grid, &device);
         let zeros = float_tensor(vec![3.0; q * 2], [1, q, 2], &device);

@@ -34,7 +34,7 @@ use super::data::{Batch, SampleDraw, TrainingData};
 use super::hazard::predicted;
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
-use super::occupancy::overlap_counts;
+use super::occupancy::confusion;
 use super::probes::{ProbeOutputs, Probes, load_weights, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
@@ -461,7 +461,7 @@ impl Trainer {
                 .hazard
                 .map(|logits| predicted(&float_values(logits)));
             let occupancy = outputs.occupancy.map(|(logits, targets, recorded)| {
-                overlap_counts(
+                confusion(
                     &float_values(logits),
                     &float_values(targets),
                     &float_values(recorded),

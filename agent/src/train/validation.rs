@@ -3,7 +3,7 @@
 //! command, start-ups from standstill, and what the expert brakes for), since a mean over a
 //! validation set that is half lane following hides the turns, starts and stops closed-loop
 //! driving depends on; with the hazard probe on, how often it names that cause; with the
-//! occupancy probe on, the IoU of the BEV cells it marks occupied.
+//! occupancy probe on, its balanced accuracy on the BEV cells.
 
 use std::collections::BTreeMap;
 
@@ -12,7 +12,7 @@ use ssrdrive_proto::dataset::BrakeReason;
 
 use super::data::{Batch, SampleRef};
 use super::hazard::Hazard;
-use super::occupancy::OCCUPANCY_CHANNELS;
+use super::occupancy::{Confusion, OCCUPANCY_CHANNELS};
 use crate::control::beta::control_from_beta;
 use crate::model::float_values;
 use crate::model::tcp_head::HeadOutput;
@@ -53,11 +53,11 @@ pub struct ValidationMetrics {
     /// The same per situation ([`situations`]); empty in runs from before it was reported.
     #[serde(default)]
     pub by_situation: BTreeMap<String, GroupMetrics>,
-    /// Per occupancy channel ([`OCCUPANCY_CHANNELS`]) with any occupied or predicted cell, the
-    /// IoU of the cells the occupancy probe marks occupied, over the samples that record their
-    /// actors; empty without the probe.
+    /// Per occupancy channel ([`OCCUPANCY_CHANNELS`]) with occupied and empty cells, the
+    /// occupancy probe's balanced accuracy ([`Confusion::balanced_accuracy`]) over the samples
+    /// that record their actors; empty without the probe.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub occupancy_iou: BTreeMap<String, f32>,
+    pub occupancy_accuracy: BTreeMap<String, f32>,
 }
 
 impl ValidationMetrics {
@@ -84,9 +84,9 @@ impl ValidationMetrics {
             )
         });
         let occupancy: String = self
-            .occupancy_iou
+            .occupancy_accuracy
             .iter()
-            .map(|(channel, iou)| format!("; {channel} occupancy IoU {iou:.2}"))
+            .map(|(channel, a)| format!("; {channel} occupancy {:.0} %", 100.0 * a))
             .collect();
         format!(
             "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}{probe}{occupancy}",
@@ -194,26 +194,24 @@ pub struct ValidationSums {
     loss: f64,
     all: GroupSums,
     by_situation: BTreeMap<&'static str, GroupSums>,
-    /// Per occupancy channel: (intersection, union) cell counts.
-    occupancy: [(usize, usize); OCCUPANCY_CHANNELS.len()],
+    /// Per occupancy channel: how the probe's cells compare with the labels.
+    occupancy: [Confusion; OCCUPANCY_CHANNELS.len()],
 }
 
 impl ValidationSums {
     /// Adds a batch's head output (with `p` waypoints), the hazard probe's classes and the
-    /// occupancy probe's (intersection, union) counts per channel (each with its probe) and
-    /// mean loss.
+    /// occupancy probe's [`Confusion`] per channel (each with its probe) and mean loss.
     pub fn add(
         &mut self,
         batch: &Batch,
         head: &HeadOutput,
         hazards: Option<&[Hazard]>,
-        occupancy: Option<[(usize, usize); OCCUPANCY_CHANNELS.len()]>,
+        occupancy: Option<[Confusion; OCCUPANCY_CHANNELS.len()]>,
         p: usize,
         loss: f32,
     ) {
-        for (sum, (inter, union)) in self.occupancy.iter_mut().zip(occupancy.unwrap_or_default()) {
-            sum.0 += inter;
-            sum.1 += union;
+        for (sum, batch) in self.occupancy.iter_mut().zip(occupancy.unwrap_or_default()) {
+            sum.add(&batch);
         }
         let waypoints = float_values(head.waypoints.clone());
         let alpha = float_values(head.alpha.clone());
@@ -263,11 +261,10 @@ impl ValidationSums {
                 .iter()
                 .map(|(name, sums)| (name.to_string(), sums.finish(p)))
                 .collect(),
-            occupancy_iou: OCCUPANCY_CHANNELS
+            occupancy_accuracy: OCCUPANCY_CHANNELS
                 .iter()
                 .zip(self.occupancy)
-                .filter(|(_, (_, union))| *union > 0)
-                .map(|(channel, (inter, union))| (channel.to_string(), inter as f32 / union as f32))
+                .filter_map(|(channel, c)| Some((channel.to_string(), c.balanced_accuracy()?)))
                 .collect(),
         }
     }
