@@ -210,7 +210,7 @@ fn resuming_redraws_the_same_loss_curve() {
 }
 
 #[test]
-fn the_probes_resume_with_the_run_and_can_be_left_out() {
+fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
     let _rng = device_rng();
     let tmp = Scratch::new();
     let data = tmp.fixture("probe");
@@ -224,7 +224,8 @@ fn the_probes_resume_with_the_run_and_can_be_left_out() {
         ..options(&data, out)
     };
 
-    // Both probes train by default: their losses are logged and validation reports them.
+    // The hazard probe and the occupancy head train by default: their losses are logged,
+    // validation reports them, and the head is in the checkpoints.
     let out = tmp.dir("probe-on");
     let done = train(config.clone(), options(&data, &out), open(&data, &config)).unwrap();
     assert!(
@@ -238,29 +239,35 @@ fn the_probes_resume_with_the_run_and_can_be_left_out() {
         validation.occupancy_accuracy.contains_key("vehicle"),
         "{validation:?}"
     );
+    let (model, _) = checkpoint::load(&done.checkpoint, &Device::flex()).unwrap();
+    assert!(model.occupancy.is_some());
 
-    // Without a saved probe the run cannot go on as it was: the error names the file.
-    for file in ["hazard.bpk", "occupancy.bpk"] {
-        let lost = tmp.dir(&format!("probe-lost-{file}"));
-        train(config.clone(), stop_at(&lost), open(&data, &config)).unwrap();
-        std::fs::remove_file(lost.join("resume").join(file)).unwrap();
-        let error = train(config.clone(), resume(&lost), open(&data, &config))
-            .err()
-            .unwrap();
-        assert!(
-            matches!(error, TrainError::Resume { .. }) && error.to_string().contains(file),
-            "{error}"
-        );
-    }
+    // Without its saved probe the run cannot go on as it was: the error names the file.
+    let lost = tmp.dir("probe-lost");
+    train(config.clone(), stop_at(&lost), open(&data, &config)).unwrap();
+    std::fs::remove_file(lost.join("resume/hazard.bpk")).unwrap();
+    let error = train(config.clone(), resume(&lost), open(&data, &config))
+        .err()
+        .unwrap();
+    assert!(
+        matches!(error, TrainError::Resume { .. }) && error.to_string().contains("hazard.bpk"),
+        "{error}"
+    );
 
-    // Weight 0: no probe, no probe loss, nothing saved for it; the run still resumes.
+    // The occupancy head trains exactly when its loss has a weight.
+    let mut untrained = config.clone();
+    untrained.loss.occupancy = 0.0;
+    let error = train_error(untrained, &data, &tmp.dir("head-untrained"));
+    assert!(error.to_string().contains("occupancy_head"), "{error}");
+
+    // Weight 0 and no head: no loss, nothing saved for them; the run still resumes.
     let mut plain = config.clone();
     plain.loss.hazard = 0.0;
     plain.loss.occupancy = 0.0;
+    plain.model.occupancy_head = false;
     let out = tmp.dir("probe-off");
     train(plain.clone(), stop_at(&out), open(&data, &plain)).unwrap();
     assert!(!out.join("resume/hazard.bpk").exists());
-    assert!(!out.join("resume/occupancy.bpk").exists());
     let done = train(plain.clone(), resume(&out), open(&data, &plain)).unwrap();
     assert_eq!(done.steps_done, 4);
     assert!(
@@ -271,6 +278,18 @@ fn the_probes_resume_with_the_run_and_can_be_left_out() {
     let validation = done.validation.unwrap();
     assert_eq!(validation.all.hazard_accuracy, None);
     assert!(validation.occupancy_accuracy.is_empty());
+    let (model, _) = checkpoint::load(&done.checkpoint, &Device::flex()).unwrap();
+    assert!(model.occupancy.is_none());
+
+    // A fine-tune adds the head to a checkpoint without one.
+    let added = TrainConfig {
+        init: Some(done.checkpoint),
+        ..config.clone()
+    };
+    let out = tmp.dir("head-added");
+    let tuned = train(added, options(&data, &out), open(&data, &config)).unwrap();
+    let (model, _) = checkpoint::load(&tuned.checkpoint, &Device::flex()).unwrap();
+    assert!(model.occupancy.is_some());
 }
 
 #[test]

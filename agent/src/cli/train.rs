@@ -91,9 +91,10 @@ pub struct TrainArgs {
     /// for (a light, a sign, a road user, a lane change) from the scene tokens; 0 = no probe.
     #[arg(long, default_value_t = 0.5)]
     hazard_weight: f32,
-    /// Weight of the occupancy probe's loss: a training-only per-cell classifier of where the
-    /// road users are, from the BEV (labels: the actors each frame records; frames of datasets
-    /// from before that are left out of it); 0 = no probe.
+    /// Weight of the occupancy head's loss: a per-cell classifier of where the road users are,
+    /// from the BEV, part of the network and its checkpoints (labels: the actors each frame
+    /// records; frames of datasets from before that are left out of it). Fine-tuning a
+    /// checkpoint without the head adds one; 0 = no head.
     #[arg(long, default_value_t = 1.0)]
     occupancy_weight: f32,
     /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
@@ -132,6 +133,7 @@ impl TrainArgs {
         };
         model.tokens.dense_bev |= self.no_stl;
         model.ego_status |= self.ego_status;
+        model.occupancy_head = self.occupancy_weight > 0.0;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
         }

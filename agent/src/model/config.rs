@@ -38,6 +38,11 @@ pub struct SsrConfig {
     /// aligns the previous BEV. Checkpoints from before the switch have it on.
     #[serde(default = "ego_status_default")]
     pub ego_status: bool,
+    /// Whether the network has the occupancy head ([`super::occupancy`]): which BEV cells a
+    /// road user covers, trained from the actors the dataset records and kept in checkpoints.
+    /// Checkpoints from before it have none.
+    #[serde(default)]
+    pub occupancy_head: bool,
 }
 
 fn ego_status_default() -> bool {
@@ -243,6 +248,7 @@ impl SsrConfig {
                 fuser_slots: 64,
             },
             ego_status: false,
+            occupancy_head: true,
         }
     }
 
@@ -299,6 +305,7 @@ impl SsrConfig {
                 fuser_slots: 32,
             },
             ego_status: false,
+            occupancy_head: true,
         }
     }
 

@@ -1,6 +1,7 @@
 //! The SSR network: image backbone -> BEV encoder (spatial cross-attention through the camera
 //! calibration, temporal self-attention over the episode's previous BEV) -> Scenes TokenLearner
-//! (navigation-gated) -> TCP head; plus the Future Feature Predictor used in training.
+//! (navigation-gated) -> TCP head; plus the Future Feature Predictor used in training and, where
+//! the config has it, the occupancy head on the BEV.
 //!
 //! [`SsrModel::forward`] is one tick for a batch of episodes. Everything episode-specific
 //! (calibration, ego motion, previous BEV) comes in through [`ModelInput`]; the model holds no
@@ -14,6 +15,7 @@ pub mod ffp;
 pub mod fused;
 pub(crate) mod init;
 mod norm;
+pub mod occupancy;
 pub mod sampling;
 pub mod stl;
 pub mod tcp_head;
@@ -26,6 +28,7 @@ use backbone::Backbone;
 use bev::{BevEncoder, GeometryTensors};
 use config::SsrConfig;
 use ffp::FutureFeaturePredictor;
+use occupancy::{OccupancyHead, OccupancyHeadConfig};
 use stl::{SceneTokenLearner, SceneTokens};
 use tcp_head::{HeadOutput, TcpHead};
 
@@ -73,6 +76,8 @@ pub struct SsrModel {
     pub head: TcpHead,
     /// Future Feature Predictor (used by training only).
     pub ffp: FutureFeaturePredictor,
+    /// Occupancy head, where the config has one.
+    pub occupancy: Option<OccupancyHead>,
 }
 
 impl SsrConfig {
@@ -84,7 +89,19 @@ impl SsrConfig {
             stl: SceneTokenLearner::new(self, device),
             head: TcpHead::new(self, device),
             ffp: FutureFeaturePredictor::new(self, device),
+            occupancy: self.init_occupancy_head(device),
         }
+    }
+
+    /// A freshly initialised occupancy head, where the config has one.
+    pub fn init_occupancy_head(&self, device: &Device) -> Option<OccupancyHead> {
+        self.occupancy_head.then(|| {
+            OccupancyHeadConfig {
+                channels: self.channels,
+                hidden: self.channels,
+            }
+            .init(device)
+        })
     }
 }
 

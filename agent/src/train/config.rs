@@ -160,6 +160,13 @@ impl TrainConfig {
         if let Some((field, value)) = finite.iter().find(|(_, v)| !v.is_finite() || *v < 0.0) {
             return Err(format!("{field} must be finite and >= 0, got {value}"));
         }
+        if (self.loss.occupancy > 0.0) != self.model.occupancy_head {
+            return Err(format!(
+                "loss.occupancy = {} but model.occupancy_head = {}: the head trains exactly when \
+                 its loss has a weight (an untrained head would ship in the checkpoints)",
+                self.loss.occupancy, self.model.occupancy_head
+            ));
+        }
         Ok(())
     }
 }

@@ -482,7 +482,7 @@ impl Batch {
         self.brake_reasons.iter().map(|&r| Hazard::of(r)).collect()
     }
 
-    /// The actors around the ego in each sample: the occupancy probe's labels.
+    /// The actors around the ego in each sample: the occupancy head's labels.
     pub fn actors(&self) -> &[Option<Vec<ActorRecord>>] {
         &self.actors
     }

@@ -9,7 +9,7 @@
 //! - BEV: MSE of the FFP's predicted BEV to the detached BEV of the future frame;
 //! - hazard: cross-entropy of the hazard probe ([`super::hazard`]) to what the expert brakes
 //!   for;
-//! - occupancy: balanced binary cross-entropy of the occupancy probe ([`super::occupancy`]) to
+//! - occupancy: balanced binary cross-entropy of the occupancy head ([`super::occupancy`]) to
 //!   the cells road users cover.
 
 use burn::tensor::{Device, Tensor};
@@ -18,7 +18,7 @@ use super::special::{digamma, ln_gamma, ln_gamma_f64};
 use crate::model::float_tensor;
 use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
 
-/// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1), plus the probes'.
+/// Term weights; defaults follow TCP (speed 0.05) and SSR (BEV 1), plus the auxiliary outputs'.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LossWeights {
     /// Weight of the waypoint L1.
@@ -34,7 +34,7 @@ pub struct LossWeights {
     /// Weight of the hazard probe's cross-entropy; 0 = no probe (runs from before it existed).
     #[serde(default)]
     pub hazard: f32,
-    /// Weight of the occupancy probe's cross-entropy; 0 = no probe (runs from before it
+    /// Weight of the occupancy head's cross-entropy; 0 = no head (runs from before it
     /// existed).
     #[serde(default)]
     pub occupancy: f32,
@@ -137,21 +137,22 @@ pub struct Losses {
     pub bev: Option<Tensor<1>>,
     /// Hazard cross-entropy; `None` without a hazard probe.
     pub hazard: Option<Tensor<1>>,
-    /// Occupancy cross-entropy; `None` without an occupancy probe.
+    /// Occupancy cross-entropy; `None` without an occupancy head.
     pub occupancy: Option<Tensor<1>>,
 }
 
-/// The training-only probes' losses on a batch, each `None` without its probe.
+/// The auxiliary losses on a batch (hazard probe, occupancy head), each `None` without its
+/// output.
 #[derive(Debug, Clone, Default)]
 pub struct ProbeLosses {
     /// The hazard probe's cross-entropy.
     pub hazard: Option<Tensor<1>>,
-    /// The occupancy probe's cross-entropy.
+    /// The occupancy head's cross-entropy.
     pub occupancy: Option<Tensor<1>>,
 }
 
 /// Imitation loss of the head's outputs, plus the BEV loss when a prediction and a future BEV
-/// are given (the future BEV is detached here) and the probes' losses, weighted.
+/// are given (the future BEV is detached here) and the auxiliary losses, weighted.
 pub fn losses(
     head: &HeadOutput,
     targets: &ImitationTargets,

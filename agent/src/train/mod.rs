@@ -1,6 +1,6 @@
 //! Training: expert datasets to SSR samples ([`data`], [`augment`], [`loader`]), TCP's
-//! imitation losses plus SSR's future-BEV loss and the training-only probes' ([`loss`],
-//! [`probes`]: [`hazard`], [`occupancy`]),
+//! imitation losses plus SSR's future-BEV loss, the training-only hazard probe's and the
+//! occupancy head's ([`loss`], [`probes`]: [`hazard`], [`occupancy`]),
 //! the loop with AdamW, schedule, checkpoints and resume ([`run`]), configured by [`config`],
 //! and its open-loop validation metrics ([`validation`]).
 

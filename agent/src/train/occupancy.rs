@@ -1,71 +1,24 @@
-//! The occupancy probe, a training aid: from the BEV the encoder builds, predict which cells a
-//! road user or obstacle covers, with a balanced binary cross-entropy beside TCP's losses.
+//! The occupancy head's labels and loss ([`crate::model::occupancy`]): per BEV cell, whether
+//! a road user or obstacle covers it, with a balanced binary cross-entropy beside TCP's losses,
+//! and the confusion validation reports.
 //!
-//! Imitation gives the BEV the gradient of six waypoints and a control per frame, and a car
-//! stopped ahead explains only part of the brake label (speed and history explain the rest):
-//! the learner drove into stopped cars it had seen for two seconds. Dense labels of where the
-//! road users are (TransFuser's and InterFuser's BEV auxiliary tasks) ask every BEV cell for
-//! them. The labels come from the actors each stored frame records
+//! The labels come from the actors each stored frame records
 //! ([`ssrdrive_proto::dataset::FrameRecord::actors`]); frames recorded before that have none
-//! and are left out of the loss. The probe lives beside the network in a training run
-//! (`resume/occupancy.bpk`), never in a checkpoint: the served network is the same.
+//! and are left out of the loss.
 
-use burn::module::Module;
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::dataset::{ActorClass, ActorRecord};
 
 use crate::model::bev::BevGrid;
 use crate::model::float_tensor;
-use crate::model::fused::FusedLinear;
-use crate::model::init::xavier_linear;
-
-/// The probe's channels, in logit order: what the car must not hit on the road (vehicles,
-/// cyclists, obstacles) and walkers.
-pub const OCCUPANCY_CHANNELS: [&str; 2] = ["vehicle", "walker"];
+pub use crate::model::occupancy::OCCUPANCY_CHANNELS;
 
 /// The channel an actor class marks.
 pub fn channel_of(class: ActorClass) -> usize {
     match class {
         ActorClass::Vehicle | ActorClass::Cyclist | ActorClass::Static => 0,
         ActorClass::Walker => 1,
-    }
-}
-
-/// Size of an [`OccupancyProbe`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct OccupancyProbeConfig {
-    /// Channels of the BEV (the network's `channels`).
-    pub channels: usize,
-    /// Width of the hidden layer.
-    pub hidden: usize,
-}
-
-impl OccupancyProbeConfig {
-    /// A randomly initialised probe.
-    pub fn init(&self, device: &Device) -> OccupancyProbe {
-        OccupancyProbe {
-            hidden: xavier_linear(self.channels, self.hidden, device),
-            out: xavier_linear(self.hidden, OCCUPANCY_CHANNELS.len(), device),
-        }
-    }
-}
-
-/// One hidden layer per BEV cell, a logit per channel of [`OCCUPANCY_CHANNELS`].
-#[derive(Module, Debug)]
-pub struct OccupancyProbe {
-    hidden: FusedLinear,
-    out: FusedLinear,
-}
-
-impl OccupancyProbe {
-    /// Occupancy logits of each BEV cell.
-    ///
-    /// # Shapes
-    /// - bev: `[B, Q, C]`
-    /// - output: `[B, Q, 2]` (in [`OCCUPANCY_CHANNELS`] order)
-    pub fn forward(&self, bev: Tensor<3>) -> Tensor<3> {
-        self.out.forward(relu(self.hidden.forward(bev)))
     }
 }
 
@@ -143,7 +96,7 @@ pub fn batch_targets(
     )
 }
 
-/// How a probe's cells (occupied where the logit is above 0) compare with the labels, per
+/// How the head's cells (occupied where the logit is above 0) compare with the labels, per
 /// channel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Confusion {
@@ -177,7 +130,7 @@ impl Confusion {
     }
 }
 
-/// The probe's [`Confusion`] per channel over the samples whose `recorded` entry is 1, from
+/// The head's [`Confusion`] per channel over the samples whose `recorded` entry is 1, from
 /// `[B, Q, 2]` logits and targets and `[B]` recorded flags (row-major values).
 pub fn confusion(
     logits: &[f32],
@@ -303,21 +256,5 @@ mod tests {
         let (none, nothing) = batch_targets(&[None], &grid, &device);
         let zeros = float_tensor(vec![3.0; q * 2], [1, q, 2], &device);
         assert_eq!(float_values(occupancy_loss(zeros, none, nothing))[0], 0.0);
-    }
-
-    #[test]
-    fn probe_maps_each_cell_to_a_logit_per_channel() {
-        let device = Device::flex();
-        let probe = OccupancyProbeConfig {
-            channels: 8,
-            hidden: 16,
-        }
-        .init(&device);
-        let bev = float_tensor(
-            (0..2 * 5 * 8).map(|v| v as f32 * 0.01).collect(),
-            [2, 5, 8],
-            &device,
-        );
-        assert_eq!(probe.forward(bev).dims(), [2, 5, 2]);
     }
 }

@@ -1,7 +1,7 @@
-//! The training-only probes beside the network ([`super::hazard`] on the scene tokens,
-//! [`super::occupancy`] on the BEV): which ones a run trains (those whose loss weight is above
-//! 0), their resume files, and their outputs and losses on a batch. None is ever in a
-//! checkpoint.
+//! The auxiliary outputs a run trains beside the imitation losses: the training-only hazard
+//! probe on the scene tokens ([`super::hazard`], never in a checkpoint, its own resume file),
+//! and the network's occupancy head on the BEV ([`crate::model::occupancy`], part of the
+//! network; labels and loss in [`super::occupancy`]); their outputs and losses on a batch.
 
 use std::path::Path;
 
@@ -13,17 +13,15 @@ use super::config::TrainConfig;
 use super::data::Batch;
 use super::hazard::{HazardProbe, HazardProbeConfig, hazard_loss};
 use super::loss::ProbeLosses;
-use super::occupancy::{OccupancyProbe, OccupancyProbeConfig, batch_targets, occupancy_loss};
-use crate::model::ModelOutput;
+use super::occupancy::{batch_targets, occupancy_loss};
+use crate::model::{ModelOutput, SsrModel};
 
-/// The probes a run trains, as one module for the optimiser (which keeps their state by
-/// parameter id, beside the network's).
+/// The training-only probes a run trains, as one module for the optimiser (which keeps their
+/// state by parameter id, beside the network's).
 #[derive(Module, Debug)]
 pub struct Probes {
     /// What the expert brakes for, from the scene tokens (`resume/hazard.bpk`).
     pub hazard: Option<HazardProbe>,
-    /// Which BEV cells road users cover (`resume/occupancy.bpk`).
-    pub occupancy: Option<OccupancyProbe>,
 }
 
 /// The probes' outputs on a batch.
@@ -31,8 +29,8 @@ pub struct Probes {
 pub struct ProbeOutputs {
     /// `[B, 5]` hazard logits.
     pub hazard: Option<Tensor<2>>,
-    /// `[B, Q, 2]` occupancy logits, their targets, and `[B]` 1 for the samples that record
-    /// their actors.
+    /// `[B, Q, 2]` occupancy logits of the network's head, their targets, and `[B]` 1 for the
+    /// samples that record their actors.
     pub occupancy: Option<(Tensor<3>, Tensor<3>, Tensor<1>)>,
 }
 
@@ -43,13 +41,6 @@ impl Probes {
         Self {
             hazard: (config.loss.hazard > 0.0)
                 .then(|| HazardProbeConfig { channels, hidden }.init(device)),
-            occupancy: (config.loss.occupancy > 0.0).then(|| {
-                OccupancyProbeConfig {
-                    channels,
-                    hidden: channels,
-                }
-                .init(device)
-            }),
         }
     }
 
@@ -57,9 +48,6 @@ impl Probes {
     pub fn load(&mut self, dir: &Path) -> Result<(), String> {
         if let Some(probe) = &mut self.hazard {
             load_weights(probe, dir, "hazard.bpk")?;
-        }
-        if let Some(probe) = &mut self.occupancy {
-            load_weights(probe, dir, "occupancy.bpk")?;
         }
         Ok(())
     }
@@ -69,15 +57,14 @@ impl Probes {
         if let Some(probe) = &self.hazard {
             save_weights(probe, dir, "hazard.bpk")?;
         }
-        if let Some(probe) = &self.occupancy {
-            save_weights(probe, dir, "occupancy.bpk")?;
-        }
         Ok(())
     }
 
-    /// The probes' outputs on the network's `output` for `batch` (targets on `device`).
+    /// The probes' and `model`'s occupancy head's outputs on the network's `output` for
+    /// `batch` (targets on `device`).
     pub fn run(
         &self,
+        model: &SsrModel,
         output: &ModelOutput,
         batch: &Batch,
         config: &TrainConfig,
@@ -88,10 +75,10 @@ impl Probes {
                 .hazard
                 .as_ref()
                 .map(|probe| probe.forward(output.scene.tokens.clone())),
-            occupancy: self.occupancy.as_ref().map(|probe| {
+            occupancy: model.occupancy.as_ref().map(|head| {
                 let (targets, recorded) =
                     batch_targets(batch.actors(), &config.model.bev.grid, device);
-                (probe.forward(output.bev.clone()), targets, recorded)
+                (head.forward(output.bev.clone()), targets, recorded)
             }),
         }
     }

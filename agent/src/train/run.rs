@@ -7,7 +7,7 @@
 //! <out>/metrics.jsonl              a line per step ("kind": "step") and per validation
 //! <out>/checkpoints/step-NNNNNN.safetensors   servable checkpoints (config, rig, notes)
 //! <out>/final.safetensors          the last step's weights
-//! <out>/resume/                    weights with parameter ids (and the probes', see
+//! <out>/resume/                    weights with parameter ids (and the hazard probe's, see
 //!                                  [`super::probes`]), AdamW state, progress
 //! ```
 //! Guarantees: resuming a run continues from its last checkpoint with the same batches,
@@ -136,7 +136,7 @@ pub struct StepMetrics {
     /// Hazard cross-entropy; `None` without the hazard probe.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hazard: Option<f32>,
-    /// Occupancy cross-entropy; `None` without the occupancy probe.
+    /// Occupancy cross-entropy; `None` without the occupancy head.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub occupancy: Option<f32>,
     /// Training throughput of this sitting so far, samples per second (validation excluded).
@@ -226,20 +226,29 @@ fn read_progress(out: &Path) -> Result<Progress, TrainError> {
 }
 
 /// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
-/// (a fine-tune changes the training, not the network).
+/// (a fine-tune changes the training, not the network), except that a fine-tune may add the
+/// occupancy head to a checkpoint without one: the head starts from random weights.
 fn initial_weights(
     path: &Path,
     model: &SsrConfig,
     device: &Device,
 ) -> Result<SsrModel, TrainError> {
-    let (weights, info) = checkpoint::load(path, device)?;
-    let differences = info.config.differences(model);
+    let (mut weights, info) = checkpoint::load(path, device)?;
+    let adds_head = model.occupancy_head && !info.config.occupancy_head;
+    let saved = SsrConfig {
+        occupancy_head: info.config.occupancy_head || adds_head,
+        ..info.config
+    };
+    let differences = saved.differences(model);
     if !differences.is_empty() {
         return Err(TrainError::Config(format!(
             "the initial checkpoint {} was saved from another network than this run's: {}",
             path.display(),
             differences.join("; ")
         )));
+    }
+    if adds_head {
+        weights.occupancy = model.init_occupancy_head(device);
     }
     Ok(weights)
 }
@@ -270,6 +279,9 @@ impl Trainer {
                 problem,
             };
             let config = progress.config;
+            config
+                .validate()
+                .map_err(|e| fail(format!("train_config: {e}")))?;
             let mut model = config.model.init(&device);
             load_weights(&mut model, &resume_dir, "model.bpk").map_err(fail)?;
             let mut probes = Probes::new(&config, &device);
@@ -582,7 +594,7 @@ fn batch_losses(
         config.loss.target_concentration,
         device,
     );
-    let outputs = probes.run(&output, batch, config, device);
+    let outputs = probes.run(model, &output, batch, config, device);
     (
         losses(
             &output.head,

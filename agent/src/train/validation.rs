@@ -3,7 +3,7 @@
 //! command, start-ups from standstill, and what the expert brakes for), since a mean over a
 //! validation set that is half lane following hides the turns, starts and stops closed-loop
 //! driving depends on; with the hazard probe on, how often it names that cause; with the
-//! occupancy probe on, its balanced accuracy on the BEV cells.
+//! occupancy head on, its balanced accuracy on the BEV cells.
 
 use std::collections::BTreeMap;
 
@@ -54,7 +54,7 @@ pub struct ValidationMetrics {
     #[serde(default)]
     pub by_situation: BTreeMap<String, GroupMetrics>,
     /// Per occupancy channel ([`OCCUPANCY_CHANNELS`]) with occupied and empty cells, the
-    /// occupancy probe's balanced accuracy ([`Confusion::balanced_accuracy`]) over the samples
+    /// occupancy head's balanced accuracy ([`Confusion::balanced_accuracy`]) over the samples
     /// that record their actors; empty without the probe.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub occupancy_accuracy: BTreeMap<String, f32>,
@@ -200,7 +200,7 @@ pub struct ValidationSums {
 
 impl ValidationSums {
     /// Adds a batch's head output (with `p` waypoints), the hazard probe's classes and the
-    /// occupancy probe's [`Confusion`] per channel (each with its probe) and mean loss.
+    /// occupancy head's [`Confusion`] per channel (each where the run has it) and mean loss.
     pub fn add(
         &mut self,
         batch: &Batch,
