@@ -10,7 +10,9 @@ use common::{model_input, tiny_config};
 use ssr_agent::model::tcp_head::SPEED_SCALE;
 use ssr_agent::model::{SsrModel, float_values};
 use ssr_agent::train::loss::{BetaTargets, ImitationTargets, LossWeights, ProbeLosses, losses};
+use ssr_agent::train::occupancy::{batch_targets, occupancy_loss};
 use ssr_agent::train::special::{digamma, ln_gamma, ln_gamma_f64};
+use ssrdrive_proto::dataset::{ActorClass, ActorRecord};
 
 struct MissingGradients<'a> {
     grads: &'a GradientsParams,
@@ -74,15 +76,32 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
         actions: BetaTargets::new(&actions, batch, p + 1, 10.0, &device),
         speed: Tensor::<1>::from_floats(speed_targets.as_slice(), &device).reshape([batch, 1]),
     };
+    // A car 6 m ahead in one frame, nothing recorded in the other: the occupancy head's labels.
+    let car = ActorRecord {
+        class: ActorClass::Vehicle,
+        centre: [6.0, 0.0],
+        yaw: 0.0,
+        half: [2.4, 1.0],
+    };
+    let (occupied, recorded) = batch_targets(&[Some(vec![car]), None], &config.bev.grid, &device);
     let weights = LossWeights::default();
     let loss_of = |model: &SsrModel| {
         let output = model.forward(&input);
         let predicted = model.predict_future_bev(&output);
+        let head = model.occupancy.as_ref().expect("the presets have the head");
+        let occupancy = occupancy_loss(
+            head.forward(output.bev.clone()),
+            occupied.clone(),
+            recorded.clone(),
+        );
         losses(
             &output.head,
             &targets,
             Some((predicted, future_bev.clone())),
-            ProbeLosses::default(),
+            ProbeLosses {
+                hazard: None,
+                occupancy: Some(occupancy),
+            },
             &weights,
         )
     };
