@@ -236,7 +236,7 @@ fn initial_weights(
     let (mut weights, info) = checkpoint::load(path, device)?;
     let adds_head = model.occupancy_head && !info.config.occupancy_head;
     let saved = SsrConfig {
-        occupancy_head: info.config.occupancy_head || adds_head,
+        occupancy_head: info.config.occupancy_head || model.occupancy_head,
         ..info.config
     };
     let differences = saved.differences(model);
