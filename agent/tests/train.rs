@@ -9,7 +9,7 @@ use burn::tensor::{Device, Distribution, Tensor};
 use common::{model_input, tiny_config};
 use ssr_agent::model::tcp_head::SPEED_SCALE;
 use ssr_agent::model::{SsrModel, float_values};
-use ssr_agent::train::loss::{BetaTargets, ImitationTargets, LossWeights, ProbeLosses, losses};
+use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
 use ssr_agent::train::occupancy::{batch_targets, occupancy_loss};
 use ssr_agent::train::special::{digamma, ln_gamma, ln_gamma_f64};
 use ssrdrive_proto::dataset::{ActorClass, ActorRecord};
@@ -98,7 +98,7 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
             &output.head,
             &targets,
             Some((predicted, future_bev.clone())),
-            ProbeLosses {
+            AuxiliaryLosses {
                 hazard: None,
                 occupancy: Some(occupancy),
             },

@@ -15,7 +15,7 @@ use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::{ModelInput, float_tensor};
 use ssr_agent::policy::{SsrPolicy, StepInput};
 use ssr_agent::pose::{EgoMotion, Pose2};
-use ssr_agent::train::loss::{BetaTargets, ImitationTargets, LossWeights, ProbeLosses, losses};
+use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
 use ssrdrive_proto::camera::{CameraSpec, Rig};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::image::RgbImage;
@@ -276,7 +276,7 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
             &output.head,
             &targets,
             Some((predicted, future.clone())),
-            ProbeLosses::default(),
+            AuxiliaryLosses::default(),
             &weights,
         );
         record(0);

@@ -144,7 +144,7 @@ pub struct Losses {
 /// The auxiliary losses on a batch (hazard probe, occupancy head), each `None` without its
 /// output.
 #[derive(Debug, Clone, Default)]
-pub struct ProbeLosses {
+pub struct AuxiliaryLosses {
     /// The hazard probe's cross-entropy.
     pub hazard: Option<Tensor<1>>,
     /// The occupancy head's cross-entropy.
@@ -157,7 +157,7 @@ pub fn losses(
     head: &HeadOutput,
     targets: &ImitationTargets,
     bev: Option<(Tensor<3>, Tensor<3>)>,
-    probes: ProbeLosses,
+    auxiliary: AuxiliaryLosses,
     weights: &LossWeights,
 ) -> Losses {
     let waypoints = (head.waypoints.clone() - targets.waypoints.clone())
@@ -182,7 +182,7 @@ pub fn losses(
     if let Some(bev) = &bev {
         total = total + bev.clone().mul_scalar(weights.bev);
     }
-    let ProbeLosses { hazard, occupancy } = probes;
+    let AuxiliaryLosses { hazard, occupancy } = auxiliary;
     for (term, weight) in [(&hazard, weights.hazard), (&occupancy, weights.occupancy)] {
         if let Some(term) = term {
             total = total + term.clone().mul_scalar(weight);

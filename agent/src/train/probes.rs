@@ -12,7 +12,7 @@ use burn::tensor::{Device, Tensor};
 use super::config::TrainConfig;
 use super::data::Batch;
 use super::hazard::{HazardProbe, HazardProbeConfig, hazard_loss};
-use super::loss::ProbeLosses;
+use super::loss::AuxiliaryLosses;
 use super::occupancy::{batch_targets, occupancy_loss};
 use crate::model::{ModelOutput, SsrModel};
 
@@ -24,9 +24,9 @@ pub struct Probes {
     pub hazard: Option<HazardProbe>,
 }
 
-/// The probes' outputs on a batch.
+/// The hazard probe's and the occupancy head's outputs on a batch.
 #[derive(Debug, Clone, Default)]
-pub struct ProbeOutputs {
+pub struct AuxiliaryOutputs {
     /// `[B, 5]` hazard logits.
     pub hazard: Option<Tensor<2>>,
     /// `[B, Q, 2]` occupancy logits of the network's head, their targets, and `[B]` 1 for the
@@ -69,8 +69,8 @@ impl Probes {
         batch: &Batch,
         config: &TrainConfig,
         device: &Device,
-    ) -> ProbeOutputs {
-        ProbeOutputs {
+    ) -> AuxiliaryOutputs {
+        AuxiliaryOutputs {
             hazard: self
                 .hazard
                 .as_ref()
@@ -84,10 +84,10 @@ impl Probes {
     }
 }
 
-impl ProbeOutputs {
+impl AuxiliaryOutputs {
     /// The probes' losses against `batch`'s labels.
-    pub fn losses(&self, batch: &Batch) -> ProbeLosses {
-        ProbeLosses {
+    pub fn losses(&self, batch: &Batch) -> AuxiliaryLosses {
+        AuxiliaryLosses {
             hazard: self
                 .hazard
                 .clone()

@@ -35,7 +35,7 @@ use super::hazard::predicted;
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::occupancy::confusion;
-use super::probes::{ProbeOutputs, Probes, load_weights, save_weights};
+use super::probes::{AuxiliaryOutputs, Probes, load_weights, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::ControlConfig;
@@ -572,7 +572,7 @@ fn batch_losses(
     config: &TrainConfig,
     inner: &Device,
     device: &Device,
-) -> (Losses, HeadOutput, ProbeOutputs) {
+) -> (Losses, HeadOutput, AuxiliaryOutputs) {
     let b = batch.size;
     let deep = batch.deep_input(&config.model, inner);
     let deep_bev =
