@@ -9,6 +9,7 @@
 use std::collections::VecDeque;
 
 use burn::module::Module;
+use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::camera::{Rig, RigError};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
@@ -16,8 +17,9 @@ use ssrdrive_proto::image::RgbImage;
 
 use crate::control::{ControlConfig, ControlDecision, EpisodeController};
 use crate::model::backbone::frame_to_input;
-use crate::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
+use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use crate::model::config::SsrConfig;
+use crate::model::occupancy::OCCUPANCY_CHANNELS;
 use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
 use crate::pose::{EgoMotion, Pose2};
 
@@ -424,6 +426,13 @@ impl SsrPolicy {
             .filter(|_| wants_debug)
             .map(float_values);
         let tokens = self.config.tokens.num_tokens;
+        // The occupancy head runs only for the safety stop (and only where an episode has it on).
+        let occupancy = self
+            .model
+            .occupancy
+            .as_ref()
+            .filter(|_| states.iter().any(|s| s.controller.config().safety.enabled))
+            .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
 
         let mut results = Vec::with_capacity(b);
         for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
@@ -438,9 +447,17 @@ impl SsrPolicy {
             let a = [alpha[2 * i], alpha[2 * i + 1]];
             let bt = [beta[2 * i], beta[2 * i + 1]];
             let control_started = std::time::Instant::now();
-            let decision = state
-                .controller
-                .act(&path, input.target_point, input.speed, a, bt);
+            let safety = &state.controller.config().safety;
+            let occupied = match &occupancy {
+                Some(p) if safety.enabled => {
+                    occupied_cells(p, i, &self.config.bev.grid, safety.threshold)
+                }
+                _ => Vec::new(),
+            };
+            let decision =
+                state
+                    .controller
+                    .act(&path, input.target_point, input.speed, a, bt, &occupied);
             let control_time = control_started.elapsed();
             let debug = (input.debug).then(|| {
                 let token_attention = attention.as_ref().map(|maps| {
@@ -473,4 +490,24 @@ impl SsrPolicy {
         }
         results
     }
+}
+
+/// The ego-frame centres of the cells of episode `episode` whose occupancy probability (any
+/// channel) is at least `threshold`, from `[B, Q, channels]` probabilities.
+fn occupied_cells(
+    probabilities: &[f32],
+    episode: usize,
+    grid: &BevGrid,
+    threshold: f32,
+) -> Vec<[f32; 2]> {
+    let (q, k) = (grid.cells(), OCCUPANCY_CHANNELS.len());
+    let cells = &probabilities[episode * q * k..(episode + 1) * q * k];
+    (0..q)
+        .filter(|&cell| {
+            cells[cell * k..(cell + 1) * k]
+                .iter()
+                .any(|&p| p >= threshold)
+        })
+        .map(|cell| grid.cell_centre(cell))
+        .collect()
 }

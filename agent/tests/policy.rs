@@ -4,7 +4,9 @@
 mod common;
 
 use common::{policy_of, rig, step_input, tiny_config};
+use ssr_agent::control::{ControlConfig, SafetyStop};
 use ssr_agent::model::bev::HISTORY_TICKS;
+use ssr_agent::model::config::SsrConfig;
 use ssr_agent::policy::{InputError, SsrPolicy, StepError};
 
 fn policy() -> SsrPolicy {
@@ -164,4 +166,41 @@ fn bad_inputs_are_named_and_change_nothing() {
         "failed steps leave the episode untouched"
     );
     assert_eq!(other.ticks(), 0);
+}
+
+#[test]
+fn the_safety_stop_reads_the_occupancy_head_at_its_threshold() {
+    let policy = policy();
+    let rig = rig(1, 900, 256);
+    // The tiny grid's cells are 6 m wide: the nearest centres ahead are 3 m to either side.
+    let safety = |threshold: f32| ControlConfig {
+        safety: SafetyStop {
+            enabled: true,
+            threshold,
+            half_width: 3.5,
+            ..SafetyStop::default()
+        },
+        ..ControlConfig::default()
+    };
+    let decide = |policy: &SsrPolicy, control: ControlConfig| {
+        let mut episode = policy.new_episode_with(control);
+        policy
+            .step(&mut episode, &step_input(&rig, 0, 1))
+            .unwrap()
+            .decision
+    };
+    // Every cell counts at threshold 0, none at 1 (the random head is far from certain).
+    let stop = decide(&policy, safety(0.0));
+    assert!(stop.safety_stop && stop.control.brake == 1.0 && stop.control.throttle == 0.0);
+    assert!(!decide(&policy, safety(1.0)).safety_stop);
+    assert!(
+        !decide(&policy, ControlConfig::default()).safety_stop,
+        "off by default"
+    );
+    // A network without the head gives the rule nothing to see.
+    let headless = policy_of(SsrConfig {
+        occupancy_head: false,
+        ..tiny_config()
+    });
+    assert!(!decide(&headless, safety(0.0)).safety_stop);
 }

@@ -258,3 +258,29 @@ fn images_decode_from_every_encoding_to_the_same_rgb() {
     let error = decode_image(&unknown, &spec).unwrap_err();
     assert!(error.to_string().contains("encoding 42"), "{error}");
 }
+
+#[test]
+fn the_safety_stop_needs_a_network_with_the_occupancy_head() {
+    let device = Backend::Cpu.device().unwrap();
+    let safety = ServeConfig {
+        safety_stop: true,
+        ..ServeConfig::default()
+    };
+    // The bundled checkpoint predates the head: refused, with what to do.
+    let error = ssr_agent::serve::load_policy(&safety, &device)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.contains("occupancy head") && error.contains("--safety-stop false"),
+        "{error}"
+    );
+    // Without it the bundled checkpoint serves; the presets have the head.
+    assert!(ssr_agent::serve::load_policy(&ServeConfig::default(), &device).is_ok());
+    let with_head = ServeConfig {
+        untrained_config: Some("cpu-default".into()),
+        ..safety
+    };
+    let (policy, _) = ssr_agent::serve::load_policy(&with_head, &device).unwrap();
+    assert!(policy.control().safety.enabled);
+}

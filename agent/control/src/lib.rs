@@ -1,8 +1,9 @@
 //! From a planned trajectory and TCP's control branch to vehicle control: pure pursuit and a
 //! speed PID that follow the waypoints ([`trajectory`]), the control branch's Beta distributions
-//! turned into actions ([`beta`]), TCP's situation-based fusion of the two ([`fusion`]), and a
-//! timed rule that gets a car going again after a long stop ([`unstick`]), with the per-episode
-//! state all of them keep ([`EpisodeController`]).
+//! turned into actions ([`beta`]), TCP's situation-based fusion of the two ([`fusion`]), a
+//! timed rule that gets a car going again after a long stop ([`unstick`]), and a stop when the
+//! network believes the path just ahead occupied ([`safety`]), with the per-episode state all
+//! of them keep ([`EpisodeController`]).
 //!
 //! A crate of its own so that the agent server and the simulator's oracle-plan agent (which
 //! feeds it the expert's plan) drive through the same code; it depends on the contract crate
@@ -17,10 +18,12 @@
 pub mod beta;
 pub mod fusion;
 pub mod pid;
+pub mod safety;
 pub mod trajectory;
 pub mod unstick;
 
 use fusion::Fusion;
+pub use safety::SafetyStop;
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
 use trajectory::TrajectoryFollower;
@@ -90,6 +93,8 @@ pub struct ControlConfig {
     pub turn_count: usize,
     /// The timed unstick rule (on by default).
     pub unstick: Unstick,
+    /// The safety stop on the network's occupancy (off by default).
+    pub safety: SafetyStop,
 }
 
 impl Default for ControlConfig {
@@ -112,6 +117,7 @@ impl Default for ControlConfig {
             turn_steer: 0.1,
             turn_count: 10,
             unstick: Unstick::default(),
+            safety: SafetyStop::default(),
         }
     }
 }
@@ -132,6 +138,7 @@ impl ControlConfig {
             ));
         }
         self.unstick.validate()?;
+        self.safety.validate()?;
         let v = &self.vehicle;
         if !(v.wheelbase > 0.5 && v.wheelbase < 20.0) {
             return Err(format!(
@@ -175,6 +182,9 @@ pub struct ControlDecision {
     /// Whether the unstick rule overrode the fused control this tick.
     #[serde(default)]
     pub unsticking: bool,
+    /// Whether the safety stop overrode the control this tick.
+    #[serde(default)]
+    pub safety_stop: bool,
 }
 
 /// Everything the control side remembers about one episode.
@@ -187,6 +197,11 @@ pub struct EpisodeController {
 }
 
 impl EpisodeController {
+    /// The settings this episode is driven under.
+    pub fn config(&self) -> &ControlConfig {
+        &self.config
+    }
+
     /// The state of a new episode driven under `config`.
     pub fn new(config: ControlConfig) -> Self {
         Self {
@@ -198,7 +213,8 @@ impl EpisodeController {
     }
 
     /// One tick: `waypoints` ego frame (x forward, y left), `target_point` likewise, `speed`
-    /// m/s, and the control branch's Beta parameters for [acceleration, steer].
+    /// m/s, the control branch's Beta parameters for [acceleration, steer], and the ego-frame
+    /// points the network believes occupied (for the [`safety`] stop).
     pub fn act(
         &mut self,
         waypoints: &[[f32; 2]],
@@ -206,9 +222,10 @@ impl EpisodeController {
         speed: f32,
         alpha: [f32; 2],
         beta: [f32; 2],
+        occupied: &[[f32; 2]],
     ) -> ControlDecision {
         let branch = beta::control_from_beta(alpha, beta);
-        self.act_with_branch(waypoints, target_point, speed, Some(branch))
+        self.act_with_branch(waypoints, target_point, speed, Some(branch), occupied)
     }
 
     /// [`EpisodeController::act`] with the control branch's control already decided (an oracle
@@ -220,6 +237,7 @@ impl EpisodeController {
         target_point: [f32; 2],
         speed: f32,
         branch: Option<Control>,
+        occupied: &[[f32; 2]],
     ) -> ControlDecision {
         let trajectory = self
             .follower
@@ -230,12 +248,23 @@ impl EpisodeController {
         let (control, unsticking) =
             self.unstick
                 .apply(fused, speed, trajectory.steer, &self.config.unstick);
+        let safety_stop = self.config.safety.blocked(waypoints, speed, occupied);
+        let control = if safety_stop {
+            Control {
+                steer: control.steer,
+                throttle: 0.0,
+                brake: 1.0,
+            }
+        } else {
+            control
+        };
         ControlDecision {
             control,
             trajectory,
             branch,
             turning,
             unsticking,
+            safety_stop,
         }
     }
 }

@@ -4,9 +4,9 @@
 //! along its plan for [`Unstick::creep_s`] seconds at up to [`Unstick::creep_speed`], then the
 //! count starts again.
 //!
-//! A camera-only agent has no detector to tell whether its path is free, so unlike
-//! TransFuser++'s rule (which creeps only when a LiDAR safety box is empty) this one is timed
-//! alone. The wait is set longer than the longest red light of a four-way junction (about 45 s
+//! TransFuser++'s rule creeps only when a LiDAR safety box is empty; here the [`super::safety`]
+//! stop, where it is on, plays that part from the network's own occupancy head, and overrides
+//! the creep. The wait is set longer than the longest red light of a four-way junction (about 45 s
 //! in sim-bridge and CARLA), so a car held at a light is not pushed over its line, and well
 //! under the leaderboard's 180 s "agent blocked". While creeping, the trajectory's steer
 //! follows the plan (or the target point when the plan gives no direction).

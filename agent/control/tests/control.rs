@@ -5,7 +5,7 @@ use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
 use ssr_control::fusion::Fusion;
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
-use ssr_control::{ControlConfig, EpisodeController, Unstick, Vehicle};
+use ssr_control::{ControlConfig, EpisodeController, SafetyStop, Unstick, Vehicle};
 use ssrdrive_proto::control::Control;
 
 fn near(a: f32, b: f32) -> bool {
@@ -270,6 +270,7 @@ fn episode_controller_reports_both_sources() {
         3.0,
         [3.0, 2.0],
         [2.0, 2.0],
+        &[],
     );
     assert_eq!(d.trajectory.throttle, 0.75);
     assert!(near(d.branch.throttle, 1.0 / 3.0));
@@ -297,7 +298,7 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     let mut controller = EpisodeController::new(config.clone());
     let mut decisions = Vec::new();
     for _ in 0..wait_ticks + creep_ticks + 10 {
-        decisions.push(controller.act_with_branch(&hold, left_target, 0.0, None));
+        decisions.push(controller.act_with_branch(&hold, left_target, 0.0, None, &[]));
     }
     assert!(
         decisions[..wait_ticks - 1]
@@ -328,16 +329,16 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
         let speed = if tick == wait_ticks / 2 { 1.0 } else { 0.0 };
         assert!(
             !controller
-                .act_with_branch(&hold, left_target, speed, None)
+                .act_with_branch(&hold, left_target, speed, None, &[])
                 .unsticking
         );
     }
     assert!(
         controller
-            .act_with_branch(&hold, left_target, 0.0, None)
+            .act_with_branch(&hold, left_target, 0.0, None, &[])
             .unsticking
     );
-    let creep = controller.act_with_branch(&hold, left_target, rule.creep_speed + 0.1, None);
+    let creep = controller.act_with_branch(&hold, left_target, rule.creep_speed + 0.1, None, &[]);
     assert!(
         creep.unsticking && creep.control.throttle == 0.0,
         "{creep:?}"
@@ -352,7 +353,88 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     };
     let mut controller = EpisodeController::new(off);
     for _ in 0..wait_ticks * 3 {
-        let d = controller.act_with_branch(&hold, left_target, 0.0, None);
+        let d = controller.act_with_branch(&hold, left_target, 0.0, None, &[]);
         assert!(!d.unsticking && d.control.brake == 1.0);
     }
+}
+
+#[test]
+fn the_safety_stop_brakes_for_what_lies_on_the_path_within_the_stopping_distance() {
+    let rule = SafetyStop {
+        enabled: true,
+        ..SafetyStop::default()
+    };
+    let straight = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]];
+    // At 4 m/s the check reaches front 2.4 + margin 1.5 + 2 m of reaction + 1.6 m of braking.
+    assert!(near(rule.reach(4.0), 7.5));
+    assert!(rule.blocked(&straight, 4.0, &[[6.0, 0.5]]));
+    assert!(
+        !rule.blocked(&straight, 4.0, &[[9.0, 0.0]]),
+        "beyond the reach"
+    );
+    assert!(
+        rule.blocked(&straight, 8.0, &[[9.0, 0.0]]),
+        "faster reaches further"
+    );
+    assert!(
+        !rule.blocked(&straight, 4.0, &[[5.0, 2.3]]),
+        "beside the corridor"
+    );
+    assert!(
+        !rule.blocked(&straight, 4.0, &[[-3.0, 0.0]]),
+        "behind the car"
+    );
+    assert!(!rule.blocked(&straight, 4.0, &[]));
+    // The corridor follows a bend of the plan: a point straight ahead is off it.
+    let left = [[2.0, 0.2], [3.5, 1.5], [4.5, 3.0], [5.0, 5.0]];
+    assert!(rule.blocked(&left, 4.0, &[[4.2, 2.5]]));
+    assert!(!rule.blocked(&left, 4.0, &[[6.0, -1.0]]));
+    // A plan to stand still checks straight ahead, as far as the margin at standstill.
+    let hold = [[0.0, 0.0]; 4];
+    assert!(rule.blocked(&hold, 0.0, &[[3.5, 0.0]]));
+    assert!(!rule.blocked(&hold, 0.0, &[[4.5, 0.0]]));
+    // Off, it never acts; out of range, it is refused with the field named.
+    let off = SafetyStop::default();
+    assert!(!off.enabled && !off.blocked(&straight, 4.0, &[[6.0, 0.0]]));
+    let bad = SafetyStop {
+        threshold: 1.5,
+        ..SafetyStop::default()
+    };
+    assert!(bad.validate().unwrap_err().contains("safety.threshold"));
+}
+
+#[test]
+fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
+    let config = ControlConfig {
+        safety: SafetyStop {
+            enabled: true,
+            ..SafetyStop::default()
+        },
+        ..ControlConfig::default()
+    };
+    let ahead = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]];
+    let mut controller = EpisodeController::new(config.clone());
+    let free = controller.act(&ahead, [20.0, 0.0], 3.0, [3.0, 2.0], [2.0, 2.0], &[]);
+    assert!(!free.safety_stop && free.control.throttle > 0.5);
+    let stop = controller.act(
+        &ahead,
+        [20.0, 0.0],
+        3.0,
+        [3.0, 2.0],
+        [2.0, 2.0],
+        &[[5.0, 0.0]],
+    );
+    assert!(stop.safety_stop, "{stop:?}");
+    assert_eq!((stop.control.throttle, stop.control.brake), (0.0, 1.0));
+    assert!(stop.trajectory.throttle > 0.5, "the sources still say go");
+
+    // After the long wait the unstick rule would creep; not into an occupied cell.
+    let hold = [[0.0, 0.0]; 4];
+    let wait_ticks = (config.unstick.after_s * 20.0) as usize;
+    let mut controller = EpisodeController::new(config);
+    let decisions: Vec<_> = (0..wait_ticks + 5)
+        .map(|_| controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, &[[3.0, 0.0]]))
+        .collect();
+    let last = decisions.last().unwrap();
+    assert!(last.unsticking && last.safety_stop && last.control.throttle == 0.0);
 }

@@ -78,6 +78,10 @@ pub struct ServeArgs {
     /// The unstick rule: after 50 s stopped, creep 2 s along the plan [default: true].
     #[arg(long, env = "SSR_AGENT_UNSTICK")]
     unstick: Option<bool>,
+    /// The safety stop: brake when the network's occupancy head believes the path just ahead
+    /// occupied (needs a checkpoint with the head) [default: false].
+    #[arg(long, env = "SSR_AGENT_SAFETY_STOP")]
+    safety_stop: Option<bool>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -137,6 +141,7 @@ impl ServeArgs {
         set(&mut config.log_format, &self.log_format);
         set(&mut config.backend, &self.backend);
         set(&mut config.unstick, &self.unstick);
+        set(&mut config.safety_stop, &self.safety_stop);
         config.validate()?;
         Ok(config)
     }

@@ -76,6 +76,9 @@ pub struct ServeConfig {
     /// The controller's unstick rule (creep along the plan after a long stop; see
     /// `ssr_control::unstick`); `false` turns it off for every episode.
     pub unstick: bool,
+    /// The controller's safety stop (brake where the network's occupancy head believes the
+    /// path just ahead occupied; see `ssr_control::safety`); needs a checkpoint with the head.
+    pub safety_stop: bool,
 }
 
 impl Default for ServeConfig {
@@ -101,6 +104,7 @@ impl Default for ServeConfig {
             log_format: LogFormat::Human,
             backend: Backend::Cpu,
             unstick: true,
+            safety_stop: false,
         }
     }
 }

@@ -95,6 +95,14 @@ pub fn load_policy(
     };
     let mut control = control;
     control.unstick.enabled = config.unstick;
+    control.safety.enabled = config.safety_stop;
+    if control.safety.enabled && model.occupancy.is_none() {
+        anyhow::bail!(
+            "the safety stop reads the network's occupancy head, and {} has none \
+             (train with --occupancy-weight above 0, or serve with --safety-stop false)",
+            info.checkpoint
+        );
+    }
     let policy = SsrPolicy::new(model, model_config, control, device.clone());
     Ok((policy, info))
 }

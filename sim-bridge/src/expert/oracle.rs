@@ -88,6 +88,7 @@ impl Agent for OraclePlan {
             to_f32(obs.target_point),
             obs.speed as f32,
             branch,
+            &[],
         );
         Ok(decision.control)
     }

@@ -1,0 +1,141 @@
+//! The safety stop: brake when the network itself believes the path just ahead is occupied.
+//!
+//! An imitation agent copies the expert's slowing near a road user but not always the moment
+//! it must stop: the learner crept at the expert's 2 m/s into walkers it had slowed for, and
+//! drove into stopped cars it had seen for two seconds. The network's occupancy head
+//! (`ssr_agent::model::occupancy`) says per BEV cell how likely a road user covers it; the
+//! caller hands this rule the centres of the cells at or above [`SafetyStop::threshold`]. When
+//! one lies on the planned path (within [`SafetyStop::half_width`] of it) closer than the
+//! stopping distance (the ego's front, then [`SafetyStop::margin`], the distance covered in
+//! [`SafetyStop::reaction_s`] and the braking distance at [`SafetyStop::decel`]), the car
+//! brakes fully, whatever the fusion or the unstick rule said. This is InterFuser's safety
+//! controller on a learned occupancy map, and the safety box of TransFuser++'s creep rule; it
+//! uses nothing the network does not see.
+//!
+//! Where the plan is shorter than the distance checked (a car planning to stand still), the
+//! path goes on straight along its last direction (straight ahead for a plan without one).
+
+use serde::{Deserialize, Serialize};
+
+/// Settings of the rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SafetyStop {
+    /// Whether the rule acts.
+    pub enabled: bool,
+    /// Occupancy probability from which a cell counts as occupied.
+    pub threshold: f32,
+    /// Distance from the ego origin (the box centre) to its front bumper, m.
+    pub front: f32,
+    /// Half width of the corridor around the path, m (the ego's half width plus a margin).
+    pub half_width: f32,
+    /// Free distance always kept ahead of the bumper, m.
+    pub margin: f32,
+    /// Seconds of travel before the brakes act.
+    pub reaction_s: f32,
+    /// Deceleration the braking distance assumes, m/s^2.
+    pub decel: f32,
+}
+
+impl Default for SafetyStop {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            threshold: 0.95,
+            front: 2.4,
+            half_width: 1.6,
+            margin: 1.5,
+            reaction_s: 0.5,
+            decel: 5.0,
+        }
+    }
+}
+
+impl SafetyStop {
+    /// Checks ranges; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let fields = [
+            ("safety.threshold", self.threshold, 0.0, 1.0),
+            ("safety.front", self.front, 0.0, 20.0),
+            ("safety.half_width", self.half_width, 0.1, 10.0),
+            ("safety.margin", self.margin, 0.0, 20.0),
+            ("safety.reaction_s", self.reaction_s, 0.0, 5.0),
+            ("safety.decel", self.decel, 0.5, 20.0),
+        ];
+        for (name, value, low, high) in fields {
+            if !(low..=high).contains(&value) {
+                return Err(format!("{name} = {value} is outside {low}..{high}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// How far along the path from the ego origin the corridor is checked at `speed` m/s.
+    pub fn reach(&self, speed: f32) -> f32 {
+        let speed = speed.max(0.0);
+        self.front + self.margin + speed * self.reaction_s + speed * speed / (2.0 * self.decel)
+    }
+
+    /// Whether one of the `occupied` points (ego frame) lies on the path `waypoints` (ego
+    /// frame, starting after the origin) within [`SafetyStop::reach`] at `speed`.
+    pub fn blocked(&self, waypoints: &[[f32; 2]], speed: f32, occupied: &[[f32; 2]]) -> bool {
+        if !self.enabled || occupied.is_empty() {
+            return false;
+        }
+        let reach = self.reach(speed);
+        let path = corridor_path(waypoints, reach);
+        occupied.iter().any(|&point| {
+            let mut start = 0.0;
+            path.windows(2).any(|segment| {
+                let (along, across) = project(point, segment[0], segment[1]);
+                let length = distance(segment[0], segment[1]);
+                let hit = (0.0..=length).contains(&along)
+                    && start + along <= reach
+                    && across <= self.half_width;
+                start += length;
+                hit
+            })
+        })
+    }
+}
+
+/// The path from the origin through `waypoints`, extended straight along its last direction
+/// until it is at least `reach` long.
+fn corridor_path(waypoints: &[[f32; 2]], reach: f32) -> Vec<[f32; 2]> {
+    let mut path = vec![[0.0, 0.0]];
+    for &point in waypoints {
+        // Repeated points (a plan to stand still) add no direction.
+        if point.iter().all(|v| v.is_finite()) && distance(point, path[path.len() - 1]) > 0.1 {
+            path.push(point);
+        }
+    }
+    let length: f32 = path.windows(2).map(|s| distance(s[0], s[1])).sum();
+    let last = path[path.len() - 1];
+    let direction = match path.len() {
+        1 => [1.0, 0.0],
+        n => {
+            let before = path[n - 2];
+            let d = distance(before, last);
+            [(last[0] - before[0]) / d, (last[1] - before[1]) / d]
+        }
+    };
+    let extra = (reach - length).max(0.0) + 1.0;
+    path.push([
+        last[0] + direction[0] * extra,
+        last[1] + direction[1] * extra,
+    ]);
+    path
+}
+
+fn distance(a: [f32; 2], b: [f32; 2]) -> f32 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// Where `point` lies relative to the segment `a`-`b` (apart by more than 0.1 m): its distance
+/// along from `a`, and its distance from the segment's line.
+fn project(point: [f32; 2], a: [f32; 2], b: [f32; 2]) -> (f32, f32) {
+    let length = distance(a, b);
+    let (ux, uy) = ((b[0] - a[0]) / length, (b[1] - a[1]) / length);
+    let (dx, dy) = (point[0] - a[0], point[1] - a[1]);
+    (dx * ux + dy * uy, (dx * uy - dy * ux).abs())
+}
