@@ -23,7 +23,9 @@ use serde::{Deserialize, Serialize};
 pub struct SafetyStop {
     /// Whether the rule acts.
     pub enabled: bool,
-    /// Occupancy probability from which a cell counts as occupied.
+    /// Occupancy probability from which a cell counts as occupied. The default, 0.98, found
+    /// 94 % of the validation frames with a vehicle 1-14 m ahead within 2 m of the axis, and 81 %
+    /// of the frames where it saw one had one (v5 step 3,000 of the closed-loop recipe).
     pub threshold: f32,
     /// Distance from the ego origin (the box centre) to its front bumper, m.
     pub front: f32,
@@ -41,7 +43,7 @@ impl Default for SafetyStop {
     fn default() -> Self {
         Self {
             enabled: false,
-            threshold: 0.95,
+            threshold: 0.98,
             front: 2.4,
             half_width: 1.6,
             margin: 1.5,
