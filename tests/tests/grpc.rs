@@ -151,6 +151,58 @@ fn local_agent_starts_its_own_server() {
 }
 
 #[test]
+fn a_local_agent_drives_runs_at_once_as_one_at_a_time() {
+    // The bundled network, two routes for 3 s each: with two runs at once, each run's controls
+    // are the ones it gets alone, bit for bit (batched kernels round differently).
+    let tmp = tempfile::tempdir().unwrap();
+    let controls = |jobs: &str| {
+        let dir = tmp.path().join(format!("jobs-{jobs}"));
+        let record = dir.to_str().unwrap();
+        let flags = [
+            "--limit",
+            "2",
+            "--timeout",
+            "3",
+            "--jobs",
+            jobs,
+            "--record",
+            record,
+        ];
+        succeeded(
+            eval_command("local", &flags, &dir.join("results.json"))
+                .env("SSR_AGENT_BIN", binary("ssr-agent"))
+                .env_remove("SSR_AGENT_UNTRAINED_CONFIG")
+                .env_remove("SSR_AGENT_CHECKPOINT")
+                .env_remove("SSR_AGENT_MAX_BATCH")
+                .output()
+                .unwrap(),
+        );
+        let mut logs: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|entry| entry.unwrap().path())
+            .filter(|path| path.extension().is_some_and(|e| e == "ssrlog"))
+            .collect();
+        logs.sort();
+        assert_eq!(logs.len(), 2, "{logs:?}");
+        logs.iter()
+            .map(|path| {
+                let log = sim_bridge::replay::log::read_log(path).unwrap();
+                log.ticks
+                    .iter()
+                    .map(|tick| {
+                        let c = tick.control.unwrap();
+                        [c.steer, c.throttle, c.brake].map(f64::to_bits)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+    let alone = controls("1");
+    assert!(alone.iter().all(|run| run.len() >= 59), "3 s at 20 Hz");
+    assert_eq!(controls("2"), alone);
+}
+
+#[test]
 fn a_server_lost_mid_route_crashes_the_route_and_resume_finishes_the_run() {
     let server = Server::start(&[]);
     let tmp = tempfile::tempdir().unwrap();

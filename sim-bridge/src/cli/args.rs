@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use anyhow::bail;
 use clap::Args;
-use sim_bridge::client::local::LocalServer;
+use sim_bridge::client::local::{LocalRole, LocalServer};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::xml::RouteSpec;
@@ -136,11 +136,14 @@ impl WorldArgs {
 }
 
 /// The server an `--agent` value names: `grpc://HOST:PORT` (or `http://`), or `local`: a child
-/// `ssr-agent serve` (with a metrics port if `metrics`), alive as long as the returned handle.
-pub fn server_target(agent: &str, metrics: bool) -> anyhow::Result<(String, Option<LocalServer>)> {
+/// `ssr-agent serve` set up for `role`, alive as long as the returned handle.
+pub fn server_target(
+    agent: &str,
+    role: LocalRole,
+) -> anyhow::Result<(String, Option<LocalServer>)> {
     match agent {
         "local" => {
-            let server = LocalServer::start(metrics)?;
+            let server = LocalServer::start(role)?;
             Ok((server.target(), Some(server)))
         }
         remote if remote.starts_with("grpc://") || remote.starts_with("http://") => {

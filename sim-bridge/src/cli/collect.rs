@@ -14,6 +14,8 @@ use sim_bridge::map::Map;
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::dataset::NoiseConfig;
 
+use sim_bridge::client::local::LocalRole;
+
 use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
 
 #[derive(Debug, Args)]
@@ -154,7 +156,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     }
     let (target, _local_server) = match &args.driver {
         Some(driver) => {
-            let (target, server) = server_target(driver, false)?;
+            let (target, server) = server_target(driver, LocalRole::Driving)?;
             (Some(target), server)
         }
         None => (None, None),

@@ -21,6 +21,8 @@ use sim_bridge::route::xml::RouteSpec;
 use sim_bridge::scoring::{ScoringConfig, summary_table};
 use ssrdrive_proto::camera::Rig;
 
+use sim_bridge::client::local::LocalRole;
+
 use super::args::{
     RouteArgs, WorldArgs, parse_count, parse_positive, parse_seconds, server_target,
 };
@@ -51,8 +53,9 @@ pub struct EvalArgs {
     /// Runs of each route; repetition r uses seed S + r.
     #[arg(long, default_value_t = 1, value_parser = parse_count)]
     repetitions: usize,
-    /// Runs at once, each with its own agent (a gRPC server batches their steps); results
-    /// are the same as one at a time.
+    /// Runs at once, each with its own agent; results are the same as one at a time (a
+    /// `local` agent steps one run per forward pass; a remote server that batches the runs'
+    /// steps rounds differently with the batch, and learned agents may then diverge)
     #[arg(long, default_value_t = 1, value_parser = parse_count)]
     jobs: usize,
     /// End every route after this many simulated seconds (a timeout without penalty) instead
@@ -224,7 +227,7 @@ fn agent_target(args: &EvalArgs) -> anyhow::Result<(Option<String>, Option<Local
     ) {
         return Ok((None, None));
     }
-    let (target, server) = server_target(&args.agent, false)?;
+    let (target, server) = server_target(&args.agent, LocalRole::Driving)?;
     Ok((Some(target), server))
 }
 

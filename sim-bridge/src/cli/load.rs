@@ -25,6 +25,8 @@ use ssrdrive_proto::dataset::Dataset;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::wire;
 
+use sim_bridge::client::local::LocalRole;
+
 use super::args::{RouteArgs, WorldArgs, parse_positive, parse_seconds, server_target};
 
 #[derive(Debug, Args)]
@@ -75,7 +77,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     if args.episodes == 0 || args.frames == 0 {
         bail!("--episodes and --frames must be at least 1");
     }
-    let (target, local) = server_target(&args.agent, true)?;
+    let (target, local) = server_target(&args.agent, LocalRole::LoadTest)?;
     let metrics_url = args.metrics.clone().or_else(|| {
         local
             .as_ref()

@@ -8,6 +8,8 @@ use anyhow::{Context, bail};
 use clap::Args;
 use sim_bridge::replay::{ReplayReport, Spread, log::read_log, replay};
 
+use sim_bridge::client::local::LocalRole;
+
 use super::args::{parse_seconds, server_target};
 
 #[derive(Debug, Args)]
@@ -87,7 +89,7 @@ fn print(report: &ReplayReport, path: &std::path::Path) {
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let files = log_files(&args.logs)?;
-    let (target, _local) = server_target(&args.agent, false)?;
+    let (target, _local) = server_target(&args.agent, LocalRole::Driving)?;
     let mut reports = Vec::new();
     for path in &files {
         let log = read_log(path)?;

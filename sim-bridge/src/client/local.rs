@@ -11,6 +11,19 @@ use std::time::Duration;
 
 use crate::agent::AgentError;
 
+/// What a local server is started for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LocalRole {
+    /// Driving or re-feeding runs (`eval`, `collect --driver`, `replay`): one step per forward
+    /// pass (`SSR_AGENT_MAX_BATCH=1` unless the environment sets it). Batched kernels round
+    /// differently from single ones, and closed loop amplifies the difference, so a run would
+    /// otherwise depend on which other runs' steps happened to share its batch; this way
+    /// `--jobs N` gives the results of one run at a time. No metrics port.
+    Driving,
+    /// `load`: the server batches as configured, and opens a metrics port.
+    LoadTest,
+}
+
 /// A running local server.
 pub struct LocalServer {
     child: Child,
@@ -59,12 +72,12 @@ fn read_addresses(
 }
 
 impl LocalServer {
-    /// Starts `ssr-agent serve` on 127.0.0.1 with a free port (and a free metrics port when
-    /// `metrics` is set), and waits until it has bound its ports (not until it is warmed up:
-    /// clients check health).
-    pub fn start(metrics: bool) -> Result<Self, AgentError> {
+    /// Starts `ssr-agent serve` on 127.0.0.1 with a free port, set up for `role`, and waits
+    /// until it has bound its ports (not until it is warmed up: clients check health).
+    pub fn start(role: LocalRole) -> Result<Self, AgentError> {
         let binary = find_binary()?;
         let mut command = Command::new(&binary);
+        let metrics = role == LocalRole::LoadTest;
         let metrics_listen = if metrics { "127.0.0.1:0" } else { "off" };
         command
             .args(["serve", "--listen", "127.0.0.1:0"])
@@ -74,6 +87,9 @@ impl LocalServer {
             .stderr(Stdio::inherit());
         if std::env::var_os("RUST_LOG").is_none() {
             command.env("RUST_LOG", "warn");
+        }
+        if role == LocalRole::Driving && std::env::var_os("SSR_AGENT_MAX_BATCH").is_none() {
+            command.env("SSR_AGENT_MAX_BATCH", "1");
         }
         let mut child = command
             .spawn()
