@@ -168,6 +168,18 @@ impl ControlConfig {
     }
 }
 
+/// Checks that each `(name, value, low, high)` has `value` in `low..=high`; the message names
+/// the first field outside its range.
+pub(crate) fn check_ranges(fields: &[(&str, f32, f32, f32)]) -> Result<(), String> {
+    match fields
+        .iter()
+        .find(|(_, value, low, high)| !(low..=high).contains(&value))
+    {
+        Some((name, value, low, high)) => Err(format!("{name} = {value} is outside {low}..{high}")),
+        None => Ok(()),
+    }
+}
+
 /// The three controls of one tick: what the vehicle gets and where it came from.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct ControlDecision {

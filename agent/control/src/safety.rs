@@ -64,12 +64,7 @@ impl SafetyStop {
             ("safety.reaction_s", self.reaction_s, 0.0, 5.0),
             ("safety.decel", self.decel, 0.5, 20.0),
         ];
-        for (name, value, low, high) in fields {
-            if !(low..=high).contains(&value) {
-                return Err(format!("{name} = {value} is outside {low}..{high}"));
-            }
-        }
-        Ok(())
+        super::check_ranges(&fields)
     }
 
     /// How far along the path from the ego origin the corridor is checked at `speed` m/s.

@@ -56,12 +56,7 @@ impl Unstick {
             ("unstick.creep_speed", self.creep_speed, 0.1, 10.0),
             ("unstick.creep_throttle", self.creep_throttle, 0.0, 1.0),
         ];
-        for (name, value, low, high) in fields {
-            if !(low..=high).contains(&value) {
-                return Err(format!("{name} = {value} is outside {low}..{high}"));
-            }
-        }
-        Ok(())
+        super::check_ranges(&fields)
     }
 }
 
