@@ -75,6 +75,14 @@ pub enum CheckpointError {
         /// Why the config was refused.
         reason: String,
     },
+    /// Controller settings that do not validate.
+    #[error("controller settings for checkpoint {path}: {reason}")]
+    BadControl {
+        /// The checkpoint file they were meant for.
+        path: PathBuf,
+        /// Which setting is out of range.
+        reason: String,
+    },
     /// The weights do not fit the network the config describes (names or shapes).
     #[error("checkpoint {path} does not match its config '{config}': {details}")]
     Mismatch {
@@ -127,6 +135,41 @@ pub fn save(
             path: path.to_path_buf(),
             source: std::io::Error::other(e.to_string()),
         })
+}
+
+/// Writes a copy of the checkpoint at `from` to `to` with `control` (checked first) as its
+/// controller settings; the weights and every other metadata entry are kept. The copy is
+/// written beside `to` and renamed over it, so `to` may be `from` and is never left half
+/// written.
+pub fn with_control(
+    from: &Path,
+    to: &Path,
+    control: &ControlConfig,
+    device: &Device,
+) -> Result<(), CheckpointError> {
+    control
+        .validate()
+        .map_err(|reason| CheckpointError::BadControl {
+            path: to.to_path_buf(),
+            reason,
+        })?;
+    let (model, info) = load(from, device)?;
+    let control_json = serde_json::to_string(control).expect("configs serialise");
+    let metadata: Vec<(&str, String)> = info
+        .metadata
+        .iter()
+        .filter(|(key, _)| key.as_str() != CONTROL_KEY)
+        .map(|(key, value)| (key.as_str(), value.clone()))
+        .chain([(CONTROL_KEY, control_json)])
+        .collect();
+    let mut partial = to.as_os_str().to_owned();
+    partial.push(".partial");
+    let partial = PathBuf::from(partial);
+    save(&model, &info.config, &metadata, &partial)?;
+    std::fs::rename(&partial, to).map_err(|source| CheckpointError::Io {
+        path: to.to_path_buf(),
+        source,
+    })
 }
 
 /// The controller settings a checkpoint carries (checked), or the defaults when it has none.

@@ -1,4 +1,5 @@
-//! Checkpoints: save then load gives identical outputs; bad files are clear errors.
+//! Checkpoints: save then load gives identical outputs; new controller settings keep the
+//! weights; bad files are clear errors.
 
 mod common;
 
@@ -7,8 +8,12 @@ use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Device;
 
 use common::{max_abs_diff, model_input, tiny_config};
-use ssr_agent::checkpoint::{CheckpointError, inspect, load, save};
-use ssr_agent::model::float_values;
+use ssr_agent::checkpoint::{
+    CONTROL_KEY, CheckpointError, control_config, inspect, load, save, with_control,
+};
+use ssr_agent::control::ControlConfig;
+use ssr_agent::model::config::SsrConfig;
+use ssr_agent::model::{SsrModel, float_values};
 
 #[test]
 fn save_then_load_gives_identical_outputs() {
@@ -24,9 +29,14 @@ fn save_then_load_gives_identical_outputs() {
         info.metadata.get("note").map(String::as_str),
         Some("unit test")
     );
-    let input = model_input(&config, 2, 1, true, &device);
-    let a = model.valid().forward(&input);
-    let b = loaded.valid().forward(&input);
+    assert_same_outputs(&model, &loaded, &config, &device);
+}
+
+/// The two networks give bit-identical waypoints and BEV on one input.
+fn assert_same_outputs(a: &SsrModel, b: &SsrModel, config: &SsrConfig, device: &Device) {
+    let input = model_input(config, 2, 1, true, device);
+    let a = a.valid().forward(&input);
+    let b = b.valid().forward(&input);
     assert_eq!(
         max_abs_diff(
             float_values(a.head.waypoints),
@@ -35,6 +45,57 @@ fn save_then_load_gives_identical_outputs() {
         0.0
     );
     assert_eq!(max_abs_diff(float_values(a.bev), float_values(b.bev)), 0.0);
+}
+
+#[test]
+fn new_controller_settings_keep_the_weights_and_the_other_metadata() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let model = config.init(&device);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.safetensors");
+    save(&model, &config, &[("note", "unit test".into())], &path).unwrap();
+    let before = std::fs::read(&path).unwrap();
+    assert_eq!(
+        control_config(&inspect(&path).unwrap()).unwrap(),
+        ControlConfig::default()
+    );
+
+    // Out of range: refused, and the file is untouched.
+    let bad = ControlConfig {
+        alpha: 2.0,
+        ..ControlConfig::default()
+    };
+    let error = with_control(&path, &path, &bad, &device).unwrap_err();
+    assert!(
+        matches!(error, CheckpointError::BadControl { .. }),
+        "{error}"
+    );
+    assert!(error.to_string().contains("alpha = 2"), "{error}");
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+
+    // In place: the weights give the same outputs, the notes stay, the settings are new.
+    let mut control = ControlConfig::default();
+    control.safety.enabled = true;
+    control.vehicle.wheelbase = 2.87;
+    with_control(&path, &path, &control, &device).unwrap();
+    let (loaded, info) = load(&path, &device).unwrap();
+    assert_eq!(control_config(&info).unwrap(), control);
+    assert!(info.metadata.contains_key(CONTROL_KEY));
+    assert_eq!(info.metadata["note"], "unit test");
+    assert!(!dir.path().join("model.safetensors.partial").exists());
+    assert_same_outputs(&model, &loaded, &config, &device);
+
+    // A truncated source is named, and nothing is written.
+    let truncated = dir.path().join("truncated.safetensors");
+    std::fs::write(&truncated, &before[..before.len() / 2]).unwrap();
+    let out = dir.path().join("out.safetensors");
+    let error = with_control(&truncated, &out, &control, &device).unwrap_err();
+    assert!(
+        matches!(error, CheckpointError::Truncated { .. }),
+        "{error}"
+    );
+    assert!(!out.exists());
 }
 
 #[test]

@@ -36,6 +36,59 @@ fn inspect_reports_bad_files() {
 }
 
 #[test]
+fn control_prints_and_changes_only_the_named_settings() {
+    use ssr_agent::control::ControlConfig;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.safetensors");
+    let config = common::tiny_config();
+    let model = config.init(&burn::tensor::Device::flex());
+    ssr_agent::checkpoint::save(&model, &config, &[], &path).unwrap();
+    let path = path.to_str().unwrap();
+    let out = dir.path().join("changed.safetensors");
+    let out = out.to_str().unwrap();
+    let printed = |checkpoint: &str| {
+        let (ok, stdout, stderr) = ssr_agent(&["control", checkpoint]);
+        assert!(ok, "{stderr}");
+        serde_json::from_str::<ControlConfig>(&stdout).unwrap()
+    };
+    assert_eq!(printed(path), ControlConfig::default());
+
+    let patch = r#"{"safety": {"enabled": true}, "vehicle": {"max_wheel_angle": 70}}"#;
+    let (ok, _, stderr) = ssr_agent(&["control", path, "--set", patch, "--out", out]);
+    assert!(ok, "{stderr}");
+    let mut expected = ControlConfig::default();
+    expected.safety.enabled = true;
+    expected.vehicle.max_wheel_angle = 70.0;
+    assert_eq!(printed(out), expected);
+    // From a file, over the changed copy: the earlier changes stay.
+    let file = dir.path().join("patch.json");
+    std::fs::write(&file, r#"{"unstick": {"after_s": 30}}"#).unwrap();
+    let file = file.to_str().unwrap();
+    let (ok, _, stderr) = ssr_agent(&["control", out, "--set", file, "--out", out]);
+    assert!(ok, "{stderr}");
+    expected.unstick.after_s = 30.0;
+    assert_eq!(printed(out), expected);
+
+    // Refusals name the problem and write nothing.
+    let refused = |set: &str, needle: &str| {
+        let (ok, _, stderr) = ssr_agent(&["control", out, "--set", set, "--out", path]);
+        assert!(!ok && stderr.contains(needle), "{set}: {stderr}");
+        assert_eq!(printed(path), ControlConfig::default(), "{set}");
+    };
+    refused(
+        r#"{"safety": {"enabeld": true}}"#,
+        "unknown controller setting 'safety.enabeld'",
+    );
+    refused(r#"{"vehicle": 3}"#, "'vehicle' is a group of settings");
+    refused(r#"{"alpha": 2}"#, "alpha = 2");
+    refused(r#"{"alpha": "high"}"#, "changed controller settings");
+    refused(r#"{"alpha": 0.5"#, "--set is not JSON");
+    refused("/no/such/patch.json", "/no/such/patch.json");
+    let (ok, _, stderr) = ssr_agent(&["control", path, "--set", "{}"]);
+    assert!(!ok && stderr.contains("--out"), "{stderr}");
+}
+
+#[test]
 fn bench_runs_a_small_config_and_prints_json() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("tiny.json");

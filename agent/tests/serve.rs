@@ -6,6 +6,7 @@ mod common;
 use std::time::{Duration, Instant};
 
 use ssr_agent::device::Backend;
+use ssr_agent::model::config::SsrConfig;
 use ssr_agent::policy::SsrPolicy;
 use ssr_agent::serve::ServeConfig;
 use ssr_agent::serve::config::ServeConfigError;
@@ -260,14 +261,41 @@ fn images_decode_from_every_encoding_to_the_same_rgb() {
 }
 
 #[test]
-fn the_safety_stop_needs_a_network_with_the_occupancy_head() {
+fn the_safety_stop_follows_the_checkpoint_unless_told_and_needs_the_occupancy_head() {
     let device = Backend::Cpu.device().unwrap();
-    let safety = ServeConfig {
-        safety_stop: true,
+    let safety = |config: &ServeConfig| {
+        let (policy, _) = ssr_agent::serve::load_policy(config, &device).unwrap();
+        policy.control().safety.enabled
+    };
+    // The bundled checkpoint has the head and carries the stop on; a setting overrides it.
+    assert!(safety(&ServeConfig::default()));
+    let off = ServeConfig {
+        safety_stop: Some(false),
         ..ServeConfig::default()
     };
-    // The bundled checkpoint predates the head: refused, with what to do.
-    let error = ssr_agent::serve::load_policy(&safety, &device)
+    assert!(!safety(&off));
+    // An untrained preset has the head but the default controller: off unless asked.
+    let preset = ServeConfig {
+        untrained_config: Some("cpu-default".into()),
+        ..ServeConfig::default()
+    };
+    assert!(!safety(&preset));
+    let asked = ServeConfig {
+        safety_stop: Some(true),
+        ..preset
+    };
+    assert!(safety(&asked));
+    // A network without the head is refused, with what to do.
+    let dir = tempfile::tempdir().unwrap();
+    let headless = dir.path().join("headless.json");
+    let mut config = SsrConfig::cpu_default();
+    config.occupancy_head = false;
+    std::fs::write(&headless, serde_json::to_string(&config).unwrap()).unwrap();
+    let refused = ServeConfig {
+        untrained_config: Some(headless.to_str().unwrap().into()),
+        ..asked
+    };
+    let error = ssr_agent::serve::load_policy(&refused, &device)
         .err()
         .unwrap()
         .to_string();
@@ -275,12 +303,4 @@ fn the_safety_stop_needs_a_network_with_the_occupancy_head() {
         error.contains("occupancy head") && error.contains("--safety-stop false"),
         "{error}"
     );
-    // Without it the bundled checkpoint serves; the presets have the head.
-    assert!(ssr_agent::serve::load_policy(&ServeConfig::default(), &device).is_ok());
-    let with_head = ServeConfig {
-        untrained_config: Some("cpu-default".into()),
-        ..safety
-    };
-    let (policy, _) = ssr_agent::serve::load_policy(&with_head, &device).unwrap();
-    assert!(policy.control().safety.enabled);
 }

@@ -1,5 +1,6 @@
 //! `ssr-agent bench`: forward latency (median of timed runs after warm-up) with the per-stage
-//! breakdown of the paper's latency analysis, a full policy step from TCP's 900x256 frames, and
+//! breakdown of the paper's latency analysis (and the occupancy head, where the network has
+//! one), a full policy step from TCP's 900x256 frames (safety stop on, where it can be), and
 //! optionally a training step, plus parameter counts and per-episode state memory.
 
 use std::time::Instant;
@@ -200,13 +201,20 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
             }),
         ),
     ];
+    if let Some(occupancy) = &model.occupancy {
+        rows.push((
+            "occupancy_head_ms",
+            time_ms(w, i, || {
+                occupancy.forward(bev.clone());
+                sync(device);
+            }),
+        ));
+    }
     if batch == 1 {
-        let policy = SsrPolicy::new(
-            model,
-            config.clone(),
-            ControlConfig::default(),
-            device.clone(),
-        );
+        // As served: a network with the occupancy head runs it every step for the safety stop.
+        let mut control = ControlConfig::default();
+        control.safety.enabled = model.occupancy.is_some();
+        let policy = SsrPolicy::new(model, config.clone(), control, device.clone());
         let camera = CameraSpec::tcp_front();
         let frame = RgbImage {
             width: camera.width,

@@ -1,8 +1,9 @@
 //! The `ssr-agent` command line: one module per subcommand ([`serve`], [`train`], [`bench`],
-//! [`bench_serve`]), the small ones (`config`, `inspect`) here.
+//! [`bench_serve`], [`control`]), the small ones (`config`, `inspect`) here.
 
 pub mod bench;
 pub mod bench_serve;
+pub mod control;
 pub mod serve;
 pub mod train;
 
@@ -51,6 +52,11 @@ pub enum Command {
     },
     /// Show what a checkpoint holds (config, metadata, size) after checking it is complete.
     Inspect { checkpoint: PathBuf },
+    /// Print a checkpoint's controller settings (vehicle geometry, look-ahead, PID gains,
+    /// fusion, unstick rule, safety stop) as JSON, or write a copy with some changed (--set
+    /// JSON --out PATH). `serve` drives with them unless its flags override the unstick rule
+    /// or the safety stop.
+    Control(control::ControlArgs),
 }
 
 /// Logging for one run: `format` at info level unless `RUST_LOG` says otherwise.
@@ -75,6 +81,7 @@ fn run_tool(command: Command) -> anyhow::Result<()> {
         Command::Bench(args) => bench::run(&args),
         Command::BenchServe(args) => bench_serve::run(&args),
         Command::Train(args) => train::run(&args),
+        Command::Control(args) => control::run(&args),
         Command::Config { preset } => {
             let config = SsrConfig::preset(&preset).expect("clap checked the name");
             println!(

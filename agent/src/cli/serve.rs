@@ -75,11 +75,13 @@ pub struct ServeArgs {
     /// and a Vulkan, Metal or DX12 adapter.
     #[arg(long, env = "SSR_AGENT_BACKEND")]
     backend: Option<Backend>,
-    /// The unstick rule: after 50 s stopped, creep 2 s along the plan [default: true].
+    /// The unstick rule: after 50 s stopped, creep 2 s along the plan [default: the
+    /// checkpoint's setting (`ssr-agent control`); on in every shipped one].
     #[arg(long, env = "SSR_AGENT_UNSTICK")]
     unstick: Option<bool>,
     /// The safety stop: brake when the network's occupancy head believes the path just ahead
-    /// occupied (needs a checkpoint with the head) [default: false].
+    /// occupied (needs a checkpoint with the head) [default: the checkpoint's setting
+    /// (`ssr-agent control`)].
     #[arg(long, env = "SSR_AGENT_SAFETY_STOP")]
     safety_stop: Option<bool>,
 }
@@ -140,8 +142,8 @@ impl ServeArgs {
         set(&mut config.drain_timeout_s, &self.drain_timeout_s);
         set(&mut config.log_format, &self.log_format);
         set(&mut config.backend, &self.backend);
-        set(&mut config.unstick, &self.unstick);
-        set(&mut config.safety_stop, &self.safety_stop);
+        config.unstick = self.unstick.or(config.unstick);
+        config.safety_stop = self.safety_stop.or(config.safety_stop);
         config.validate()?;
         Ok(config)
     }

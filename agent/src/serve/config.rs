@@ -74,11 +74,13 @@ pub struct ServeConfig {
     /// feature).
     pub backend: Backend,
     /// The controller's unstick rule (creep along the plan after a long stop; see
-    /// `ssr_control::unstick`); `false` turns it off for every episode.
-    pub unstick: bool,
+    /// `ssr_control::unstick`) on or off for every episode; `None` keeps the checkpoint's
+    /// setting.
+    pub unstick: Option<bool>,
     /// The controller's safety stop (brake where the network's occupancy head believes the
-    /// path just ahead occupied; see `ssr_control::safety`); needs a checkpoint with the head.
-    pub safety_stop: bool,
+    /// path just ahead occupied; see `ssr_control::safety`) on or off for every episode;
+    /// `None` keeps the checkpoint's setting. On needs a checkpoint with the head.
+    pub safety_stop: Option<bool>,
 }
 
 impl Default for ServeConfig {
@@ -103,8 +105,8 @@ impl Default for ServeConfig {
             drain_timeout_s: 30.0,
             log_format: LogFormat::Human,
             backend: Backend::Cpu,
-            unstick: true,
-            safety_stop: false,
+            unstick: None,
+            safety_stop: None,
         }
     }
 }

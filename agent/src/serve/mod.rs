@@ -94,8 +94,8 @@ pub fn load_policy(
         expected_rig,
     };
     let mut control = control;
-    control.unstick.enabled = config.unstick;
-    control.safety.enabled = config.safety_stop;
+    control.unstick.enabled = config.unstick.unwrap_or(control.unstick.enabled);
+    control.safety.enabled = config.safety_stop.unwrap_or(control.safety.enabled);
     if control.safety.enabled && model.occupancy.is_none() {
         anyhow::bail!(
             "the safety stop reads the network's occupancy head, and {} has none \
