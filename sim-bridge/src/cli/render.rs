@@ -1,14 +1,19 @@
-//! `sim-bridge render`: drive routes with an agent and write what its cameras saw: one PNG per
-//! camera every few ticks, and an animated PNG of the whole run with the camera view beside a
-//! top-down view of the ego's surroundings.
+//! `sim-bridge render`: drive routes with the expert or a served agent and write what the
+//! cameras saw: one PNG per camera every few ticks, and an animated PNG of the whole run with the
+//! camera view beside a top-down view of the ego's surroundings. A served agent's scene-token
+//! attention maps (its debug block, asked for on the rendered ticks) go beside them, and each
+//! rendered tick's composite is also written as a still.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
+use sim_bridge::agent::{Agent, AgentError, CameraFrame, Observation, RouteContext};
+use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
+use sim_bridge::client::local::LocalRole;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
+use sim_bridge::render::tokens::token_panel;
 use sim_bridge::render::topdown::local_view;
 use sim_bridge::route::DenseRoute;
 use sim_bridge::scoring::ScoringConfig;
@@ -17,8 +22,9 @@ use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::safe_name;
 use ssrdrive_proto::image::{RgbImage, encode_png, write_apng};
+use ssrdrive_proto::v1;
 
-use super::args::{PlannedRoute, RouteArgs, WorldArgs};
+use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
 
 #[derive(Debug, Args)]
 pub struct RenderArgs {
@@ -26,10 +32,16 @@ pub struct RenderArgs {
     route: RouteArgs,
     #[command(flatten)]
     world: WorldArgs,
+    /// Who drives: `expert` (in process), `local` (starts `ssr-agent serve`; SSR_AGENT_*
+    /// variables such as SSR_AGENT_CHECKPOINT configure it) or `grpc://HOST:PORT`. A served
+    /// agent's scene-token attention maps go beside the views.
+    #[arg(long, default_value = "expert")]
+    agent: String,
     /// Camera rig: a preset (`tcp`: TCP's 900x256 front camera; `tcp-small`: the same at
-    /// 320x96) or a JSON rig file (a list of CARLA-style camera descriptions).
-    #[arg(long, default_value = "tcp")]
-    rig: String,
+    /// 320x96) or a JSON rig file (a list of CARLA-style camera descriptions) [default: `tcp`
+    /// for the expert, the rig a served agent expects].
+    #[arg(long)]
+    rig: Option<String>,
     /// Ticks (20 Hz) between two rendered frames: 10 gives 2 Hz.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     every: u64,
@@ -45,6 +57,10 @@ pub struct RenderArgs {
     /// Write only the per-camera PNGs, no animation.
     #[arg(long)]
     no_animation: bool,
+    /// End every route after this many simulated seconds instead of the leaderboard's
+    /// length-based timeout (a short look at a long route).
+    #[arg(long, value_parser = super::args::parse_positive)]
+    timeout: Option<f64>,
     /// Output folder: one subfolder per route.
     #[arg(long, default_value = "renders")]
     out: PathBuf,
@@ -54,14 +70,35 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if !(args.topdown_radius.is_finite() && args.topdown_radius > 0.0) {
         bail!("--topdown-radius must be a positive number of metres");
     }
-    let rig = Rig::from_name_or_file(&args.rig)?;
+    let rig = args
+        .rig
+        .as_deref()
+        .map(Rig::from_name_or_file)
+        .transpose()?;
     let (map, planned) = args.route.load()?;
+    let (mut driver, _local_server) = match args.agent.as_str() {
+        "expert" => (
+            Driver::Expert(Expert::new(), rig.unwrap_or(Rig::tcp())),
+            None,
+        ),
+        agent => {
+            let (target, server) = server_target(agent, LocalRole::Driving)?;
+            let options = GrpcOptions {
+                rig,
+                client: "sim-bridge render".into(),
+                ..GrpcOptions::default()
+            };
+            (
+                Driver::Served(GrpcAgent::connect(&target, options)?),
+                server,
+            )
+        }
+    };
     for PlannedRoute { spec, dense } in &planned {
         let dir = args.out.join(safe_name(&format!("route_{}", spec.id)));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut film = Film {
-            driver: Expert::new(),
-            rig: rig.clone(),
+            driver: &mut driver,
             args: &args,
             dir: dir.clone(),
             route: None,
@@ -70,13 +107,16 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             error: None,
         };
         let world = args.world.config(&map, args.world.seed);
-        run_route(
+        let run = run_route(
             &map,
             spec,
             dense,
             &mut film,
             world,
-            ScoringConfig::default(),
+            ScoringConfig {
+                timeout: args.timeout,
+                ..ScoringConfig::default()
+            },
             0,
             0,
             |_| {},
@@ -85,10 +125,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             return Err(e);
         }
         let mut summary = format!(
-            "route {}: {} frames in {}",
+            "route {}: {} frames in {} ({})",
             spec.id,
             film.written,
-            dir.display()
+            dir.display(),
+            run.record.status
         );
         if !args.no_animation && !film.frames.is_empty() {
             let path = dir.join("run.png");
@@ -104,10 +145,16 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Who drives: the expert in process (with the rig to render), or an agent server.
+#[expect(clippy::large_enum_variant, reason = "one driver per render run")]
+enum Driver {
+    Expert(Expert, Rig),
+    Served(GrpcAgent),
+}
+
 /// The driver, with every rendered frame written out and composed for the animation.
 struct Film<'a> {
-    driver: Expert,
-    rig: Rig,
+    driver: &'a mut Driver,
     args: &'a RenderArgs,
     dir: PathBuf,
     route: Option<DenseRoute>,
@@ -117,7 +164,17 @@ struct Film<'a> {
 }
 
 impl Film<'_> {
-    fn record(&mut self, obs: &Observation, world: &World<'_>) -> anyhow::Result<()> {
+    /// Whether tick `frame` is one to render and write.
+    fn renders(&self, frame: u64) -> bool {
+        frame.is_multiple_of(self.args.every) && self.written < self.args.max_frames
+    }
+
+    fn record(
+        &mut self,
+        obs: &Observation,
+        world: &World<'_>,
+        debug: Option<&v1::Debug>,
+    ) -> anyhow::Result<()> {
         for frame in &obs.frames {
             let path = self
                 .dir
@@ -132,13 +189,17 @@ impl Film<'_> {
         let Some(route) = &self.route else {
             return Ok(());
         };
-        let cameras_width = obs.frames.iter().map(|f| f.width).max().unwrap_or(0);
-        let cameras_height: u32 = obs.frames.iter().map(|f| f.height).sum();
+        let stack_height: u32 = obs.frames.iter().map(|f| f.height).sum();
         let side = match self.args.topdown {
-            0 => cameras_height.max(128),
+            0 => stack_height.max(128),
             side => side,
         };
-        let panel = local_view(
+        // Small cameras are enlarged (nearest pixel, whole factors) to the panels' height.
+        let zoom = (side / stack_height.max(1)).max(1);
+        let cameras: Vec<RgbImage> = obs.frames.iter().map(|f| enlarge(f, zoom)).collect();
+        let cameras_width = cameras.iter().map(|f| f.width).max().unwrap_or(0);
+        let cameras_height: u32 = cameras.iter().map(|f| f.height).sum();
+        let topdown = local_view(
             world.map,
             route,
             &world.ego_state(),
@@ -146,7 +207,16 @@ impl Film<'_> {
             self.args.topdown_radius,
             side,
         );
-        let (width, height) = (cameras_width + side, cameras_height.max(side));
+        let tokens = match debug {
+            Some(debug) if !debug.token_attention.is_empty() => {
+                Some(token_panel(&debug.token_attention, side).map_err(|e| {
+                    anyhow::anyhow!("the agent's debug block at tick {}: {e}", obs.frame)
+                })?)
+            }
+            _ => None,
+        };
+        let panels = if tokens.is_some() { 2 } else { 1 };
+        let (width, height) = (cameras_width + panels * side, cameras_height.max(side));
         let stride = width as usize * 3;
         let mut rgb = vec![0u8; stride * height as usize];
         let mut blit = |x0: u32, y0: u32, w: u32, pixels: &[u8]| {
@@ -156,14 +226,35 @@ impl Film<'_> {
             }
         };
         let mut y = 0;
-        for frame in &obs.frames {
+        for frame in &cameras {
             blit(0, y, frame.width, &frame.rgb);
             y += frame.height;
         }
-        blit(cameras_width, 0, side, panel.pixels());
+        blit(cameras_width, 0, side, topdown.pixels());
+        if let Some(tokens) = &tokens {
+            blit(cameras_width + side, 0, side, &tokens.rgb);
+            let path = self.dir.join(format!("{:06}_view.png", obs.frame));
+            write_file(&path, &encode_png(width, height, &rgb)?)?;
+        }
         self.frames.push(RgbImage { width, height, rgb });
         Ok(())
     }
+}
+
+/// `frame` with each pixel repeated `zoom` times across and down.
+fn enlarge(frame: &CameraFrame, zoom: u32) -> RgbImage {
+    let (width, height) = (frame.width * zoom, frame.height * zoom);
+    let mut rgb = Vec::with_capacity((width * height * 3) as usize);
+    for row in frame.rgb.chunks_exact(frame.width as usize * 3) {
+        let line: Vec<u8> = row
+            .chunks_exact(3)
+            .flat_map(|pixel| pixel.repeat(zoom as usize))
+            .collect();
+        for _ in 0..zoom {
+            rgb.extend_from_slice(&line);
+        }
+    }
+    RgbImage { width, height, rgb }
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
@@ -172,29 +263,57 @@ fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 
 impl Agent for Film<'_> {
     fn name(&self) -> String {
-        self.driver.name()
+        match &*self.driver {
+            Driver::Expert(expert, _) => expert.name(),
+            Driver::Served(agent) => agent.name(),
+        }
     }
 
     fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.route = Some(ctx.route.clone());
-        self.driver.start_route(ctx)
+        match &mut *self.driver {
+            Driver::Expert(expert, _) => expert.start_route(ctx),
+            Driver::Served(agent) => agent.start_route(ctx),
+        }
+    }
+
+    fn end_route(&mut self) {
+        if let Driver::Served(agent) = &mut *self.driver {
+            agent.end_route();
+        }
     }
 
     fn sensors(&self) -> Option<Rig> {
-        Some(self.rig.clone())
+        match &*self.driver {
+            Driver::Expert(_, rig) => Some(rig.clone()),
+            Driver::Served(agent) => agent.sensors(),
+        }
     }
 
     fn wants_frames(&self, frame: u64) -> bool {
-        frame.is_multiple_of(self.args.every) && self.written < self.args.max_frames
+        // A served agent drives from its cameras on every tick.
+        matches!(&*self.driver, Driver::Served(_)) || self.renders(frame)
+    }
+
+    fn planned_trajectory(&self) -> Vec<glam::DVec2> {
+        match &*self.driver {
+            Driver::Expert(expert, _) => expert.planned_trajectory(),
+            Driver::Served(agent) => agent.planned_trajectory(),
+        }
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
-        if !obs.frames.is_empty()
+        let render = !obs.frames.is_empty() && self.renders(obs.frame);
+        let (control, debug) = match &mut *self.driver {
+            Driver::Expert(expert, _) => (expert.run_step(obs, world)?, None),
+            Driver::Served(agent) => agent.step(obs, render)?,
+        };
+        if render
             && self.error.is_none()
-            && let Err(e) = self.record(obs, world)
+            && let Err(e) = self.record(obs, world, debug.as_ref())
         {
             self.error = Some(e);
         }
-        self.driver.run_step(obs, world)
+        Ok(control)
     }
 }

@@ -199,11 +199,26 @@ impl Agent for GrpcAgent {
     }
 
     fn run_step(&mut self, obs: &Observation, _world: &World<'_>) -> Result<Control, AgentError> {
+        self.step(obs, false).map(|(control, _)| control)
+    }
+}
+
+impl GrpcAgent {
+    /// One `Step`; with `debug`, the server's debug block (token attention maps, both control
+    /// branches) comes back too, when the server gives one.
+    pub fn step(
+        &mut self,
+        obs: &Observation,
+        debug: bool,
+    ) -> Result<(Control, Option<v1::Debug>), AgentError> {
         let episode = self
             .episode
             .as_deref()
             .ok_or_else(|| AgentError("run_step before start_route".into()))?;
-        let request = self.timed(obs.step_request(episode));
+        let request = self.timed(v1::StepRequest {
+            debug,
+            ..obs.step_request(episode)
+        });
         let reply = self
             .runtime
             .block_on(self.client.step(request))
@@ -217,7 +232,7 @@ impl Agent for GrpcAgent {
         let control = reply
             .control
             .ok_or_else(|| AgentError(format!("Step {}: the answer has no control", obs.frame)))?;
-        Ok(wire::control_from_proto(&control))
+        Ok((wire::control_from_proto(&control), reply.debug))
     }
 }
 

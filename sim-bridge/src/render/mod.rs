@@ -1,6 +1,6 @@
 //! Pictures: camera frames through a rig (a CPU rasterizer: [`cameras`] over [`scene`],
-//! [`actors`], [`shapes`], [`raster`] and [`style`]), and top-down PNGs of route runs for
-//! people ([`topdown`] on [`canvas`]).
+//! [`actors`], [`shapes`], [`raster`] and [`style`]), top-down PNGs of route runs for
+//! people ([`topdown`] on [`canvas`]), and a served agent's token attention maps ([`tokens`]).
 
 pub mod actors;
 pub mod cameras;
@@ -9,6 +9,7 @@ pub mod raster;
 pub mod scene;
 pub mod shapes;
 pub mod style;
+pub mod tokens;
 pub mod topdown;
 
 pub use cameras::{CameraRenderer, SceneState};
