@@ -232,6 +232,28 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
     assert!(ok, "{stderr}");
     assert!(stdout.contains("3 steps done (0 in this run"), "{stdout}");
 
+    // The command-only gate, in a run of its own.
+    let gated = dir.join("gated");
+    let (ok, _, stderr) = ssr_agent(&[
+        "train",
+        "--data",
+        data,
+        "--out",
+        gated.to_str().unwrap(),
+        "--model",
+        model,
+        "--quiet",
+        "--steps",
+        "1",
+        "--batch-size",
+        "2",
+        "--gate-command-only",
+    ]);
+    assert!(ok, "{stderr}");
+    let info = ssr_agent::checkpoint::inspect(&gated.join("final.safetensors")).unwrap();
+    assert_eq!(info.config.name, "tiny-gate-command");
+    assert!(!info.config.tokens.gate_target_point);
+
     let (ok, _, stderr) = train(&["--tokens", "0"]);
     assert!(!ok && stderr.contains("num_tokens"), "{stderr}");
     let (ok, _, stderr) = ssr_agent(&["train", "--data", "/no/such/dataset", "--out", out_arg]);

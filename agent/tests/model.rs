@@ -188,9 +188,9 @@ fn token_attention_rows_sum_to_one() {
 }
 
 #[test]
-fn command_and_target_point_change_the_gate() {
+fn command_and_target_point_change_the_gate_unless_it_reads_the_command_only() {
     let device = Device::flex();
-    let gate = NavigationGate::new(16, &device);
+    let gate = NavigationGate::new(16, true, &device);
     let onehot = |i: usize| {
         let mut v = vec![0.0; 6];
         v[i] = 1.0;
@@ -203,6 +203,13 @@ fn command_and_target_point_change_the_gate() {
     assert!(base.iter().all(|g| *g > 0.0 && *g < 1.0));
     assert!(max_abs_diff(base.clone(), other_command) > 1e-3);
     assert!(max_abs_diff(base, other_target) > 1e-3);
+
+    let command_only = NavigationGate::new(16, false, &device);
+    let base = float_values(command_only.forward(onehot(3), target(10.0, 0.0)));
+    let other_command = float_values(command_only.forward(onehot(0), target(10.0, 0.0)));
+    let other_target = float_values(command_only.forward(onehot(3), target(10.0, 8.0)));
+    assert!(max_abs_diff(base.clone(), other_command) > 1e-3);
+    assert_eq!(max_abs_diff(base, other_target), 0.0);
 }
 
 /// Both sampler implementations (the fused CPU loop in inference, tensor ops under autodiff)

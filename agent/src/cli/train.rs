@@ -106,6 +106,9 @@ pub struct TrainArgs {
     /// Number of scene tokens (SSR: 16).
     #[arg(long)]
     tokens: Option<usize>,
+    /// Ablation: the navigation gate reads the command only, not the target point.
+    #[arg(long, conflicts_with = "init")]
+    gate_command_only: bool,
     /// Share of routes held out for validation.
     #[arg(long, default_value_t = 0.05)]
     validation_fraction: f64,
@@ -132,14 +135,19 @@ impl TrainArgs {
             None => SsrConfig::from_name_or_file(&self.model)?,
         };
         model.tokens.dense_bev |= self.no_stl;
+        model.tokens.gate_target_point &= !self.gate_command_only;
         model.ego_status |= self.ego_status;
         model.occupancy_head = self.occupancy_weight > 0.0;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
         }
-        if self.no_stl || self.no_ffp || self.tokens.is_some() {
+        if self.no_stl || self.no_ffp || self.gate_command_only || self.tokens.is_some() {
             let mut name = model.name.clone();
-            for (on, tag) in [(self.no_stl, "-no-stl"), (self.no_ffp, "-no-ffp")] {
+            for (on, tag) in [
+                (self.no_stl, "-no-stl"),
+                (self.no_ffp, "-no-ffp"),
+                (self.gate_command_only, "-gate-command"),
+            ] {
                 if on {
                     name.push_str(tag);
                 }

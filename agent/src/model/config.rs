@@ -49,6 +49,10 @@ fn ego_status_default() -> bool {
     true
 }
 
+fn gate_target_point_default() -> bool {
+    true
+}
+
 /// ResNet with basic blocks.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BackboneConfig {
@@ -90,6 +94,10 @@ pub struct TokenConfig {
     /// `bottleneck` and `layers` are unused.
     #[serde(default)]
     pub dense_bev: bool,
+    /// Whether the navigation gate reads the target point beside the command (SSR does);
+    /// `false` is the ablation "gate from the command only".
+    #[serde(default = "gate_target_point_default")]
+    pub gate_target_point: bool,
     /// Scene tokens TokenLearner produces.
     pub num_tokens: usize,
     /// Hidden width of TokenLearner's MLP.
@@ -231,6 +239,7 @@ impl SsrConfig {
             },
             tokens: TokenConfig {
                 dense_bev: false,
+                gate_target_point: true,
                 num_tokens: 16,
                 bottleneck: 64,
                 layers: 3,
@@ -288,6 +297,7 @@ impl SsrConfig {
             },
             tokens: TokenConfig {
                 dense_bev: false,
+                gate_target_point: true,
                 num_tokens: 16,
                 bottleneck: 32,
                 layers: 2,

@@ -1,5 +1,6 @@
 //! Scenes TokenLearner (STL): the BEV is gated channel-wise by the navigation information (the
-//! RoadOption command and the target point, concatenated as the paper does), concatenated with
+//! RoadOption command and the target point, concatenated as the paper does; the command alone
+//! in an ablation), concatenated with
 //! the BEV positional embedding, and summarised by TokenLearner into a few scene tokens that
 //! self-attention layers then relate. The token attention maps come back for visualisation.
 //!
@@ -23,25 +24,39 @@ use super::transformer::{SelfAttentionLayer, run_layers};
 /// Target points enter the gate divided by this many metres.
 pub const TARGET_SCALE: f32 = 25.0;
 
-/// Channel gate from the navigation information (an SE-style MLP ending in a sigmoid).
+/// Channel gate from the navigation information (an SE-style MLP ending in a sigmoid): the
+/// command and the target point, or the command alone (an ablation).
 #[derive(Module, Debug)]
 pub struct NavigationGate {
     fc_in: FusedLinear,
     fc_out: FusedLinear,
+    reads_target_point: bool,
 }
 
 impl NavigationGate {
-    /// A randomly initialised gate over `channels` BEV channels.
-    pub fn new(channels: usize, device: &Device) -> Self {
+    /// A randomly initialised gate over `channels` BEV channels, reading the target point
+    /// beside the command when `reads_target_point`.
+    pub fn new(channels: usize, reads_target_point: bool, device: &Device) -> Self {
+        let inputs = COMMANDS + if reads_target_point { 2 } else { 0 };
         Self {
-            fc_in: xavier_linear(COMMANDS + 2, channels, device),
+            fc_in: xavier_linear(inputs, channels, device),
             fc_out: xavier_linear(channels, channels, device),
+            reads_target_point,
         }
     }
 
-    /// `command` one-hot `[B, 6]`, `target_point` `[B, 2]` (ego frame, m) to a gate `[B, C]` in (0, 1).
+    /// The gate in (0, 1) for each channel.
+    ///
+    /// # Shapes
+    /// - command: `[B, 6]` (one-hot)
+    /// - target_point: `[B, 2]` (ego frame, m; unused by a command-only gate)
+    /// - output: `[B, C]`
     pub fn forward(&self, command: Tensor<2>, target_point: Tensor<2>) -> Tensor<2> {
-        let navigation = Tensor::cat(vec![command, target_point.div_scalar(TARGET_SCALE)], 1);
+        let navigation = if self.reads_target_point {
+            Tensor::cat(vec![command, target_point.div_scalar(TARGET_SCALE)], 1)
+        } else {
+            command
+        };
         sigmoid(self.fc_out.forward(relu(self.fc_in.forward(navigation))))
     }
 }
@@ -110,7 +125,7 @@ impl SceneTokenLearner {
         let c = config.channels;
         let t = &config.tokens;
         let parts = (!t.dense_bev).then(|| LearnerParts {
-            gate: NavigationGate::new(c, device),
+            gate: NavigationGate::new(c, t.gate_target_point, device),
             learner: TokenLearner::new(2 * c, t.bottleneck, t.num_tokens, device),
             layers: (0..t.layers)
                 .map(|_| SelfAttentionLayer::new(c, t.heads, t.ffn_dim, device))

@@ -1,0 +1,283 @@
+#!/usr/bin/env python3
+"""The paper's ablations in closed loop: STL, FFP, the number of scene tokens and what the
+navigation gate reads.
+
+For each variant and training seed this trains the network with the bundled recipe on the same
+data and step budget (`ssr-agent train`), gives the checkpoint the bundled controller settings
+(`ssr-agent control`: safety stop on), drives it on the Town05-style long and short routes
+(`sim-bridge eval --agent local`), times it at batch 1 and 8 (`ssr-agent bench`) and reads its
+open-loop validation from the checkpoint (`ssr-agent inspect`). One table covers every run found
+under --out: ablation.md and ablation.json.
+
+Every stage writes into --out/<variant>/seed-<k>/ and is skipped once its output is complete;
+training and evaluation continue from where they stopped (`--resume`). A killed run therefore
+continues when the same command is run again. Standard library only.
+
+    python3 agent/ablation/ablate.py --data data/train-v3 --out runs/ablation
+    python3 agent/ablation/ablate.py --data data/train-v3 --out runs/ablation \\
+        --variants full,no-ffp --seeds 1          # a second seed for two of them
+    python3 agent/ablation/ablate.py --out runs/ablation --table-only
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+# Variant name -> the `ssr-agent train` flags that make it (full SSR: 16 tokens, STL, FFP, a
+# gate on the command and the target point).
+VARIANTS = {
+    "full": [],
+    "no-stl": ["--no-stl"],
+    "no-ffp": ["--no-ffp"],
+    "tokens-4": ["--tokens", "4"],
+    "tokens-8": ["--tokens", "8"],
+    "tokens-32": ["--tokens", "32"],
+    "gate-command": ["--gate-command-only"],
+}
+
+# The bundled recipe from scratch (README, "Training"): the flags every variant shares.
+RECIPE = [
+    "--lr", "5e-4", "--warmup-steps", "1000", "--history-dropout", "0.1",
+    "--hazard-weight", "0.5", "--occupancy-weight", "1.0",
+    "--checkpoint-every", "1000", "--validate-every", "5000",
+]
+# The bundled checkpoint's sample passes: 68,000 steps of 8.
+DEFAULT_STEPS = 68000
+ROUTE_SETS = ["town05-long-style", "town05-short-style"]
+# Controller settings of the bundled agent, given to every variant's checkpoint.
+BUNDLED_CONTROL = '{"safety": {"enabled": true}}'
+
+
+def main():
+    args = parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    if not args.table_only:
+        if args.data is None:
+            sys.exit("ablate.py: --data is required (or --table-only)")
+        for variant in args.variants:
+            for seed in args.seeds:
+                run_variant(args, variant, seed)
+    rows = [collect(run) for run in sorted(runs_under(args.out))]
+    if not rows:
+        sys.exit(f"ablate.py: no finished runs under {args.out}")
+    write_table(args.out, rows)
+
+
+def parse_args():
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--data", type=Path, help="dataset from `sim-bridge collect`")
+    parser.add_argument("--out", type=Path, default=Path("runs/ablation"))
+    parser.add_argument("--variants", default=",".join(VARIANTS), type=variant_list,
+                        help=f"comma separated, of: {', '.join(VARIANTS)} (default: all)")
+    parser.add_argument("--seeds", default="0", type=seed_list, help="training seeds, e.g. 0,1")
+    parser.add_argument("--steps", type=int, default=DEFAULT_STEPS,
+                        help=f"training steps of 8 samples (default {DEFAULT_STEPS}, the bundled budget)")
+    parser.add_argument("--repetitions", type=int, default=3)
+    parser.add_argument("--jobs", type=int, default=2, help="runs at once in each evaluation")
+    parser.add_argument("--limit", type=int, help="only the first N routes of each set (smoke runs)")
+    parser.add_argument("--timeout", type=float, help="end every route after S simulated seconds (smoke runs)")
+    parser.add_argument("--bench-iterations", type=int, default=20)
+    parser.add_argument("--bin", type=Path, default=Path("target/release"),
+                        help="folder of the ssr-agent and sim-bridge binaries")
+    parser.add_argument("--table-only", action="store_true",
+                        help="only rebuild the table from the runs under --out")
+    args = parser.parse_args()
+    for name in ("ssr-agent", "sim-bridge"):
+        if not args.table_only and not (args.bin / name).is_file():
+            parser.error(f"{args.bin / name} is missing: build with "
+                         "`cargo build --release -p ssr-agent -p sim-bridge` or pass --bin")
+    return args
+
+
+def variant_list(text):
+    names = [v for v in text.split(",") if v]
+    unknown = [v for v in names if v not in VARIANTS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown variant {', '.join(unknown) or '(none)'}; known: {', '.join(VARIANTS)}")
+    return names
+
+
+def seed_list(text):
+    try:
+        return [int(s) for s in text.split(",") if s]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds must be integers, got '{text}'")
+
+
+def run_variant(args, variant, seed):
+    run = args.out / variant / f"seed-{seed}"
+    run.mkdir(parents=True, exist_ok=True)
+    tool = lambda name: str(args.bin / name)
+    label = f"[{variant} seed {seed}]"
+
+    final = run / "train" / "final.safetensors"
+    if not final.is_file():
+        resume = ["--resume"] if (run / "train" / "resume").is_dir() else []
+        step(label, "train", run / "train.log",
+             [tool("ssr-agent"), "train", "--data", str(args.data), "--out", str(run / "train"),
+              "--steps", str(args.steps), "--seed", str(seed), "--quiet",
+              *RECIPE, *VARIANTS[variant], *resume])
+
+    agent = run / "agent.safetensors"
+    if not agent.is_file():
+        step(label, "control", run / "control.log",
+             [tool("ssr-agent"), "control", str(final), "--set", BUNDLED_CONTROL,
+              "--out", str(agent)])
+
+    info = run / "inspect.txt"
+    if not info.is_file():
+        step(label, "inspect", info, [tool("ssr-agent"), "inspect", str(agent)], stdout_only=True)
+
+    bench = run / "bench.jsonl"
+    if not bench.is_file():
+        model = run / "model.json"
+        model.write_text(json.dumps(checkpoint_field(info, "config")))
+        partial = run / "bench.partial"
+        for batch in (1, 8):
+            step(label, f"bench batch {batch}", partial,
+                 [tool("ssr-agent"), "bench", "--config", str(model), "--batch", str(batch),
+                  "--iterations", str(args.bench_iterations), "--json"],
+                 append=batch > 1, stdout_only=True)
+        partial.rename(bench)
+
+    for routes in ROUTE_SETS:
+        out = run / f"eval-{routes}.json"
+        flags = ["--limit", str(args.limit)] if args.limit else []
+        flags += ["--timeout", str(args.timeout)] if args.timeout else []
+        step(label, f"eval {routes}", run / f"eval-{routes}.log",
+             [tool("sim-bridge"), "eval", "--agent", "local", "--routes", routes,
+              "--repetitions", str(args.repetitions), "--jobs", str(args.jobs), "--quiet",
+              "--resume", "--out", str(out), *flags],
+             env={"SSR_AGENT_CHECKPOINT": str(agent), "SSR_AGENT_BIN": tool("ssr-agent")},
+             append=True)
+
+
+def step(label, what, log, command, env=None, append=False, stdout_only=False):
+    """Runs `command` with its output (`stdout_only`: its stdout; stderr goes to the terminal)
+    in `log`; a failure stops the script, naming the log."""
+    print(f"{label} {what} (log: {log})", flush=True)
+    with open(log, "a" if append else "w") as out:
+        done = subprocess.run(command, stdout=out,
+                              stderr=None if stdout_only else subprocess.STDOUT,
+                              env={**os.environ, **(env or {})})
+    if done.returncode != 0:
+        sys.exit(f"{label} {what} failed (exit {done.returncode}); see {log}")
+
+
+def checkpoint_field(inspect_txt, key):
+    """A JSON field of `ssr-agent inspect`'s output: `key: {...}` on one line, or the pretty
+    config block after `config:`."""
+    text = inspect_txt.read_text()
+    if key == "config":
+        return json.loads(text.split("\nconfig: ", 1)[1])
+    for line in text.splitlines():
+        if line.startswith(f"{key}: "):
+            return json.loads(line[len(key) + 2:])
+    raise KeyError(f"{inspect_txt} has no '{key}'")
+
+
+def runs_under(out):
+    """Every <variant>/seed-<k> folder under `out` whose evaluations are all written."""
+    for variant in VARIANTS:
+        for run in sorted((out / variant).glob("seed-*")):
+            if all((run / f"eval-{r}.json").is_file() for r in ROUTE_SETS) and \
+                    (run / "bench.jsonl").is_file():
+                yield run
+
+
+def collect(run):
+    """One run's figures: open loop, timing and size, and closed loop per route set."""
+    validation = checkpoint_field(run / "inspect.txt", "training").get("validation") or {}
+    l2 = validation.get("l2_m")  # nulls where the data had no validation routes
+    bench = {}
+    for line in (run / "bench.jsonl").read_text().splitlines():
+        if line.startswith("{"):
+            report = json.loads(line)
+            bench[report["batch"]] = report["results"]
+    row = {
+        "variant": run.parent.name,
+        "seed": int(run.name.removeprefix("seed-")),
+        "params": int(bench[1]["params"]),
+        "ms_batch_1": bench[1]["forward_ms"],
+        "ms_batch_8": bench[8]["forward_ms"],
+        "l2_m": l2 if l2 and None not in l2 else None,
+    }
+    for routes in ROUTE_SETS:
+        row[routes] = closed_loop(json.loads((run / f"eval-{routes}.json").read_text()))
+    return row
+
+
+def closed_loop(results):
+    """DS, RC and IS (means over runs) and infractions per km driven from a results JSON."""
+    records = results["_checkpoint"]["records"]
+    mean = lambda key: statistics.mean(r["scores"][key] for r in records)
+    km = sum(r["meta"]["route_length"] * r["scores"]["score_route"] / 100 for r in records) / 1000
+    counts = {}
+    for r in records:
+        for kind, events in r["infractions"].items():
+            counts[kind] = counts.get(kind, 0) + len(events)
+    return {
+        "runs": len(records),
+        "ds": mean("score_composed"),
+        "rc": mean("score_route"),
+        "is": mean("score_penalty"),
+        "km": km,
+        "per_km": {kind: n / km for kind, n in counts.items()} if km > 0 else None,
+    }
+
+
+def spread(values):
+    """'mean' for one value, 'mean ± sd' (over seeds) for more."""
+    if len(values) == 1:
+        return f"{values[0]:.2f}"
+    return f"{statistics.mean(values):.2f} ± {statistics.stdev(values):.2f}"
+
+
+def infraction_rates(loops):
+    """Collisions, red lights and off-lane events per km, means over seeds ('-' if no run
+    drove a metre)."""
+    driven = [l["per_km"] for l in loops if l["per_km"] is not None]
+    if not driven:
+        return "-"
+    rate = lambda kinds: statistics.mean(sum(p.get(k, 0.0) for k in kinds) for p in driven)
+    collisions = rate(["collisions_vehicle", "collisions_pedestrian", "collisions_layout"])
+    return f"{collisions:.2f} / {rate(['red_light']):.2f} / {rate(['outside_route_lanes']):.2f}"
+
+
+def write_table(out, rows):
+    by_variant = {}
+    for row in rows:
+        by_variant.setdefault(row["variant"], []).append(row)
+    header = ["variant", "seeds", "params", "ms b1", "ms b8", "L2 1/2/3 s (m)"]
+    for routes in ROUTE_SETS:
+        short = routes.removeprefix("town05-").removesuffix("-style")
+        header += [f"{short} DS", f"{short} RC", f"{short} IS",
+                   f"{short} collisions / red / off-lane per km"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for variant, runs in by_variant.items():
+        l2 = [r["l2_m"] for r in runs if r["l2_m"]]
+        cells = [variant, ",".join(str(r["seed"]) for r in runs), f"{runs[0]['params']:,}",
+                 spread([r["ms_batch_1"] for r in runs]), spread([r["ms_batch_8"] for r in runs]),
+                 " / ".join(f"{statistics.mean(v[h] for v in l2):.2f}" for h in range(3))
+                 if l2 else "-"]
+        for routes in ROUTE_SETS:
+            loops = [r[routes] for r in runs]
+            cells += [spread([l["ds"] for l in loops]), spread([l["rc"] for l in loops]),
+                      spread([l["is"] for l in loops]), infraction_rates(loops)]
+        lines.append("| " + " | ".join(cells) + " |")
+    table = "\n".join(lines) + "\n"
+    (out / "ablation.md").write_text(table)
+    (out / "ablation.json").write_text(json.dumps(rows, indent=1) + "\n")
+    print(table, end="")
+    print(f"written to {out / 'ablation.md'} and {out / 'ablation.json'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+//! The ablation harness (`agent/ablation/ablate.py`) end to end on a tiny budget: it collects
+//! nothing itself, so a small expert dataset comes first; then two variants are trained for two
+//! steps, driven on one route of each Town05-style set for a second and timed, and the table
+//! is written. Run again, every finished stage is skipped.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use ssrdrive_tests::binary;
+
+fn ablate(args: &[&str], bin: &Path) -> Output {
+    Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../agent/ablation/ablate.py"))
+        .arg("--bin")
+        .arg(bin)
+        .args(args)
+        .env("PYTHONDONTWRITEBYTECODE", "1")
+        .output()
+        .expect("python3 runs")
+}
+
+#[test]
+fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, out) = (tmp.path().join("data"), tmp.path().join("out"));
+    let collect = Command::new(binary("sim-bridge"))
+        .args([
+            "collect",
+            "--routes",
+            "train-small",
+            "--limit",
+            "40",
+            "--vehicles",
+            "0",
+        ])
+        .args(["--quiet", "--out"])
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(
+        collect.status.success(),
+        "{}",
+        String::from_utf8_lossy(&collect.stderr)
+    );
+    let bin = binary("sim-bridge").parent().unwrap().to_path_buf();
+    let (data, out_arg) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let args = [
+        "--data",
+        data,
+        "--out",
+        out_arg,
+        "--variants",
+        "full,tokens-4",
+        "--steps",
+        "2",
+        "--repetitions",
+        "1",
+        "--limit",
+        "1",
+        "--timeout",
+        "1",
+        "--bench-iterations",
+        "1",
+        "--jobs",
+        "1",
+    ];
+    let run = ablate(&args, &bin);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("[tokens-4 seed 0] train"), "{stdout}");
+
+    let table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    let rows = table.as_array().unwrap();
+    let variants: Vec<&str> = rows
+        .iter()
+        .map(|r| r["variant"].as_str().unwrap())
+        .collect();
+    assert_eq!(variants, ["full", "tokens-4"]);
+    // Fewer tokens, fewer TokenLearner outputs; both ran through training, bench and eval.
+    assert!(
+        rows[1]["params"].as_u64() < rows[0]["params"].as_u64(),
+        "{rows:?}"
+    );
+    for row in rows {
+        assert_eq!(row["l2_m"].as_array().unwrap().len(), 3, "{row}");
+        assert!(row["ms_batch_1"].as_f64().unwrap() > 0.0, "{row}");
+        for routes in ["town05-long-style", "town05-short-style"] {
+            assert_eq!(row[routes]["runs"], 1, "{row}");
+        }
+    }
+    let markdown = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    assert!(markdown.contains("| tokens-4 | 0 |"), "{markdown}");
+
+    // Again: nothing is trained twice, and the table is the same.
+    let again = ablate(&args, &bin);
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(again.status.success(), "{stdout}");
+    assert!(!stdout.contains("train (log"), "{stdout}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("ablation.md")).unwrap(),
+        markdown
+    );
+
+    // Unknown variants and missing binaries are named.
+    let bad = ablate(&["--data", data, "--variants", "full,huge"], &bin);
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && stderr.contains("unknown variant huge"),
+        "{stderr}"
+    );
+    let missing = ablate(&["--data", data], Path::new("/no/such/bin"));
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        !missing.status.success() && stderr.contains("/no/such/bin/ssr-agent is missing"),
+        "{stderr}"
+    );
+}
