@@ -190,7 +190,8 @@ fn validation_situations_follow_the_command_start_ups_and_brake_causes() {
 }
 
 #[test]
-fn balanced_sampling_favours_starts_slowing_light_waits_turns_recoveries_and_the_learners_states() {
+fn balanced_sampling_favours_starts_slowing_light_waits_stop_signs_turns_recoveries_and_the_learners_states()
+ {
     use ssr_agent::train::data::sampling_weight;
     use ssrdrive_proto::dataset::{BrakeReason, FrameRecord};
     let record = |speed: f64, throttle: f32, brake: f32, command: i32, noise: bool| {
@@ -223,6 +224,12 @@ fn balanced_sampling_favours_starts_slowing_light_waits_turns_recoveries_and_the
     let starting = frame(0.5, 0.6, 0.0, 4, false);
     assert!(standing < cruising, "{standing} vs {cruising}");
     assert!(cruising < slowing && slowing < starting);
+    let mut for_sign = record(6.0, 0.0, 0.5, 4, false);
+    for_sign.brake_reason = Some(BrakeReason::StopSign);
+    assert!(
+        sampling_weight(&for_sign, false) > starting,
+        "slowing for a stop sign"
+    );
     assert!(frame(8.0, 0.5, 0.0, 1, false) > cruising, "a turn");
     assert!(
         frame(8.0, 0.5, 0.0, 6, false) > frame(8.0, 0.5, 0.0, 1, false),
