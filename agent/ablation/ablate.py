@@ -72,7 +72,8 @@ def parse_args():
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--data", type=Path, help="dataset from `sim-bridge collect`")
-    parser.add_argument("--out", type=Path, default=Path("runs/ablation"))
+    parser.add_argument("--out", type=Path, default=Path("runs/ablation"),
+                        help="where every run and the table go (default runs/ablation)")
     parser.add_argument("--variants", default=",".join(VARIANTS), type=variant_list,
                         help=f"comma separated, of: {', '.join(VARIANTS)} (default: all)")
     parser.add_argument("--seeds", default="0", type=seed_list, help="training seeds, e.g. 0,1")

@@ -38,8 +38,9 @@ pub struct Cli {
 enum Command {
     /// Drive an agent over a route set and score it like the leaderboard.
     Eval(eval::EvalArgs),
-    /// Drive routes and write what the cameras saw: PNG frames and an animation of each run
-    /// with the camera view beside a top-down view.
+    /// Drive routes (the expert, or a served agent with --agent) and write what the cameras
+    /// saw: PNG frames and an animation of each run with the camera view beside a top-down
+    /// view, and a served agent's scene-token attention maps.
     Render(render::RenderArgs),
     /// Record the expert driving route sets (with noise injection) into a training dataset;
     /// resumable.
