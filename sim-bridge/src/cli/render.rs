@@ -152,6 +152,22 @@ enum Driver {
     Served(GrpcAgent),
 }
 
+impl Driver {
+    fn agent(&self) -> &dyn Agent {
+        match self {
+            Driver::Expert(expert, _) => expert,
+            Driver::Served(agent) => agent,
+        }
+    }
+
+    fn agent_mut(&mut self) -> &mut dyn Agent {
+        match self {
+            Driver::Expert(expert, _) => expert,
+            Driver::Served(agent) => agent,
+        }
+    }
+}
+
 /// The driver, with every rendered frame written out and composed for the animation.
 struct Film<'a> {
     driver: &'a mut Driver,
@@ -263,24 +279,16 @@ fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 
 impl Agent for Film<'_> {
     fn name(&self) -> String {
-        match &*self.driver {
-            Driver::Expert(expert, _) => expert.name(),
-            Driver::Served(agent) => agent.name(),
-        }
+        self.driver.agent().name()
     }
 
     fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.route = Some(ctx.route.clone());
-        match &mut *self.driver {
-            Driver::Expert(expert, _) => expert.start_route(ctx),
-            Driver::Served(agent) => agent.start_route(ctx),
-        }
+        self.driver.agent_mut().start_route(ctx)
     }
 
     fn end_route(&mut self) {
-        if let Driver::Served(agent) = &mut *self.driver {
-            agent.end_route();
-        }
+        self.driver.agent_mut().end_route();
     }
 
     fn sensors(&self) -> Option<Rig> {
@@ -296,10 +304,7 @@ impl Agent for Film<'_> {
     }
 
     fn planned_trajectory(&self) -> Vec<glam::DVec2> {
-        match &*self.driver {
-            Driver::Expert(expert, _) => expert.planned_trajectory(),
-            Driver::Served(agent) => agent.planned_trajectory(),
-        }
+        self.driver.agent().planned_trajectory()
     }
 
     fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
