@@ -52,12 +52,14 @@ ROUTE_SETS = ["town05-long-style", "town05-short-style"]
 BUNDLED_CONTROL = '{"safety": {"enabled": true}}'
 
 
+# The workspace's release binaries, wherever the script is run from.
+DEFAULT_BIN = Path(__file__).resolve().parents[2] / "target" / "release"
+
+
 def main():
     args = parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
     if not args.table_only:
-        if args.data is None:
-            sys.exit("ablate.py: --data is required (or --table-only)")
+        args.out.mkdir(parents=True, exist_ok=True)
         for variant in args.variants:
             for seed in args.seeds:
                 run_variant(args, variant, seed)
@@ -71,29 +73,51 @@ def parse_args():
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--data", type=Path, help="dataset from `sim-bridge collect`")
+    parser.add_argument("--data", type=Path,
+                        help="dataset from `sim-bridge collect` (required unless --table-only)")
     parser.add_argument("--out", type=Path, default=Path("runs/ablation"),
-                        help="where every run and the table go (default runs/ablation)")
+                        help="where every run and the table go (default: %(default)s)")
     parser.add_argument("--variants", default=",".join(VARIANTS), type=variant_list,
                         help=f"comma separated, of: {', '.join(VARIANTS)} (default: all)")
-    parser.add_argument("--seeds", default="0", type=seed_list, help="training seeds, e.g. 0,1")
-    parser.add_argument("--steps", type=int, default=DEFAULT_STEPS,
-                        help=f"training steps of 8 samples (default {DEFAULT_STEPS}, the bundled budget)")
-    parser.add_argument("--repetitions", type=int, default=3)
-    parser.add_argument("--jobs", type=int, default=2, help="runs at once in each evaluation")
-    parser.add_argument("--limit", type=int, help="only the first N routes of each set (smoke runs)")
+    parser.add_argument("--seeds", default="0", type=seed_list,
+                        help="training seeds, e.g. 0,1 (default: %(default)s)")
+    parser.add_argument("--steps", type=positive, default=DEFAULT_STEPS,
+                        help="training steps of 8 samples (default: %(default)s, the bundled budget)")
+    parser.add_argument("--repetitions", type=positive, default=3,
+                        help="repetitions of each evaluation (default: %(default)s)")
+    parser.add_argument("--jobs", type=positive, default=2,
+                        help="runs at once in each evaluation (default: %(default)s)")
+    parser.add_argument("--limit", type=positive, help="only the first N routes of each set (smoke runs)")
     parser.add_argument("--timeout", type=float, help="end every route after S simulated seconds (smoke runs)")
-    parser.add_argument("--bench-iterations", type=int, default=20)
-    parser.add_argument("--bin", type=Path, default=Path("target/release"),
-                        help="folder of the ssr-agent and sim-bridge binaries")
+    parser.add_argument("--bench-iterations", type=positive, default=20,
+                        help="timed runs per bench measurement (default: %(default)s)")
+    parser.add_argument("--bin", type=Path, default=DEFAULT_BIN,
+                        help="folder of the ssr-agent and sim-bridge binaries (default: %(default)s)")
     parser.add_argument("--table-only", action="store_true",
                         help="only rebuild the table from the runs under --out")
     args = parser.parse_args()
+    if args.table_only:
+        return args
+    if args.data is None:
+        parser.error("--data is required (or --table-only)")
+    if not (args.data / "manifest.json").is_file():
+        parser.error(f"{args.data / 'manifest.json'} is missing: --data takes a folder "
+                     "written by `sim-bridge collect`")
     for name in ("ssr-agent", "sim-bridge"):
-        if not args.table_only and not (args.bin / name).is_file():
+        if not (args.bin / name).is_file():
             parser.error(f"{args.bin / name} is missing: build with "
                          "`cargo build --release -p ssr-agent -p sim-bridge` or pass --bin")
     return args
+
+
+def positive(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive whole number, got '{text}'")
+    return value
 
 
 def variant_list(text):
@@ -107,9 +131,12 @@ def variant_list(text):
 
 def seed_list(text):
     try:
-        return [int(s) for s in text.split(",") if s]
+        seeds = [int(s) for s in text.split(",") if s]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds must be integers, got '{text}'")
+        seeds = []
+    if not seeds or min(seeds) < 0:
+        raise argparse.ArgumentTypeError(f"seeds must be whole numbers 0 or more, got '{text}'")
+    return seeds
 
 
 def run_variant(args, variant, seed):

@@ -76,7 +76,7 @@ pub enum CheckpointError {
         reason: String,
     },
     /// Controller settings that do not validate.
-    #[error("controller settings for checkpoint {path}: {reason}")]
+    #[error("controller settings for {path}: {reason}")]
     BadControl {
         /// The checkpoint file they were meant for.
         path: PathBuf,
@@ -166,10 +166,17 @@ pub fn with_control(
     partial.push(".partial");
     let partial = PathBuf::from(partial);
     save(&model, &info.config, &metadata, &partial)?;
-    std::fs::rename(&partial, to).map_err(|source| CheckpointError::Io {
+    let io = |source| CheckpointError::Io {
         path: to.to_path_buf(),
         source,
-    })
+    };
+    // The copy keeps the mode of the file it replaces, else of the checkpoint it copies.
+    let mode = std::fs::metadata(to)
+        .or_else(|_| std::fs::metadata(from))
+        .map_err(io)?
+        .permissions();
+    std::fs::set_permissions(&partial, mode).map_err(io)?;
+    std::fs::rename(&partial, to).map_err(io)
 }
 
 /// The controller settings a checkpoint carries (checked), or the defaults when it has none.

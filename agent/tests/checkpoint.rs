@@ -74,11 +74,21 @@ fn new_controller_settings_keep_the_weights_and_the_other_metadata() {
     assert!(error.to_string().contains("alpha = 2"), "{error}");
     assert_eq!(std::fs::read(&path).unwrap(), before);
 
-    // In place: the weights give the same outputs, the notes stay, the settings are new.
+    // In place: the weights give the same outputs, the notes stay, the settings are new, and
+    // the file keeps its mode.
+    #[cfg(unix)]
+    use std::os::unix::fs::PermissionsExt;
+    #[cfg(unix)]
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
     let mut control = ControlConfig::default();
     control.safety.enabled = true;
     control.vehicle.wheelbase = 2.87;
     with_control(&path, &path, &control, &device).unwrap();
+    #[cfg(unix)]
+    assert_eq!(
+        std::fs::metadata(&path).unwrap().permissions().mode() & 0o777,
+        0o644
+    );
     let (loaded, info) = load(&path, &device).unwrap();
     assert_eq!(control_config(&info).unwrap(), control);
     assert!(info.metadata.contains_key(CONTROL_KEY));

@@ -84,6 +84,7 @@ fn control_prints_and_changes_only_the_named_settings() {
     refused(r#"{"alpha": "high"}"#, "changed controller settings");
     refused(r#"{"alpha": 0.5"#, "--set is not JSON");
     refused("/no/such/patch.json", "/no/such/patch.json");
+    refused("not json", "neither a JSON object nor a readable file");
     let (ok, _, stderr) = ssr_agent(&["control", path, "--set", "{}"]);
     assert!(!ok && stderr.contains("--out"), "{stderr}");
 }

@@ -58,7 +58,8 @@ fn read_patch(set: &str) -> anyhow::Result<Value> {
     let (text, source) = if set.trim_start().starts_with('{') {
         (set.to_string(), "--set".to_string())
     } else {
-        let text = std::fs::read_to_string(set).with_context(|| format!("reading --set {set}"))?;
+        let text = std::fs::read_to_string(set)
+            .with_context(|| format!("--set {set} is neither a JSON object nor a readable file"))?;
         (text, set.to_string())
     };
     let patch: Value =

@@ -75,8 +75,9 @@ pub struct ServeArgs {
     /// and a Vulkan, Metal or DX12 adapter.
     #[arg(long, env = "SSR_AGENT_BACKEND")]
     backend: Option<Backend>,
-    /// The unstick rule: after 50 s stopped, creep 2 s along the plan [default: the
-    /// checkpoint's setting (`ssr-agent control`); on in every shipped one].
+    /// The unstick rule: after a long stop, creep along the plan (how long: the checkpoint's
+    /// `unstick` settings) [default: the checkpoint's setting (`ssr-agent control`); on in
+    /// every shipped one].
     #[arg(long, env = "SSR_AGENT_UNSTICK")]
     unstick: Option<bool>,
     /// The safety stop: brake when the network's occupancy head believes the path just ahead

@@ -103,6 +103,14 @@ pub fn load_policy(
             info.checkpoint
         );
     }
+    tracing::info!(
+        checkpoint = %info.checkpoint,
+        safety_stop = control.safety.enabled,
+        unstick = control.unstick.enabled,
+        wheelbase_m = control.vehicle.wheelbase,
+        max_wheel_angle_deg = control.vehicle.max_wheel_angle,
+        "controller"
+    );
     let policy = SsrPolicy::new(model, model_config, control, device.clone());
     Ok((policy, info))
 }

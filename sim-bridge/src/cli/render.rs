@@ -61,6 +61,10 @@ pub struct RenderArgs {
     /// length-based timeout (a short look at a long route).
     #[arg(long, value_parser = super::args::parse_positive)]
     timeout: Option<f64>,
+    /// How long to wait for a served agent to report SERVING (a local one loads and warms up
+    /// first), e.g. `120`, `2m`.
+    #[arg(long, default_value = "120", value_parser = super::args::parse_seconds)]
+    ready_timeout: std::time::Duration,
     /// Output folder: one subfolder per route.
     #[arg(long, default_value = "renders")]
     out: PathBuf,
@@ -85,6 +89,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             let (target, server) = server_target(agent, LocalRole::Driving)?;
             let options = GrpcOptions {
                 rig,
+                ready_timeout: args.ready_timeout,
                 client: "sim-bridge render".into(),
                 ..GrpcOptions::default()
             };

@@ -133,10 +133,10 @@ pub async fn connect_when_serving(target: &str, timeout: Duration) -> Result<Cha
     let deadline = tokio::time::Instant::now() + timeout;
     loop {
         let attempt = async {
-            let channel = endpoint
-                .connect()
-                .await
-                .map_err(|e| format!("connecting: {e}"))?;
+            let channel = endpoint.connect().await.map_err(|e| {
+                let e = ssrdrive_proto::error_text::error_text(&anyhow::Error::new(e));
+                format!("connecting: {e}")
+            })?;
             let reply = HealthClient::new(channel.clone())
                 .check(tonic_health::pb::HealthCheckRequest::default())
                 .await

@@ -145,8 +145,12 @@ impl LocalServer {
 }
 
 impl Drop for LocalServer {
-    /// SIGTERM first (the server drains and exits within a moment), SIGKILL after 5 s.
+    /// SIGTERM first (the server drains and exits within a moment), SIGKILL after 5 s; nothing
+    /// when it has already exited (its pid may belong to another process by then).
     fn drop(&mut self) {
+        if let Ok(Some(_)) = self.child.try_wait() {
+            return;
+        }
         #[cfg(unix)]
         {
             let asked = Command::new("kill")
