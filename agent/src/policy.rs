@@ -165,6 +165,9 @@ pub struct StepDebug {
     pub beta: [f32; 2],
     /// The speed head's prediction, m/s.
     pub predicted_speed: f32,
+    /// `[channels][rows * cols]` the occupancy head's probabilities (vehicle, walker; see
+    /// `OCCUPANCY_CHANNELS`); empty for a network without the head.
+    pub occupancy: Vec<Vec<f32>>,
 }
 
 /// What one step returns.
@@ -426,13 +429,15 @@ impl SsrPolicy {
             .filter(|_| wants_debug)
             .map(float_values);
         let tokens = self.config.tokens.num_tokens;
-        // The occupancy head runs only for the safety stop (and only where an episode has it on).
+        // The occupancy head runs only for the safety stop and for debug outputs (and only
+        // where an episode asks for one of them).
         let occupancy = self
             .model
             .occupancy
             .as_ref()
-            .filter(|_| states.iter().any(|s| s.controller.config().safety.enabled))
+            .filter(|_| wants_debug || states.iter().any(|s| s.controller.config().safety.enabled))
             .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
+        let channels = OCCUPANCY_CHANNELS.len();
 
         let mut results = Vec::with_capacity(b);
         for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
@@ -472,6 +477,18 @@ impl SsrPolicy {
                     alpha: a,
                     beta: bt,
                     predicted_speed: speed[i] * crate::model::tcp_head::SPEED_SCALE,
+                    occupancy: occupancy
+                        .as_ref()
+                        .map(|p| {
+                            (0..channels)
+                                .map(|c| {
+                                    (0..q)
+                                        .map(|cell| p[(i * q + cell) * channels + c])
+                                        .collect()
+                                })
+                                .collect()
+                        })
+                        .unwrap_or_default(),
                 }
             });
             if state.recent.len() == HISTORY_TICKS {

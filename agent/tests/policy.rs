@@ -36,6 +36,12 @@ fn an_episode_keeps_its_bev_and_debug_maps_come_back() {
         debug.token_attention[0].len(),
         debug.bev_rows * debug.bev_cols
     );
+    // The occupancy head's vehicle and walker probabilities, even with the safety stop off.
+    assert!(!policy.control().safety.enabled);
+    assert_eq!(debug.occupancy.len(), 2);
+    assert!(debug.occupancy.iter().all(|map| {
+        map.len() == debug.bev_rows * debug.bev_cols && map.iter().all(|p| (0.0..=1.0).contains(p))
+    }));
     // The history is the BEV of the step HISTORY_TICKS (0.5 s) back, as in training.
     for tick in 1..HISTORY_TICKS as u32 {
         assert!(!episode.has_previous_bev(), "no history yet at tick {tick}");

@@ -203,7 +203,7 @@ fn a_local_agent_drives_runs_at_once_as_one_at_a_time() {
 }
 
 #[test]
-fn render_puts_a_served_agents_token_attention_beside_the_views() {
+fn render_puts_a_served_agents_token_attention_and_occupancy_beside_the_views() {
     let server = Server::start(&[]);
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path();
@@ -220,12 +220,13 @@ fn render_puts_a_served_agents_token_attention_beside_the_views() {
     assert!(stdout.contains("route 0: 3 frames"), "{stdout}");
     let route = out.join("route_0");
     // The camera (the server's 320x96 rig, enlarged twice to the panels' 192 px), the top-down
-    // view and the 16 token maps, for each rendered tick, beside the raw camera frames.
+    // view, the 16 token maps and the occupancy, for each rendered tick, beside the raw camera
+    // frames.
     for tick in ["000000", "000010", "000020"] {
         assert!(route.join(format!("{tick}_rgb_front.png")).is_file());
         let view = std::fs::read(route.join(format!("{tick}_view.png"))).unwrap();
         let size = |at: usize| u32::from_be_bytes(view[at..at + 4].try_into().unwrap());
-        assert_eq!((size(16), size(20)), (640 + 2 * 192, 192), "tick {tick}");
+        assert_eq!((size(16), size(20)), (640 + 3 * 192, 192), "tick {tick}");
     }
     assert!(route.join("run.png").is_file());
 

@@ -395,16 +395,18 @@ fn millis(time: Duration) -> f64 {
 
 fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
     let debug = output.debug.as_ref()?;
-    Some(v1::Debug {
-        token_attention: debug
-            .token_attention
-            .iter()
+    let maps = |maps: &[Vec<f32>]| {
+        maps.iter()
             .map(|weights| v1::TokenMap {
                 rows: debug.bev_rows as u32,
                 cols: debug.bev_cols as u32,
                 weights: weights.clone(),
             })
-            .collect(),
+            .collect()
+    };
+    Some(v1::Debug {
+        token_attention: maps(&debug.token_attention),
+        occupancy: maps(&debug.occupancy),
         trajectory_control: Some(wire::control_to_proto(output.decision.trajectory)),
         branch_control: Some(wire::control_to_proto(output.decision.branch)),
         beta_params: vec![debug.alpha[0], debug.beta[0], debug.alpha[1], debug.beta[1]],

@@ -1,8 +1,8 @@
 //! `sim-bridge render`: drive routes with the expert or a served agent and write what the
 //! cameras saw: one PNG per camera every few ticks, and an animated PNG of the whole run with the
 //! camera view beside a top-down view of the ego's surroundings. A served agent's scene-token
-//! attention maps (its debug block, asked for on the rendered ticks) go beside them, and each
-//! rendered tick's composite is also written as a still.
+//! attention maps and occupancy (its debug block, asked for on the rendered ticks) go beside
+//! them, and each rendered tick's composite is also written as a still.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +13,7 @@ use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::local::LocalRole;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
-use sim_bridge::render::tokens::token_panel;
+use sim_bridge::render::bev_maps::{occupancy_panel, token_panel};
 use sim_bridge::render::topdown::local_view;
 use sim_bridge::route::DenseRoute;
 use sim_bridge::scoring::ScoringConfig;
@@ -228,15 +228,18 @@ impl Film<'_> {
             self.args.topdown_radius,
             side,
         );
-        let tokens = match debug {
-            Some(debug) if !debug.token_attention.is_empty() => {
-                Some(token_panel(&debug.token_attention, side).map_err(|e| {
-                    anyhow::anyhow!("the agent's debug block at tick {}: {e}", obs.frame)
-                })?)
+        // The debug block's BEV maps, each where the agent sent it: token attention, occupancy.
+        let mut maps = Vec::new();
+        if let Some(debug) = debug {
+            let bad = |e| anyhow::anyhow!("the agent's debug block at tick {}: {e}", obs.frame);
+            if !debug.token_attention.is_empty() {
+                maps.push(token_panel(&debug.token_attention, side).map_err(bad)?);
             }
-            _ => None,
-        };
-        let panels = if tokens.is_some() { 2 } else { 1 };
+            if !debug.occupancy.is_empty() {
+                maps.push(occupancy_panel(&debug.occupancy, side).map_err(bad)?);
+            }
+        }
+        let panels = 1 + maps.len() as u32;
         let (width, height) = (cameras_width + panels * side, cameras_height.max(side));
         let stride = width as usize * 3;
         let mut rgb = vec![0u8; stride * height as usize];
@@ -252,8 +255,10 @@ impl Film<'_> {
             y += frame.height;
         }
         blit(cameras_width, 0, side, topdown.pixels());
-        if let Some(tokens) = &tokens {
-            blit(cameras_width + side, 0, side, &tokens.rgb);
+        for (k, map) in maps.iter().enumerate() {
+            blit(cameras_width + (1 + k as u32) * side, 0, side, &map.rgb);
+        }
+        if !maps.is_empty() {
             let path = self.dir.join(format!("{:06}_view.png", obs.frame));
             write_file(&path, &encode_png(width, height, &rgb)?)?;
         }

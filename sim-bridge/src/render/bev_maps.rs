@@ -1,11 +1,12 @@
-//! The scene tokens' attention over the agent's BEV grid as a picture: one heat map per token in
-//! a square grid, which `sim-bridge render` puts beside the camera and top-down views when a
-//! served agent returns its debug block (SSR's paper shows the same in its Figure 4).
+//! Maps over the agent's BEV grid from its debug block, as pictures that `sim-bridge render` puts
+//! beside the camera and top-down views: the scene tokens' attention, one heat map per token in
+//! a square grid (SSR's paper shows the same in its Figure 4), and the occupancy head's
+//! vehicles and walkers in one map.
 //!
-//! Each map is in the ego frame as the agent sends it: the far front at the top, the car's
-//! left on the left. Each is scaled to its own largest weight, on a square-root scale so that
-//! weak attention still shows: the picture shows where each token looks, not how strongly one
-//! token looks compared with another.
+//! Maps are in the ego frame as the agent sends them: the far front at the top, the car's left
+//! on the left. Each token map is scaled to its own largest weight, on a square-root scale so
+//! that weak attention still shows: the picture shows where each token looks, not how strongly
+//! one token looks compared with another. Occupancy is a probability and is drawn as one.
 
 use ssrdrive_proto::image::RgbImage;
 use ssrdrive_proto::v1::TokenMap;
@@ -26,19 +27,7 @@ const RAMP: [[f32; 3]; 5] = [
 /// `maps` in a grid of ceil(sqrt(n)) columns inside a `side`-pixel square (see the module doc),
 /// or why they cannot be drawn: no maps, or a map whose weights do not fill its rows x cols.
 pub fn token_panel(maps: &[TokenMap], side: u32) -> Result<RgbImage, String> {
-    if maps.is_empty() {
-        return Err("the debug block has no token maps".into());
-    }
-    for (k, map) in maps.iter().enumerate() {
-        if map.rows == 0 || map.cols == 0 || map.weights.len() != (map.rows * map.cols) as usize {
-            return Err(format!(
-                "token map {k} has {} weights for {} x {} cells",
-                map.weights.len(),
-                map.rows,
-                map.cols
-            ));
-        }
-    }
+    check("token", maps)?;
     let per_row = (maps.len() as f64).sqrt().ceil() as u32;
     let cell = side.saturating_sub(GAP) / per_row;
     if cell <= GAP {
@@ -80,14 +69,76 @@ pub fn token_panel(maps: &[TokenMap], side: u32) -> Result<RgbImage, String> {
     })
 }
 
-/// The ramp's colour at `level` in [0, 1] (clamped; NaN is 0).
-fn heat(level: f32) -> [u8; 3] {
-    let level = if level.is_nan() {
+/// Vehicle occupancy's colour at probability 1 (walkers': [`WALKER`]).
+const VEHICLE: [f32; 3] = [255.0, 90.0, 40.0];
+/// Walker occupancy's colour at probability 1.
+const WALKER: [f32; 3] = [60.0, 220.0, 255.0];
+
+/// The occupancy head's `[vehicle, walker]` maps as one `side`-pixel square: each cell blends
+/// from the background towards [`VEHICLE`] by the vehicle probability, then towards [`WALKER`]
+/// by the walker probability; or why they cannot be drawn (not two maps of one grid).
+pub fn occupancy_panel(maps: &[TokenMap], side: u32) -> Result<RgbImage, String> {
+    check("occupancy", maps)?;
+    let [vehicle, walker] = maps else {
+        return Err(format!(
+            "{} occupancy maps, not 2 (vehicle, walker)",
+            maps.len()
+        ));
+    };
+    if (vehicle.rows, vehicle.cols) != (walker.rows, walker.cols) || side == 0 {
+        return Err("the occupancy maps differ in size".into());
+    }
+    let (rows, cols) = (vehicle.rows, vehicle.cols);
+    let mut rgb = Vec::with_capacity((side * side * 3) as usize);
+    for y in 0..side {
+        let row = y * rows / side;
+        for x in 0..side {
+            let at = (row * cols + x * cols / side) as usize;
+            let (v, w) = (unit(vehicle.weights[at]), unit(walker.weights[at]));
+            for c in 0..3 {
+                let base = BACKGROUND[c] as f32;
+                let with_vehicle = base + v * (VEHICLE[c] - base);
+                rgb.push((with_vehicle + w * (WALKER[c] - with_vehicle)).round() as u8);
+            }
+        }
+    }
+    Ok(RgbImage {
+        width: side,
+        height: side,
+        rgb,
+    })
+}
+
+/// Every map fills its rows x cols and there is one; else which does not, named by `what`.
+fn check(what: &str, maps: &[TokenMap]) -> Result<(), String> {
+    if maps.is_empty() {
+        return Err(format!("the debug block has no {what} maps"));
+    }
+    for (k, map) in maps.iter().enumerate() {
+        if map.rows == 0 || map.cols == 0 || map.weights.len() != (map.rows * map.cols) as usize {
+            return Err(format!(
+                "{what} map {k} has {} weights for {} x {} cells",
+                map.weights.len(),
+                map.rows,
+                map.cols
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `value` clamped to [0, 1] (NaN is 0).
+fn unit(value: f32) -> f32 {
+    if value.is_nan() {
         0.0
     } else {
-        level.clamp(0.0, 1.0)
-    };
-    let at = level * (RAMP.len() - 1) as f32;
+        value.clamp(0.0, 1.0)
+    }
+}
+
+/// The ramp's colour at `level` in [0, 1] (clamped; NaN is 0).
+fn heat(level: f32) -> [u8; 3] {
+    let at = unit(level) * (RAMP.len() - 1) as f32;
     let i = (at as usize).min(RAMP.len() - 2);
     let t = at - i as f32;
     std::array::from_fn(|c| (RAMP[i][c] + t * (RAMP[i + 1][c] - RAMP[i][c])).round() as u8)
@@ -146,6 +197,26 @@ mod tests {
                 .unwrap_err()
                 .contains("too small")
         );
+    }
+
+    #[test]
+    fn occupancy_is_drawn_by_probability_in_its_channel_colour() {
+        // A 2x2 grid: a vehicle certain in the top-left cell, a walker in the bottom-right.
+        let map = |hot: usize| TokenMap {
+            rows: 2,
+            cols: 2,
+            weights: (0..4).map(|k| if k == hot { 1.0 } else { 0.0 }).collect(),
+        };
+        let panel = occupancy_panel(&[map(0), map(3)], 10).unwrap();
+        let pixel = |x: u32, y: u32| {
+            let at = ((y * 10 + x) * 3) as usize;
+            [panel.rgb[at], panel.rgb[at + 1], panel.rgb[at + 2]]
+        };
+        assert_eq!(pixel(1, 1), VEHICLE.map(|v| v as u8));
+        assert_eq!(pixel(8, 8), WALKER.map(|v| v as u8));
+        assert_eq!(pixel(8, 1), BACKGROUND);
+        let error = occupancy_panel(&[map(0)], 10).unwrap_err();
+        assert!(error.contains("1 occupancy maps, not 2"), "{error}");
     }
 
     #[test]
