@@ -10,7 +10,8 @@ open-loop validation from the checkpoint (`ssr-agent inspect`). One table covers
 under --out: ablation.md and ablation.json.
 
 Every stage writes into --out/<variant>/seed-<k>/ and is skipped once its output is complete;
-training and evaluation continue from where they stopped (`--resume`). A killed run therefore
+training and evaluation continue from where they stopped (`--resume`), and a `done` file marks a
+run whose evaluations all finished (only those enter the table). A killed run therefore
 continues when the same command is run again. Standard library only.
 
     python3 agent/ablation/ablate.py --data data/train-v3 --out runs/ablation
@@ -175,6 +176,9 @@ def run_variant(args, variant, seed):
                  append=batch > 1, stdout_only=True)
         partial.rename(bench)
 
+    done = run / "done"
+    if done.is_file():
+        return
     for routes in ROUTE_SETS:
         out = run / f"eval-{routes}.json"
         flags = ["--limit", str(args.limit)] if args.limit else []
@@ -185,6 +189,8 @@ def run_variant(args, variant, seed):
               "--resume", "--out", str(out), *flags],
              env={"SSR_AGENT_CHECKPOINT": str(agent), "SSR_AGENT_BIN": tool("ssr-agent")},
              append=True)
+    # Every evaluation exited 0, so every run is scored (a killed one leaves a partial JSON).
+    done.touch()
 
 
 def step(label, what, log, command, env=None, append=False, stdout_only=False):
@@ -212,11 +218,10 @@ def checkpoint_field(inspect_txt, key):
 
 
 def runs_under(out):
-    """Every <variant>/seed-<k> folder under `out` whose evaluations are all written."""
+    """Every <variant>/seed-<k> folder under `out` whose stages have all finished."""
     for variant in VARIANTS:
         for run in sorted((out / variant).glob("seed-*")):
-            if all((run / f"eval-{r}.json").is_file() for r in ROUTE_SETS) and \
-                    (run / "bench.jsonl").is_file():
+            if (run / "done").is_file():
                 yield run
 
 

@@ -1,7 +1,8 @@
 //! The ablation harness (`agent/ablation/ablate.py`) end to end on a tiny budget: it collects
 //! nothing itself, so a small expert dataset comes first; then two variants are trained for two
 //! steps, driven on one route of each Town05-style set for a second and timed, and the table
-//! is written. Run again, every finished stage is skipped.
+//! is written. Run again, every finished stage is skipped; an unfinished run stays out of the
+//! table.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -96,14 +97,23 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     let markdown = std::fs::read_to_string(out.join("ablation.md")).unwrap();
     assert!(markdown.contains("| tokens-4 | 0 |"), "{markdown}");
 
-    // Again: nothing is trained twice, and the table is the same.
+    // Again: nothing is trained or driven twice, and the table is the same.
     let again = ablate(&args, &bin);
     let stdout = String::from_utf8_lossy(&again.stdout);
     assert!(again.status.success(), "{stdout}");
-    assert!(!stdout.contains("train (log"), "{stdout}");
+    assert!(!stdout.contains("(log"), "{stdout}");
     assert_eq!(
         std::fs::read_to_string(out.join("ablation.md")).unwrap(),
         markdown
+    );
+    // A run whose evaluations did not all finish stays out of the table.
+    std::fs::remove_file(out.join("tokens-4/seed-0/done")).unwrap();
+    let table = ablate(&["--out", out_arg, "--table-only"], &bin);
+    let stdout = String::from_utf8_lossy(&table.stdout);
+    assert!(table.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("| full | 0 |") && !stdout.contains("tokens-4"),
+        "{stdout}"
     );
 
     // Unknown variants and missing binaries are named.

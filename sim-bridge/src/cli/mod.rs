@@ -40,7 +40,7 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Drive routes (the expert, or a served agent with --agent) and write what the cameras
     /// saw: PNG frames and an animation of each run with the camera view beside a top-down
-    /// view, and a served agent's scene-token attention maps.
+    /// view, and a served agent's scene-token attention and occupancy maps.
     Render(render::RenderArgs),
     /// Record the expert driving route sets (with noise injection) into a training dataset;
     /// resumable.

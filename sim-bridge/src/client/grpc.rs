@@ -204,8 +204,8 @@ impl Agent for GrpcAgent {
 }
 
 impl GrpcAgent {
-    /// One `Step`; with `debug`, the server's debug block (token attention maps, both control
-    /// branches) comes back too, when the server gives one.
+    /// One `Step`; with `debug`, the server's debug block (token attention and occupancy maps,
+    /// both control branches) comes back too, when the server gives one.
     pub fn step(
         &mut self,
         obs: &Observation,
