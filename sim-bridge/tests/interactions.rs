@@ -7,8 +7,9 @@
 //! (a light whose stop line is at x = 100): red and yellow hold the ego while its tail could
 //! still cross on red. And on `maps/short_sections.xodr`: lane sections a few centimetres long
 //! do not hide a standing ego from the traffic behind them. And on the bundled town of small
-//! T-junctions: at a junction without lights the ego takes its turn, and traffic gives it. And
-//! on `maps/cut_connector.xodr`: connectors conflict by their whole path through the junction.
+//! T-junctions: at a junction without lights the ego takes its turn, and traffic gives it, and
+//! traffic does not enter a junction it cannot leave. And on `maps/cut_connector.xodr`:
+//! connectors conflict by their whole path through the junction.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
@@ -436,4 +437,66 @@ fn connectors_conflict_by_their_whole_path_through_the_junction() {
     assert!(of(east).contains(&north_first) && of(east).contains(&north_second));
     // The two pieces of one path do not conflict with each other.
     assert!(!of(north_first).contains(&north_second));
+}
+
+/// Traffic does not enter a junction it cannot leave (CARLA's junction exit check): with a car
+/// standing at the start of its way out, a car at the entry takes another way through the
+/// junction that has room and never stops inside it. It used to drive in and stand there
+/// behind the car, holding every connector that crosses its own; on Town02 queues spilling
+/// back from junction to junction closed into a gridlock that held the ego for good.
+#[test]
+fn traffic_does_not_enter_a_junction_it_cannot_leave() {
+    let map = load("small", towngen::bundled(TownStyle::SmallTJunctions));
+    let out_of = |connector: LaneIdx| map.lane(connector).successors.first().copied();
+    let long_exit = |connector: LaneIdx| {
+        out_of(connector)
+            .is_some_and(|exit| !map.lane(exit).in_junction() && map.lane(exit).length() > 30.0)
+    };
+    // An approach without a light with two ways through the junction onto long lanes.
+    let (from, ways) = map
+        .lanes
+        .iter()
+        .filter(|l| !l.in_junction() && l.length() > 40.0 && map.light_ending(l.idx).is_none())
+        .find_map(|l| {
+            let ways: Vec<LaneIdx> = (l.successors.iter().copied())
+                .filter(|&c| map.lane(c).in_junction() && long_exit(c))
+                .collect();
+            (ways.len() >= 2).then_some((l.idx, ways))
+        })
+        .expect("an approach with two ways through a junction");
+    let (blocked, exit) = (ways[0], out_of(ways[0]).unwrap());
+    // The ego holds on a lane far away.
+    let entry = map.lane(from).points.last().copied().unwrap();
+    let far = (map.lanes.iter())
+        .find(|l| !l.in_junction() && l.length() > 30.0 && (l.points[0] - entry).length() > 200.0)
+        .expect("a lane far away");
+    let (a, b) = (far.pose_at(5.0).position, far.pose_at(25.0).position);
+    let route = route_through(&map, &[(a.x, a.y), (b.x, b.y)]);
+    let mut world = quiet_world(&map, &route, 2);
+    let stand_at = world.traffic.vehicles[0].half.x + 0.5;
+    let pin_blocker = |world: &mut World<'_>| {
+        let blocker = &mut world.traffic.vehicles[0];
+        (blocker.lane, blocker.s, blocker.speed) = (exit, stand_at, 0.0);
+        blocker.next = out_of(exit).into_iter().collect();
+    };
+    pin_blocker(&mut world);
+    let car = &mut world.traffic.vehicles[1];
+    (car.lane, car.s, car.speed, car.arrival) = (from, map.lane(from).length() - 8.0, 0.0, None);
+    car.next = vec![blocked, exit];
+    for _ in 0..(20.0 / 0.05) as usize {
+        world.step(HOLD);
+        pin_blocker(&mut world);
+        let car = &world.traffic.vehicles[1];
+        assert_ne!(
+            car.lane, blocked,
+            "it drove into the junction it cannot leave"
+        );
+        assert!(
+            !(map.lane(car.lane).in_junction() && car.speed < 0.1),
+            "it stands inside the junction at t = {:.2} s: {car:?}",
+            world.time
+        );
+    }
+    let car = &world.traffic.vehicles[1];
+    assert_ne!(car.lane, from, "it went another way: {car:?}");
 }

@@ -6,8 +6,16 @@
 //! end in the same lane (through any further pieces of the junction). A vehicle within
 //! [`REQUEST_DISTANCE`] of a junction may enter when no conflicting connector is occupied (by a
 //! vehicle or the ego) and no conflicting vehicle that arrived earlier is waiting to enter;
-//! otherwise it holds at the stop line. The ego waiting to enter a junction from an approach
-//! without a light takes its turn among those requests ([`EgoPresence::junction_request`]),
+//! otherwise it holds at the stop line. It also needs room to leave the junction, CARLA's
+//! traffic-manager junction exit check ([`EXIT_GAP`] beyond its own length past the junction's
+//! end, behind the last vehicle there and those ahead of it inside; see [`has_exit_room`]):
+//! without it, it holds at the stop line without a request, so it keeps no one waiting, and
+//! takes another way through the junction that has room, if there is one. A vehicle that
+//! entered without room stopped inside the junction, holding every connector that conflicts
+//! with its own, and queues spilling back from junction to junction closed into cycles that
+//! never cleared (gridlock around Town02's T-junctions). The ego waiting to enter a junction
+//! from an approach without a light takes its turn among those requests
+//! ([`EgoPresence::junction_request`]),
 //! and the expert asks [`Traffic::ego_may_enter`] before it goes: out of turn, both would end
 //! up inside the junction, each waiting for the other. A vehicle whose path runs into a lane that ends (a lane
 //! drop, as on CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic
@@ -68,12 +76,19 @@ const LATERAL_SPEED: f64 = 1.0;
 const MAX_CONNECTOR_PIECES: usize = 4;
 /// The id the ego goes by in junction requests (vehicles have ids from 1000).
 const EGO_ID: u32 = 0;
+/// Gap a vehicle entering a junction wants past it, behind the last vehicle on its exit and
+/// behind each vehicle ahead of it in the junction, m (CARLA's traffic manager keeps 4 m:
+/// `SAFE_DISTANCE_AFTER_JUNCTION`).
+const EXIT_GAP: f64 = 4.0;
 /// How far ahead of its front a vehicle checks its path for the ego's box, m.
 const EGO_WATCH: f64 = 30.0;
 /// Spacing of that check, m.
 const EGO_WATCH_STEP: f64 = 1.0;
 /// Clearance beyond its half width the vehicle keeps from the ego's box, m.
 const EGO_WATCH_MARGIN: f64 = 0.4;
+
+/// Occupants per lane: (arc length, half length, speed, id).
+type Occupancy = HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>;
 
 /// One background vehicle.
 #[derive(Debug, Clone)]
@@ -256,8 +271,9 @@ impl Traffic {
         dt: f64,
         rng: &mut impl Rng,
     ) {
-        let occupancy = self.occupancy(map, ego);
-        let grants = self.junction_grants(map, lights, ego);
+        let occupancy = self.occupancy(map, Some(ego));
+        self.avoid_full_exits(map, &occupancy, rng);
+        let grants = self.junction_grants(map, lights, ego, &occupancy);
         let mut accels = Vec::with_capacity(self.vehicles.len());
         for (i, v) in self.vehicles.iter().enumerate() {
             let mut gap = self.free_distance(map, lights, &occupancy, i, grants[i]);
@@ -276,18 +292,15 @@ impl Traffic {
         self.respawn_stuck(map, ego, rng);
     }
 
-    /// Vehicles (and the ego) per lane: (s, half length, speed, id). Near the start of a
-    /// junction connector, where connectors from one lane still overlap before they diverge,
-    /// an occupant is listed on every sibling connector too, so followers keep their distance.
-    fn occupancy(
-        &self,
-        map: &Map,
-        ego: &EgoPresence,
-    ) -> HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> {
-        let mut occ: HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>> = HashMap::new();
+    /// Vehicles (and the ego, when given) per lane: (s, half length, speed, id). Near the start
+    /// of a junction connector, where connectors from one lane still overlap before they
+    /// diverge, an occupant is listed on every sibling connector too, so followers keep their
+    /// distance.
+    fn occupancy(&self, map: &Map, ego: Option<&EgoPresence>) -> Occupancy {
+        let mut occ: Occupancy = HashMap::new();
         let ego_entry = ego
-            .on_lane
-            .map(|(lane, s)| (lane, s, ego.obb.half.x, ego.speed, 0));
+            .and_then(|ego| ego.on_lane.map(|on_lane| (on_lane, ego)))
+            .map(|((lane, s), ego)| (lane, s, ego.obb.half.x, ego.speed, EGO_ID));
         let entries = self
             .vehicles
             .iter()
@@ -315,7 +328,7 @@ impl Traffic {
         &self,
         map: &Map,
         lights: &[LightState],
-        occ: &HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>,
+        occ: &Occupancy,
         i: usize,
         granted: bool,
     ) -> (f64, f64) {
@@ -360,8 +373,7 @@ impl Traffic {
         to_end: f64,
         granted: bool,
     ) -> bool {
-        let entering_junction = v.next.first().is_some_and(|n| map.lane(*n).in_junction());
-        if !entering_junction || map.lane(v.lane).in_junction() {
+        if !approaching_junction(map, v) {
             return false;
         }
         if !v.ignores_lights
@@ -382,7 +394,13 @@ impl Traffic {
     }
 
     /// Which vehicles may enter the junction ahead now.
-    fn junction_grants(&self, map: &Map, lights: &[LightState], ego: &EgoPresence) -> Vec<bool> {
+    fn junction_grants(
+        &self,
+        map: &Map,
+        lights: &[LightState],
+        ego: &EgoPresence,
+        occ: &Occupancy,
+    ) -> Vec<bool> {
         let mut occupied = self.junction_occupants(map);
         // The ego blocks the connector it is on, and, while it approaches a junction at speed,
         // every connector it could take: traffic gives way to an ego about to enter.
@@ -394,7 +412,7 @@ impl Traffic {
                 occupied.extend(l.successors.iter().filter(|c| map.lane(**c).in_junction()));
             }
         }
-        let requests = self.junction_requests(map, lights);
+        let requests = self.junction_requests(map, lights, occ);
         // The ego waiting to enter takes its turn among them.
         let ego_request = ego
             .junction_request
@@ -405,20 +423,23 @@ impl Traffic {
             .copied()
             .chain(ego_request)
             .collect();
-        // Red-light runners (scenario vehicles) go regardless.
+        // Red-light runners (scenario vehicles) go regardless; a vehicle without room past the
+        // junction holds, without a request.
         self.vehicles
             .iter()
             .zip(&requests)
             .map(|(v, request)| match *request {
-                Some(request) if !v.ignores_lights => self.may_go(request, &occupied, &all),
-                _ => true,
+                _ if v.ignores_lights => true,
+                Some(request) => self.may_go(request, &occupied, &all),
+                None => !approaching_junction(map, v) || has_exit_room(map, v, occ),
             })
             .collect()
     }
 
     /// Whether the ego, waiting since `arrival` to enter the junction connector `connector`, may
     /// go now by the rule traffic follows (see the module doc): no conflicting connector is
-    /// occupied and no conflicting vehicle that arrived earlier waits to enter.
+    /// occupied and no conflicting vehicle that arrived earlier (with room past the junction,
+    /// judged without the ego) waits to enter.
     pub fn ego_may_enter(
         &self,
         map: &Map,
@@ -426,8 +447,9 @@ impl Traffic {
         connector: LaneIdx,
         arrival: f64,
     ) -> bool {
+        let occupancy = self.occupancy(map, None);
         let requests: Vec<(LaneIdx, f64, u32)> = self
-            .junction_requests(map, lights)
+            .junction_requests(map, lights, &occupancy)
             .into_iter()
             .flatten()
             .collect();
@@ -448,11 +470,14 @@ impl Traffic {
     }
 
     /// Per vehicle, its request to enter the junction ahead: (connector, arrival, id), when it
-    /// has arrived within [`REQUEST_DISTANCE`] and no light holds it.
+    /// has arrived within [`REQUEST_DISTANCE`], no light holds it and it has room past the
+    /// junction ([`has_exit_room`]; a vehicle that cannot leave the junction does not
+    /// keep others waiting).
     fn junction_requests(
         &self,
         map: &Map,
         lights: &[LightState],
+        occ: &Occupancy,
     ) -> Vec<Option<(LaneIdx, f64, u32)>> {
         self.vehicles
             .iter()
@@ -463,8 +488,12 @@ impl Traffic {
                         .light_at_end
                         .get(&v.lane)
                         .is_some_and(|&l| lights[l] != LightState::Green);
-                (map.lane(connector).in_junction() && !held_by_light && v.arrival.is_some())
-                    .then(|| (connector, v.arrival.unwrap_or(0.0), v.id))
+                let arrival = v.arrival.filter(|_| {
+                    map.lane(connector).in_junction()
+                        && !held_by_light
+                        && (v.ignores_lights || has_exit_room(map, v, occ))
+                })?;
+                Some((connector, arrival, v.id))
             })
             .collect()
     }
@@ -488,6 +517,39 @@ impl Traffic {
         !busy && !earlier
     }
 
+    /// A vehicle held at a junction for want of room past it ([`has_exit_room`]) takes another
+    /// way through the junction that has room, when there is one, as a driver turns off a
+    /// jammed street: without it a ring of full lanes (round a block) waits on itself for ever.
+    fn avoid_full_exits(&mut self, map: &Map, occ: &Occupancy, rng: &mut impl Rng) {
+        for v in &mut self.vehicles {
+            let at_entry = map.lane(v.lane).length() - v.s < REQUEST_DISTANCE;
+            if v.ignores_lights
+                || !at_entry
+                || !approaching_junction(map, v)
+                || has_exit_room(map, v, occ)
+            {
+                continue;
+            }
+            let mut ways: Vec<Vec<LaneIdx>> = map
+                .lane(v.lane)
+                .successors
+                .iter()
+                .filter(|&&c| c != v.next[0] && map.lane(c).kind == LaneKind::Driving)
+                .map(|&c| {
+                    let mut way = v.clone();
+                    way.next = vec![c];
+                    extend_path(map, &mut way, rng);
+                    way
+                })
+                .filter(|way| has_exit_room(map, way, occ))
+                .map(|way| way.next)
+                .collect();
+            if !ways.is_empty() {
+                v.next = ways.swap_remove(rng.random_range(0..ways.len()));
+            }
+        }
+    }
+
     /// Integrate one vehicle and move it across lane ends.
     fn advance(&mut self, map: &Map, i: usize, accel: f64, t: f64, dt: f64, rng: &mut impl Rng) {
         let v = &mut self.vehicles[i];
@@ -508,9 +570,7 @@ impl Traffic {
             };
         }
         let to_end = map.lane(v.lane).length() - v.s;
-        let approaching = v.next.first().is_some_and(|n| map.lane(*n).in_junction())
-            && !map.lane(v.lane).in_junction();
-        if approaching && to_end < REQUEST_DISTANCE {
+        if approaching_junction(map, v) && to_end < REQUEST_DISTANCE {
             v.arrival.get_or_insert(t);
         }
         if self.stop_at_end.contains_key(&v.lane)
@@ -535,13 +595,7 @@ impl Traffic {
     }
 
     /// Start a few lane changes where the target lane has room.
-    fn lane_changes(
-        &mut self,
-        map: &Map,
-        occ: &HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>,
-        dt: f64,
-        rng: &mut impl Rng,
-    ) {
+    fn lane_changes(&mut self, map: &Map, occ: &Occupancy, dt: f64, rng: &mut impl Rng) {
         for v in &mut self.vehicles {
             let lane = map.lane(v.lane);
             if lane.in_junction() || v.lateral != 0.0 {
@@ -601,6 +655,49 @@ impl Traffic {
             }
         }
     }
+}
+
+/// Whether the vehicle is on a non-junction lane and its path enters a junction next.
+fn approaching_junction(map: &Map, v: &Vehicle) -> bool {
+    !map.lane(v.lane).in_junction() && v.next.first().is_some_and(|n| map.lane(*n).in_junction())
+}
+
+/// The junction exit check of CARLA's traffic manager: whether there is room for a vehicle
+/// [`approaching_junction`] past the junction its path enters, so that it does not stop inside.
+/// The room is the free length from the junction's end along the path up to where the first
+/// occupant there could stop at the earliest (its rear plus its braking distance at
+/// [`IDM`]'s comfortable deceleration: one standing or crawling there blocks, one driving
+/// off does not), less what the occupants ahead inside the junction on the path will take
+/// (their length and [`EXIT_GAP`] each). The vehicle needs its own length and [`EXIT_GAP`].
+/// A path that ends before that much of it is seen counts as having room.
+fn has_exit_room(map: &Map, v: &Vehicle, occ: &Occupancy) -> bool {
+    let others = |lane: &LaneIdx| occ.get(lane).into_iter().flatten().filter(|o| o.3 != v.id);
+    let inside = v
+        .next
+        .iter()
+        .take_while(|l| map.lane(**l).in_junction())
+        .count();
+    let (through, beyond) = v.next.split_at(inside);
+    let committed: f64 = through
+        .iter()
+        .flat_map(others)
+        .map(|&(_, half, _, _)| 2.0 * half + EXIT_GAP)
+        .sum();
+    let needed = committed + 2.0 * v.half.x + EXIT_GAP;
+    let mut offset = 0.0;
+    for lane in beyond {
+        if offset >= needed {
+            break;
+        }
+        let blocked = others(lane).any(|&(s, half, speed, _)| {
+            offset + s - half + speed * speed / (2.0 * IDM.decel) < needed
+        });
+        if blocked {
+            return false;
+        }
+        offset += map.lane(*lane).length();
+    }
+    true
 }
 
 /// Where the ego's box intrudes on the corridor a vehicle's path sweeps ahead of it, whatever
