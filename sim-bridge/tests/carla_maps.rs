@@ -4,7 +4,7 @@
 mod common;
 
 use common::{carla_dir, lights_unseen_from};
-use sim_bridge::map::{LaneKind, Map, MapOptions};
+use sim_bridge::map::{LaneKind, Map, MapOptions, angle_diff};
 use ssrdrive_proto::camera::Rig;
 
 #[test]
@@ -38,6 +38,35 @@ fn carla_towns_load_with_lights_and_a_connected_lane_graph() {
             dead_ends * 20 < driving,
             "{town}: {dead_ends} dead-end driving lanes"
         );
+    }
+}
+
+/// A driving lane's heading is continuous. Town06 widens junction connector lane 400:3 from
+/// 3.0 m to 3.5 m at one width record; its centre line stepped 0.25 m sideways across 0.35 m of
+/// road, and a car following it turned broadside (3.14 to -2.35 rad) for a tick and hit the
+/// car in the next lane. No driving lane of any town may turn more than 0.3 rad between poses
+/// 0.5 m apart (the towns' tightest driving curves turn under 0.1 rad there).
+#[test]
+fn carla_driving_lanes_turn_no_more_than_a_curve_between_poses_half_a_metre_apart() {
+    let Some(dir) = carla_dir() else { return };
+    for town in ["Town01", "Town02", "Town03", "Town04", "Town06"] {
+        let map = Map::load_file(&dir.join(format!("{town}.xodr")), MapOptions::default())
+            .unwrap_or_else(|e| panic!("{town}: {e}"));
+        for lane in map.lanes.iter().filter(|l| l.kind == LaneKind::Driving) {
+            let mut s = 0.0;
+            while s + 0.5 <= lane.length() {
+                let turn = angle_diff(lane.pose_at(s + 0.5).yaw, lane.pose_at(s).yaw);
+                assert!(
+                    turn.abs() <= 0.3,
+                    "{town} lane {}:{}:{}: turns {turn:.2} rad between s {s:.2} and {:.2}",
+                    lane.road_id,
+                    lane.section,
+                    lane.lane_id,
+                    s + 0.5
+                );
+                s += 0.05;
+            }
+        }
     }
 }
 

@@ -129,6 +129,53 @@ fn a_lane_offset_step_at_a_section_boundary_leaves_the_lanes_continuous() {
     assert_eq!(first.successors, vec![second.idx]);
 }
 
+/// A lane whose width record ends short of the next one's value (Town06's connector 400 widens
+/// from 3.0 m to 3.5 m at one record) steps its centre line sideways; the baked lane ramps
+/// across the step so its heading never swings (it turned 0.8 rad and back in 0.35 m).
+#[test]
+fn a_width_step_inside_a_lane_section_leaves_the_heading_continuous() {
+    let xml = r#"<?xml version="1.0" standalone="yes"?>
+<OpenDRIVE>
+  <header revMajor="1" revMinor="4" name="width-step"/>
+  <road name="r" length="40.0" id="1" junction="-1">
+    <link/>
+    <planView>
+      <geometry s="0.0" x="0.0" y="0.0" hdg="0.0" length="40.0"><arc curvature="0.02"/></geometry>
+    </planView>
+    <elevationProfile><elevation s="0" a="0" b="0" c="0" d="0"/></elevationProfile>
+    <lateralProfile>
+      <superelevation s="0" a="0" b="0" c="0" d="0"/>
+      <superelevation s="20" a="0" b="0" c="0" d="0"/>
+    </lateralProfile>
+    <lanes>
+      <laneSection s="0.0">
+        <center><lane id="0" type="none" level="false"><link/></lane></center>
+        <right>
+          <lane id="-1" type="driving" level="false"><link/>
+            <width sOffset="0" a="3.0" b="0" c="0" d="0"/>
+            <width sOffset="20" a="3.5" b="0" c="0" d="0"/></lane>
+        </right>
+      </laneSection>
+    </lanes>
+  </road>
+</OpenDRIVE>"#;
+    let map = Map::from_str("width-step", xml, MapOptions::default()).unwrap();
+    let lane = &map.lanes[0];
+    let mut s = 0.0;
+    while s + 0.5 <= lane.length() {
+        let turn = sim_bridge::map::angle_diff(lane.pose_at(s + 0.5).yaw, lane.pose_at(s).yaw);
+        assert!(turn.abs() < 0.2, "turns {turn:.2} rad after s {s:.2}");
+        s += 0.05;
+    }
+    let end = lane.points.last().unwrap().truncate();
+    let expected = glam::DVec2::new(0.0, 50.0)
+        + glam::DVec2::from_angle(0.8 - std::f64::consts::FRAC_PI_2) * 51.75;
+    assert!(
+        (end - expected).length() < 0.05,
+        "the lane still ends at {expected}: {end}"
+    );
+}
+
 /// A road too short to carry geometry (CARLA's Town03 has roads of 1 mm between its
 /// roundabout and the streets) still links the roads on either side: the lane before it leads
 /// into the lane after it.

@@ -2,8 +2,10 @@
 //! successors, its left and right same-direction neighbours and the junction it belongs to.
 //!
 //! Guarantees: centre lines run in the direction of travel (a `Backward` lane of the file is
-//! reversed here), have at least two points, and carry a cumulative arc length; every index in a
-//! lane's links is a valid [`LaneIdx`] of the same map.
+//! reversed here), have at least two points, carry a cumulative arc length, and have no sideways
+//! step (one in the file is ramped at 0.1 m a metre, so the heading of [`Lane::pose_at`] turns
+//! only where the road bends); every index in a lane's links is a valid [`LaneIdx`] of the same
+//! map.
 
 use glam::{DVec2, DVec3};
 use xodr::LaneType;

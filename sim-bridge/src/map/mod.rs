@@ -8,7 +8,9 @@
 //!
 //! Baking repairs what real files (CARLA's towns) and the xodr crate leave broken, each at the
 //! mechanism, never per town: lanes of one road meet at lane-section seams
-//! (`close_section_seams`), and a driving lane that ends where another begins from nowhere,
+//! (`close_section_seams`), a centre line that steps sideways between two samples (a width or
+//! offset polynomial that does not meet the next record) ramps across the step over a taper
+//! (`taper_steps`), and a driving lane that ends where another begins from nowhere,
 //! heading the same way, leads into it (`stitch_link_gaps`: links through roads and lane
 //! sections too short to bake).
 
@@ -265,6 +267,7 @@ fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {
         if points.len() < 2 || !points.iter().all(|p| p.is_finite()) {
             continue;
         }
+        taper_steps(&mut points);
         if let Some(jump) = points
             .windows(2)
             .map(|w| (w[1] - w[0]).length())
@@ -373,6 +376,72 @@ fn close_section_seams(lanes: &mut [Lane]) {
             false => lane.points[0] = to,
         }
         lane.cum = lanes::cumulative_length(&lane.points);
+    }
+}
+
+/// A centre-line segment that turns away from the one before it and back into the one after
+/// by more than this, radians, each way, is a sideways step, not a bend.
+const STEP_TURN: f64 = 0.1;
+/// Steps narrower than this, metres, are left alone (float noise of the importer's `f32`s).
+const STEP_MIN: f64 = 0.01;
+/// Sideways metres per metre of travel across a tapered step: 0.1 spreads a 0.25 m step over
+/// 2.5 m and turns the heading by under 0.1 rad.
+const STEP_SLOPE: f64 = 0.1;
+
+/// Ramps every sideways step of a centre line over a taper. A width or offset polynomial that
+/// does not meet the next record's value is a step in the file (CARLA's Town06 widens the
+/// connector lane 400:3 from 3.0 m to 3.5 m at one record), and the importer samples it as a
+/// single segment that runs out sideways: a 0.25 m step across 0.35 m of road turns the heading
+/// by 0.8 rad and back, so whatever follows `pose_at` swings broadside for a tick. The points
+/// within the taper either side are moved across so the offset changes by at most
+/// [`STEP_SLOPE`] a metre; the lane's ends stay where they are.
+fn taper_steps(points: &mut [DVec3]) {
+    let mut from = 1;
+    while let Some((i, normal, lateral)) = find_step(points, from) {
+        spread_step(points, i, normal, lateral);
+        from = i + 1;
+    }
+}
+
+/// The first sideways step at or after segment `from`: the segment's index, the unit normal
+/// to the left of the travel around it, and how far the step moves left along it, metres.
+fn find_step(points: &[DVec3], from: usize) -> Option<(usize, DVec2, f64)> {
+    let direction = |i: usize| (points[i + 1] - points[i]).truncate();
+    (from.max(1)..points.len().saturating_sub(2)).find_map(|i| {
+        let (before, step, after) = (direction(i - 1), direction(i), direction(i + 1));
+        let into = before.angle_to(step);
+        let out = step.angle_to(after);
+        let is_step = into.abs() > STEP_TURN
+            && out.abs() > STEP_TURN
+            && into.signum() != out.signum()
+            && (into + out).abs() < 0.5 * into.abs().max(out.abs());
+        let normal = (before.normalize_or_zero() + after.normalize_or_zero())
+            .normalize_or_zero()
+            .perp();
+        let lateral = step.dot(normal);
+        (is_step && lateral.abs() > STEP_MIN).then_some((i, normal, lateral))
+    })
+}
+
+/// Moves the points either side of step segment `i` across along `normal` so that the
+/// `lateral` step ramps over `lateral / STEP_SLOPE` metres centred on it (shorter where a
+/// lane end comes first, sharing the step out to the other side), leaving segment `i`
+/// straight along the lane.
+fn spread_step(points: &mut [DVec3], i: usize, normal: DVec2, lateral: f64) {
+    let cum = lanes::cumulative_length(points);
+    let half = 0.5 * lateral.abs() / STEP_SLOPE;
+    let before = half.min(cum[i]);
+    let after = half.min(cum[cum.len() - 1] - cum[i + 1]);
+    let ramp = before + after;
+    for (k, p) in points.iter_mut().enumerate() {
+        let shift = if k <= i {
+            let x = cum[i] - cum[k];
+            lateral * (before - x).max(0.0) / ramp
+        } else {
+            let x = cum[k] - cum[i + 1];
+            -lateral * (after - x).max(0.0) / ramp
+        };
+        *p += (normal * shift).extend(0.0);
     }
 }
 
