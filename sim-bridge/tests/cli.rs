@@ -2,6 +2,8 @@
 
 use std::process::Command;
 
+use sim_bridge::towngen::TownStyle;
+
 fn sim_bridge(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_sim-bridge"))
         .args(args)
@@ -488,6 +490,101 @@ fn a_road_of_unusable_length_is_named_in_a_warning() {
         stderr.contains(r#"road "3" skipped: no finite length above zero; it is left out"#),
         "{stderr}"
     );
+}
+
+/// `routes random` writes a route file that `routes show` and `eval --maps` read back (the town
+/// named after the map file), and refuses bad options and maps with the problem named.
+#[test]
+fn random_routes_on_any_map_are_written_and_driven() {
+    let tmp = tempfile::tempdir().unwrap();
+    let maps = tmp.path().join("maps");
+    std::fs::create_dir(&maps).unwrap();
+    let map = maps.join("mytown.xodr");
+    std::fs::write(
+        &map,
+        sim_bridge::towngen::bundled(TownStyle::SmallTJunctions),
+    )
+    .unwrap();
+    let out = tmp.path().join("random.xml");
+    let random = |extra: &[&str]| {
+        let mut args = vec!["routes", "random", "--map", map.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        sim_bridge(&args)
+    };
+    let run = random(&[
+        "--count",
+        "3",
+        "--length",
+        "150,250",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        stdout.contains("wrote 3 routes") && stdout.contains("on mytown"),
+        "{stdout}"
+    );
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(text.matches(r#"town="mytown""#).count(), 3, "{text}");
+
+    let eval = sim_bridge(&[
+        "eval",
+        "--agent",
+        "expert",
+        "--routes",
+        out.to_str().unwrap(),
+        "--maps",
+        maps.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        tmp.path().join("results.json").to_str().unwrap(),
+    ]);
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let results: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("results.json")).unwrap()).unwrap();
+    let records = &results["_checkpoint"]["records"];
+    assert_eq!(records.as_array().map(Vec::len), Some(3), "{results}");
+
+    for (args, expected) in [
+        (vec!["--count", "0"], "--count 0"),
+        (vec!["--length", "5,10"], "--length 5,10"),
+        (vec!["--length", "300,100"], "MIN 300 is above MAX 100"),
+        (vec!["--turn-bias", "1.5"], "--turn-bias 1.5"),
+    ] {
+        let mut all = args.clone();
+        all.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let run = random(&all);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(
+            !run.status.success() && stderr.contains(expected),
+            "{args:?}: {stderr}"
+        );
+    }
+    let broken = tmp.path().join("broken.xodr");
+    std::fs::write(&broken, "<OpenDRIVE><road").unwrap();
+    let run = sim_bridge(&[
+        "routes",
+        "random",
+        "--map",
+        broken.to_str().unwrap(),
+        "--out",
+        tmp.path().join("none.xml").to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && stderr.contains("map broken is not valid OpenDRIVE"),
+        "{stderr}"
+    );
+    assert!(!tmp.path().join("none.xml").exists());
 }
 
 /// Every file of a dataset's episodes, by path relative to `root`, with its bytes; the

@@ -5,7 +5,7 @@ use glam::{DVec2, DVec3};
 use sim_bridge::map::{LaneKind, Map, MapOptions, angle_diff};
 use sim_bridge::route::plan::{PlanNode, RouteFollower, downsample, global_plan, to_ego_frame};
 use sim_bridge::route::planner::plan_route;
-use sim_bridge::route::sets::{RouteSet, SETS};
+use sim_bridge::route::sets::{RandomRoutes, RouteSet, SETS, WalkStyle, random_routes};
 use sim_bridge::route::xml::{self, Keypoint, RouteFileError, RouteSpec};
 use sim_bridge::towngen::{self, TownStyle};
 use ssrdrive_proto::command::RoadOption;
@@ -260,4 +260,59 @@ fn bundled_route_sets_are_current_and_fit_their_specs() {
         .map(|s| global_plan(&plan_route(&map, s).unwrap()))
         .collect();
     assert!(plans.iter().all(|p| p.len() >= 2));
+}
+
+/// `random_routes` draws routes of the asked lengths on any map that plan back into the walked
+/// path, the same for the same seed, others for another.
+#[test]
+fn random_routes_have_the_asked_lengths_and_follow_their_seed() {
+    let map = Map::from_str(
+        "ssr_train_dense",
+        towngen::bundled(TownStyle::DenseMultiLane),
+        MapOptions::default(),
+    )
+    .unwrap();
+    let options = RandomRoutes {
+        count: 6,
+        length: [300.0, 600.0],
+        seed: 9,
+        style: WalkStyle {
+            turn_bias: 0.5,
+            change_rate: 0.3,
+        },
+    };
+    let routes = random_routes(&map, "my_town", &options);
+    assert_eq!(routes.len(), 6);
+    let mut turns = 0;
+    for (i, spec) in routes.iter().enumerate() {
+        assert_eq!(spec.id, i.to_string());
+        assert_eq!(spec.town, "my_town");
+        let dense = plan_route(&map, spec).unwrap();
+        // The draw keeps a walk whose plan is within 10 % + 20 m of its length.
+        assert!(
+            (300.0 * 0.9 - 20.0..600.0 * 1.1 + 20.0).contains(&dense.length()),
+            "route {i}: {:.0} m",
+            dense.length()
+        );
+        turns += dense
+            .points
+            .windows(2)
+            .filter(|w| {
+                w[1].option != w[0].option
+                    && matches!(w[1].option, RoadOption::Left | RoadOption::Right)
+            })
+            .count();
+    }
+    assert!(turns > 0, "a turn bias of 0.5 gave no turn in 6 routes");
+    let again = random_routes(&map, "my_town", &options);
+    assert_eq!(xml::write(&routes), xml::write(&again));
+    let other = random_routes(
+        &map,
+        "my_town",
+        &RandomRoutes {
+            seed: 10,
+            ..options
+        },
+    );
+    assert_ne!(xml::write(&routes), xml::write(&other));
 }

@@ -178,3 +178,23 @@ pub fn parse_seconds(text: &str) -> Result<Duration, String> {
             .map_err(|_| format!("{seconds} s is longer than any run can take"))
     })
 }
+
+/// `MIN,MAX` with 0 <= MIN <= MAX, both finite (a clap value parser).
+pub fn parse_range(value: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<&str> = value.split(',').collect();
+    let [low, high] = parts.as_slice() else {
+        return Err(format!("'{value}' is not MIN,MAX"));
+    };
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v >= 0.0)
+            .ok_or_else(|| format!("'{s}' is not a finite number >= 0"))
+    };
+    let (low, high) = (parse(low)?, parse(high)?);
+    if low > high {
+        return Err(format!("MIN {low} is above MAX {high}"));
+    }
+    Ok([low, high])
+}

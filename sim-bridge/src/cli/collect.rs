@@ -43,10 +43,10 @@ pub struct CollectArgs {
     #[arg(long, default_value_t = NoiseConfig::default().rate)]
     noise_rate: f64,
     /// Smallest and largest steering offset of a lateral perturbation, `MIN,MAX`.
-    #[arg(long, default_value = "0.1,0.3", value_parser = parse_range)]
+    #[arg(long, default_value = "0.1,0.3", value_parser = super::args::parse_range)]
     noise_steer: [f64; 2],
     /// Smallest and largest duration of a perturbation, seconds, `MIN,MAX`.
-    #[arg(long, default_value = "0.5,1.0", value_parser = parse_range)]
+    #[arg(long, default_value = "0.5,1.0", value_parser = super::args::parse_range)]
     noise_duration: [f64; 2],
     /// Share of the perturbations that hold the pedals (coast and brake lightly, or press on)
     /// instead of pushing the steering.
@@ -68,26 +68,6 @@ pub struct CollectArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
-}
-
-/// `MIN,MAX` with 0 <= MIN <= MAX, both finite.
-fn parse_range(value: &str) -> Result<[f64; 2], String> {
-    let parts: Vec<&str> = value.split(',').collect();
-    let [low, high] = parts.as_slice() else {
-        return Err(format!("'{value}' is not MIN,MAX"));
-    };
-    let parse = |s: &str| {
-        s.trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite() && *v >= 0.0)
-            .ok_or_else(|| format!("'{s}' is not a finite number >= 0"))
-    };
-    let (low, high) = (parse(low)?, parse(high)?);
-    if low > high {
-        return Err(format!("MIN {low} is above MAX {high}"));
-    }
-    Ok([low, high])
 }
 
 fn default_jobs() -> u64 {

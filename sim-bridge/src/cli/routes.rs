@@ -2,12 +2,14 @@
 
 use std::path::PathBuf;
 
-use clap::Subcommand;
+use anyhow::{Context, bail};
+use clap::{Args, Subcommand};
 use sim_bridge::map::MapOptions;
 use sim_bridge::route::DenseRoute;
 use sim_bridge::route::plan::global_plan;
 use sim_bridge::route::planner::plan_route;
-use sim_bridge::route::sets::{self, SETS};
+use sim_bridge::route::sets::{self, RandomRoutes, SETS, WalkStyle};
+use sim_bridge::route::xml::{RouteSpec, write};
 use ssrdrive_proto::command::RoadOption;
 
 #[derive(Debug, Subcommand)]
@@ -29,6 +31,41 @@ pub enum RoutesCommand {
         #[arg(long, default_value = "sim-bridge/routes")]
         out_dir: PathBuf,
     },
+    /// Draw random routes on any map and write them as a leaderboard route file, to drive a
+    /// town that has no route file (CARLA's Town02, say): random walks over the driving lanes
+    /// that prefer turns at junctions and sometimes change lanes, as the bundled sets are made.
+    /// The same map, options and seed give the same file.
+    Random(RandomArgs),
+}
+
+/// `sim-bridge routes random`.
+#[derive(Debug, Args)]
+pub struct RandomArgs {
+    /// The map: an .xodr file or a bundled town name.
+    #[arg(long)]
+    map: PathBuf,
+    /// How many routes.
+    #[arg(long, default_value_t = 20)]
+    count: usize,
+    /// Route length range in metres, MIN,MAX (each route drawn uniformly from it).
+    #[arg(long, default_value = "500,1500", value_parser = super::args::parse_range)]
+    length: [f64; 2],
+    /// Seed of the draw.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Chance of turning at a junction that offers a turn (0-1).
+    #[arg(long, default_value_t = 0.45)]
+    turn_bias: f64,
+    /// Chance of a lane change where a lane is long enough (0-1).
+    #[arg(long, default_value_t = 0.3)]
+    change_rate: f64,
+    /// The town named in the file (default: the map file's name without .xodr, so that
+    /// `eval --maps DIR` finds the map again).
+    #[arg(long)]
+    town: Option<String>,
+    /// The route file to write.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 pub fn run(cmd: RoutesCommand) -> anyhow::Result<()> {
@@ -81,7 +118,79 @@ pub fn run(cmd: RoutesCommand) -> anyhow::Result<()> {
             println!("wrote {} route sets to {}", SETS.len(), out_dir.display());
             Ok(())
         }
+        RoutesCommand::Random(args) => random(args),
     }
+}
+
+/// `routes random`: check the options, draw, write, and say what was drawn.
+fn random(args: RandomArgs) -> anyhow::Result<()> {
+    let RandomArgs {
+        map: map_arg,
+        count,
+        length,
+        seed,
+        turn_bias,
+        change_rate,
+        town,
+        out,
+    } = args;
+    let style = WalkStyle {
+        turn_bias,
+        change_rate,
+    };
+    if !(1..=10_000).contains(&count) {
+        bail!("--count {count}: give 1 to 10000 routes");
+    }
+    if !(length[0] >= 20.0 && length[1] <= 50_000.0) {
+        bail!(
+            "--length {},{}: routes of 20 m to 50 km",
+            length[0],
+            length[1]
+        );
+    }
+    for (flag, p) in [
+        ("--turn-bias", style.turn_bias),
+        ("--change-rate", style.change_rate),
+    ] {
+        if !(0.0..=1.0).contains(&p) {
+            bail!("{flag} {p}: a chance between 0 and 1");
+        }
+    }
+    let map = super::load_map(&map_arg.to_string_lossy(), MapOptions::default())?;
+    let town = town.unwrap_or_else(|| map.name.clone());
+    let options = RandomRoutes {
+        count,
+        length,
+        seed,
+        style,
+    };
+    let specs = sets::random_routes(&map, &town, &options);
+    if specs.is_empty() {
+        bail!(
+            "{}: no route of {}-{} m could be drawn ({} walks each); try shorter routes",
+            map_arg.display(),
+            length[0],
+            length[1],
+            sets::ATTEMPTS
+        );
+    }
+    ssrdrive_proto::files::write_atomic(&out, write(&specs).as_bytes())
+        .with_context(|| format!("writing {}", out.display()))?;
+    let km: f64 = specs.iter().map(RouteSpec::keypoint_length).sum::<f64>() / 1000.0;
+    println!(
+        "wrote {} routes ({km:.2} km) on {town} to {}{}",
+        specs.len(),
+        out.display(),
+        if specs.len() < count {
+            format!(
+                "; {} lengths could not be drawn on this map",
+                count - specs.len()
+            )
+        } else {
+            String::new()
+        }
+    );
+    Ok(())
 }
 
 /// Left turns, right turns and lane changes along a dense route.

@@ -1,5 +1,6 @@
 //! The bundled route sets: route files the project generates itself, deterministically, on its
-//! own towns, and commits under `sim-bridge/routes/`.
+//! own towns, and commits under `sim-bridge/routes/`; and random route sets on any map
+//! ([`random_routes`], `sim-bridge routes random`) for towns that come without a route file.
 //!
 //! - `town05-long-style`: 10 routes on the evaluation town with the lengths of CARLA's Town05
 //!   Long routes (0.53 to 2.1 km, 12.3 km in all), turning at signalized junctions, using the
@@ -106,6 +107,17 @@ impl RouteSet {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let long = self.name == "town05-long-style";
         let lengths = self.lengths(&mut rng);
+        let walk_style = if long {
+            WalkStyle {
+                turn_bias: 0.45,
+                change_rate: 0.5,
+            }
+        } else {
+            WalkStyle {
+                turn_bias: 0.35,
+                change_rate: 0.15,
+            }
+        };
         let mut routes = Vec::new();
         for (i, &length) in lengths.iter().enumerate() {
             let id = if long {
@@ -115,38 +127,102 @@ impl RouteSet {
             };
             // Long routes must show the ring road (every other one) and lane changes.
             let wants_ring = long && i % 2 == 1;
-            for _attempt in 0..500 {
-                let Some(walk) = random_walk(
-                    map,
-                    &mut rng,
-                    length,
-                    if long { 0.45 } else { 0.35 },
-                    if long { 0.5 } else { 0.15 },
-                ) else {
-                    continue;
-                };
-                if wants_ring && !walk.lanes.iter().any(|l| is_three_lane(map, *l)) {
-                    continue;
-                }
-                if long && !walk.changed_lanes {
-                    continue;
-                }
-                let spec = RouteSpec {
-                    id: id.clone(),
-                    town: self.town.name().to_string(),
-                    keypoints: keypoints(map, &walk),
-                };
-                // The keypoints must plan back into a route of about the walked length.
-                let ok = plan_route(map, &spec)
-                    .is_ok_and(|d| (d.length() - walk.length).abs() < 0.1 * walk.length + 20.0);
-                if ok {
-                    routes.push(spec);
-                    break;
-                }
+            let accept = |walk: &Walk| {
+                (!wants_ring || walk.lanes.iter().any(|l| is_three_lane(map, *l)))
+                    && (!long || walk.changed_lanes)
+            };
+            let town = self.town.name();
+            if let Some(spec) = draw_route(map, &mut rng, &id, town, length, walk_style, accept) {
+                routes.push(spec);
             }
         }
         routes
     }
+}
+
+/// How a random walk chooses at junctions and on multi-lane roads.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WalkStyle {
+    /// The chance of taking a turning connector where a junction offers one (never at two
+    /// junctions in a row).
+    pub turn_bias: f64,
+    /// The chance of a lane change where a lane is long enough for one.
+    pub change_rate: f64,
+}
+
+/// Random routes on any map (`sim-bridge routes random`): what to draw.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RandomRoutes {
+    /// How many routes.
+    pub count: usize,
+    /// Each route's length is drawn uniformly from this range, metres.
+    pub length: [f64; 2],
+    /// The seed of every draw: the same map and options give the same routes.
+    pub seed: u64,
+    /// Junction and lane-change choices.
+    pub style: WalkStyle,
+}
+
+/// Up to `options.count` routes on `map`, named `town` in the route file, each with its draw's
+/// index as id:
+/// random walks over the driving lanes that plan back into a route of about the walked length.
+/// A route the map cannot give in [`ATTEMPTS`] walks (a length longer than any path without a
+/// dead end, say) is left out, so fewer may come back.
+pub fn random_routes(map: &Map, town: &str, options: &RandomRoutes) -> Vec<RouteSpec> {
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    let [low, high] = options.length;
+    let lengths: Vec<f64> = (0..options.count)
+        .map(|_| {
+            if high > low {
+                rng.random_range(low..high)
+            } else {
+                low
+            }
+        })
+        .collect();
+    lengths
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &length)| {
+            let id = i.to_string();
+            draw_route(map, &mut rng, &id, town, length, options.style, |_| true)
+        })
+        .collect()
+}
+
+/// Walks tried for one route before it is left out.
+pub const ATTEMPTS: usize = 500;
+
+/// The first of up to [`ATTEMPTS`] random walks of `length` that `accept` takes and whose
+/// keypoints plan back into a route of about the walked length.
+fn draw_route(
+    map: &Map,
+    rng: &mut impl Rng,
+    id: &str,
+    town: &str,
+    length: f64,
+    style: WalkStyle,
+    accept: impl Fn(&Walk) -> bool,
+) -> Option<RouteSpec> {
+    for _attempt in 0..ATTEMPTS {
+        let Some(walk) = random_walk(map, rng, length, style) else {
+            continue;
+        };
+        if !accept(&walk) {
+            continue;
+        }
+        let spec = RouteSpec {
+            id: id.to_string(),
+            town: town.to_string(),
+            keypoints: keypoints(map, &walk),
+        };
+        let planned = plan_route(map, &spec)
+            .is_ok_and(|d| (d.length() - walk.length).abs() < 0.1 * walk.length + 20.0);
+        if planned {
+            return Some(spec);
+        }
+    }
+    None
 }
 
 /// Regenerate every bundled set's file into `dir`, loading each town from the bundled maps.
@@ -192,13 +268,11 @@ fn is_three_lane(map: &Map, lane: LaneIdx) -> bool {
     1 + count(l.left, true) + count(l.right, false) >= 3
 }
 
-fn random_walk(
-    map: &Map,
-    rng: &mut impl Rng,
-    length: f64,
-    turn_bias: f64,
-    change_rate: f64,
-) -> Option<Walk> {
+fn random_walk(map: &Map, rng: &mut impl Rng, length: f64, style: WalkStyle) -> Option<Walk> {
+    let WalkStyle {
+        turn_bias,
+        change_rate,
+    } = style;
     let starts: Vec<&crate::map::Lane> = map
         .lanes
         .iter()
