@@ -150,6 +150,54 @@ fn local_agent_starts_its_own_server() {
     assert!(stderr.contains("did not report its port"), "{stderr}");
 }
 
+/// A local server ends with the `sim-bridge` that started it, even one killed with SIGKILL
+/// (which runs no clean-up): it watches the standard input its parent holds open.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_killed_sim_bridge_leaves_no_local_server_running() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut eval = eval_command("local", &["--limit", "1"], &tmp.path().join("results.json"))
+        .env("SSR_AGENT_BIN", binary("ssr-agent"))
+        .env("SSR_AGENT_UNTRAINED_CONFIG", "cpu-default")
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // The server is eval's child process (Linux lists children in /proc).
+    let children = format!("/proc/{0}/task/{0}/children", eval.id());
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let server: u32 = loop {
+        let listed = std::fs::read_to_string(&children).unwrap_or_default();
+        if let Some(pid) = listed.split_whitespace().next() {
+            break pid.parse().unwrap();
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no server within 60 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let server_alive = || {
+        std::fs::read_to_string(format!("/proc/{server}/stat"))
+            // A zombie (state Z) has exited and waits for its parent; init reaps it.
+            .is_ok_and(|stat| {
+                stat.rsplit(')')
+                    .next()
+                    .is_some_and(|rest| !rest.trim_start().starts_with('Z'))
+            })
+    };
+    assert!(server_alive());
+    eval.kill().unwrap();
+    eval.wait().unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while server_alive() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the local server {server} still runs 30 s after its sim-bridge was killed"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 #[test]
 fn a_local_agent_drives_runs_at_once_as_one_at_a_time() {
     // The bundled network, two routes for 3 s each: with two runs at once, each run's controls

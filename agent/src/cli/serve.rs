@@ -85,6 +85,11 @@ pub struct ServeArgs {
     /// (`ssr-agent control`)].
     #[arg(long, env = "SSR_AGENT_SAFETY_STOP")]
     safety_stop: Option<bool>,
+    /// Also shut down (draining as on SIGTERM) when standard input reaches its end: a parent
+    /// that keeps a pipe to it open (sim-bridge's local server does) takes the server with it
+    /// when it ends, even when it is killed.
+    #[arg(long, env = "SSR_AGENT_EXIT_WITH_STDIN")]
+    exit_with_stdin: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -150,7 +155,8 @@ impl ServeArgs {
     }
 }
 
-/// Serve until Ctrl-C or SIGTERM, then drain.
+/// Serve until Ctrl-C or SIGTERM (or the end of standard input with `--exit-with-stdin`),
+/// then drain.
 pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     let config = args.resolve()?;
     super::init_logs(config.log_format);
@@ -166,12 +172,32 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             if let Some(metrics) = &listeners.metrics {
                 println!("metrics on http://{}/metrics", metrics.local_addr()?);
             }
-            serve::run(listeners, config, policy, info, shutdown_signal()).await
+            let shutdown = shutdown_signal(args.exit_with_stdin.then(stdin_closed));
+            serve::run(listeners, config, policy, info, shutdown).await
         })
 }
 
-/// Ctrl-C, or SIGTERM on Unix (what container runtimes send).
-async fn shutdown_signal() {
+/// Resolves when standard input reaches its end (or fails), read on a thread of its own.
+fn stdin_closed() -> tokio::sync::oneshot::Receiver<()> {
+    let (closed, receiver) = tokio::sync::oneshot::channel();
+    std::thread::spawn(move || {
+        let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+        let _ = closed.send(());
+    });
+    receiver
+}
+
+/// Ctrl-C, SIGTERM on Unix (what container runtimes send), or `stdin` closing when given.
+async fn shutdown_signal(stdin: Option<tokio::sync::oneshot::Receiver<()>>) {
+    let stdin_closed = async {
+        match stdin {
+            Some(closed) => {
+                let _ = closed.await;
+                tracing::info!("standard input closed: shutting down");
+            }
+            None => std::future::pending().await,
+        }
+    };
     let interrupt = async {
         let _ = tokio::signal::ctrl_c().await;
     };
@@ -189,5 +215,6 @@ async fn shutdown_signal() {
     tokio::select! {
         () = interrupt => {}
         () = terminate => {}
+        () = stdin_closed => {}
     }
 }

@@ -2,7 +2,10 @@
 //! `sim-bridge eval --agent local`. The binary is `$SSR_AGENT_BIN`, else the `ssr-agent` beside
 //! this executable (where `cargo build` puts both), else one on `PATH`. The child inherits the
 //! environment, so `SSR_AGENT_CHECKPOINT` or `SSR_AGENT_UNTRAINED_CONFIG` choose its model; it
-//! logs warnings and errors only unless `RUST_LOG` says otherwise, and is killed on drop.
+//! logs warnings and errors only unless `RUST_LOG` says otherwise, and is killed on drop. It
+//! also ends with this process however that ends: it holds the write end of the child's
+//! standard input, which the child (`--exit-with-stdin`) watches, so a killed `sim-bridge` leaves
+//! no server running.
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -81,8 +84,9 @@ impl LocalServer {
         let metrics_listen = if metrics { "127.0.0.1:0" } else { "off" };
         command
             .args(["serve", "--listen", "127.0.0.1:0"])
-            .args(["--metrics-listen", metrics_listen])
-            .stdin(Stdio::null())
+            .args(["--metrics-listen", metrics_listen, "--exit-with-stdin"])
+            // Kept open in `child.stdin` for the child's life; closed when this process ends.
+            .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
         if std::env::var_os("RUST_LOG").is_none() {
