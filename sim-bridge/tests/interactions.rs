@@ -1,6 +1,7 @@
 //! Traffic and the expert at close quarters, on the hand-made two-lane road of
 //! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
-//! and y = -5.25): a follower keeps off an ego that pokes into its lane, and the expert does not
+//! and y = -5.25): a follower keeps off an ego that pokes into its lane and creeps past one that
+//! has stood a while when there is room, and the expert does not
 //! wait for a car that ran into its rear. And on `maps/lane_add.xodr` (a lane that begins at
 //! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue; traffic
 //! holds back for an ego that waits to change into its lane. And on `maps/signal_junction.xodr`
@@ -99,25 +100,59 @@ const HOLD: Control = Control {
     brake: 1.0,
 };
 
-#[test]
-fn a_follower_stops_for_an_ego_that_pokes_into_its_lane() {
+/// A follower coming at 8 m/s on lane -1 from `start_s`, an ego standing at x = 120 with its
+/// centre at `ego_y`: runs `seconds`, asserts they never touch, and calls `each_tick` with the
+/// time and the follower after every step. Returns the follower's final x.
+fn follower_beside_standing_ego(
+    start_s: f64,
+    ego_y: f64,
+    seconds: f64,
+    mut each_tick: impl FnMut(f64, &Vehicle),
+) -> f64 {
     let map = road();
     let route = outer_lane_route(&map);
-    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), 60.0, 8.0);
-    // The ego stands on the outer lane's inner edge: matched to lane -2, its left side 0.35 m
-    // into lane -1, where the follower comes at 8 m/s.
-    world.ego = Ego::new(EgoParams::default(), DVec3::new(120.0, -3.6, 0.0), 0.0);
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), start_s, 8.0);
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(120.0, ego_y, 0.0), 0.0);
     let id = world.traffic.vehicles[0].id;
-    for _ in 0..(20.0 / 0.05) as usize {
+    for _ in 0..(seconds / 0.05) as usize {
         let contacts = world.step(HOLD);
         assert!(
             contacts.iter().all(|c| c.other_id != id),
             "the follower ran into the ego at t = {:.2} s",
             world.time
         );
+        each_tick(world.time, &world.traffic.vehicles[0]);
     }
-    let follower = &world.traffic.vehicles[0];
-    assert!(follower.speed < 0.1, "it waits behind the ego");
+    world.traffic.vehicles[0].pose(&map).0.x
+}
+
+#[test]
+fn a_follower_stops_for_an_ego_that_pokes_into_its_lane() {
+    // The ego stands on the outer lane's inner edge: matched to lane -2, its left side 0.96 m
+    // into lane -1, where the follower comes: too little room to pass, ever.
+    let mut last_speed = f64::NAN;
+    let x = follower_beside_standing_ego(60.0, -3.6, 20.0, |_, v| last_speed = v.speed);
+    assert!(last_speed < 0.1 && x < 120.0, "it waits behind the ego");
+}
+
+#[test]
+fn a_follower_held_by_a_standing_ego_creeps_past_when_there_is_room() {
+    // The ego stands matched to lane -2, its left side 0.55 m into lane -1: 1.2 m from the
+    // follower's centre line, inside the clearance a follower keeps from an ego that may move
+    // (its half width + 0.4 m) but wide enough to pass a standing one.
+    let x = follower_beside_standing_ego(85.0, -4.01, 40.0, |t, v| {
+        let front = v.s + v.half.x;
+        if t < 5.0 {
+            assert!(front < 117.5, "it holds while the ego may still move");
+        }
+        if front > 116.0 && front < 121.0 {
+            assert!(v.speed < 1.5, "it creeps past: {:.2} m/s", v.speed);
+        }
+    });
+    assert!(
+        x > 140.0,
+        "once the ego has stood a while it creeps past and goes on (x = {x:.1})"
+    );
 }
 
 #[test]

@@ -21,7 +21,9 @@ use rand_chacha::ChaCha8Rng;
 use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
 use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
-use traffic::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, REQUEST_DISTANCE, Traffic};
+use traffic::{
+    EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, REQUEST_DISTANCE, STANDING_SPEED, Traffic,
+};
 
 use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;
@@ -115,6 +117,8 @@ pub struct World<'m> {
     junction_entries: Vec<(f64, LaneIdx)>,
     /// The connector the ego is about to enter and since when it has been waiting its turn.
     junction_request: Option<(LaneIdx, f64)>,
+    /// Seconds the ego has stood still in a row.
+    ego_standing_for: f64,
     rng: ChaCha8Rng,
     ids: IdSource,
 }
@@ -164,6 +168,7 @@ impl<'m> World<'m> {
             lane_changes: lane_changes(map, route),
             junction_entries: junction_entries(map, route),
             junction_request: None,
+            ego_standing_for: 0.0,
             rng,
             ids,
         };
@@ -306,6 +311,11 @@ impl<'m> World<'m> {
             .flatten()
             .map(|lane| (lane, self.map.lane(lane).project(ego.position.truncate()).s));
         self.update_junction_request(on_lane.is_some_and(|(l, _)| self.map.lane(l).in_junction()));
+        self.ego_standing_for = if ego.speed < STANDING_SPEED {
+            self.ego_standing_for + DT
+        } else {
+            0.0
+        };
         let presence = EgoPresence {
             on_lane,
             obb: ego.obb(),
@@ -313,6 +323,7 @@ impl<'m> World<'m> {
             speed: ego.speed,
             merging_into,
             junction_request: self.junction_request,
+            standing_for: self.ego_standing_for,
         };
         self.time += DT;
         self.lights.update(self.time);

@@ -21,8 +21,10 @@
 //! drop, as on CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic
 //! manager does. A vehicle near the ego also checks the corridor its path sweeps
 //! ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego is on, and stops short of
-//! it. Courtesy: while the ego stands waiting to change into a lane (its route changes lanes
-//! within [`MERGE_WAIT_AHEAD`] m), vehicles coming up that lane behind it hold back
+//! it; once the ego has stood [`SQUEEZE_AFTER_S`], a vehicle it holds creeps past with a
+//! narrower margin, as drivers do past a car that waits (see [`SQUEEZE_MARGIN`]). Courtesy:
+//! while the ego stands waiting to change into a lane (its route changes lanes within
+//! [`MERGE_WAIT_AHEAD`] m), vehicles coming up that lane behind it hold back
 //! [`COURTESY_GAP`] m short of its rear, within [`COURTESY_RANGE`], so a queue lets it in, as
 //! drivers do for a car that signals (without it a lane change planned inside a standing or
 //! crawling queue never happens). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the ego's sight (more than
@@ -36,6 +38,7 @@ use rand::{Rng, RngExt as _};
 
 use super::idm::Idm;
 use super::state::{LightState, Obb};
+use crate::map::lanes::LanePose;
 use crate::map::{LaneIdx, LaneKind, Map};
 
 /// How background vehicles follow: gentler than the expert, with a longer headway, and slower
@@ -86,6 +89,20 @@ const EGO_WATCH: f64 = 30.0;
 const EGO_WATCH_STEP: f64 = 1.0;
 /// Clearance beyond its half width the vehicle keeps from the ego's box, m.
 const EGO_WATCH_MARGIN: f64 = 0.4;
+/// Seconds the ego must have stood before a held vehicle creeps past it with only
+/// [`SQUEEZE_MARGIN`] of clearance. A vehicle that stops for an ego whose corner is near its
+/// path while the ego waits for it (its nose near the ego's path) is a deadlock that neither
+/// breaks: seen mid-junction on Town02, a crossing car and the ego each waiting for the other.
+const SQUEEZE_AFTER_S: f64 = 5.0;
+/// Clearance a vehicle's box keeps from a standing ego's box it creeps past, m.
+const SQUEEZE_MARGIN: f64 = 0.1;
+/// Spacing of the box sweep that checks the room to creep past, m.
+const SQUEEZE_STEP: f64 = 0.25;
+/// Speed under which a vehicle held by the ego creeps past it with [`SQUEEZE_MARGIN`], m/s:
+/// faster, it keeps [`EGO_WATCH_MARGIN`] and brakes, so it passes at about this speed.
+const SQUEEZE_SPEED: f64 = 1.0;
+/// Speed under which the ego counts as standing, m/s.
+pub const STANDING_SPEED: f64 = 0.1;
 
 /// Occupants per lane: (arc length, half length, speed, id).
 type Occupancy = HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>;
@@ -138,6 +155,8 @@ pub struct EgoPresence {
     /// The junction connector the ego's route enters next and since when the ego has been
     /// within [`REQUEST_DISTANCE`] of it, while it is not yet in the junction.
     pub junction_request: Option<(LaneIdx, f64)>,
+    /// Seconds the ego has stood (slower than [`STANDING_SPEED`]) in a row.
+    pub standing_for: f64,
 }
 
 impl EgoPresence {
@@ -704,33 +723,69 @@ fn has_exit_room(map: &Map, v: &Vehicle, occ: &Occupancy) -> bool {
 /// lane the ego is on (mid-junction, cutting a corner, merging in): the free gap to it and the
 /// ego's speed along the path. The lane occupancy above sees the ego only on the lane it is
 /// matched to; this is the traffic manager's geometric check that keeps a follower from
-/// driving into an ego that turns or stops across its path.
+/// driving into an ego that turns or stops across its path. A vehicle held by an ego that has
+/// stood [`SQUEEZE_AFTER_S`] sweeps its own box instead ([`squeeze_gap`]).
 fn ego_on_path(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<(f64, f64)> {
     let (position, _) = v.pose(map);
     let near = (position.truncate() - ego.position()).length() < EGO_WATCH + 10.0;
     if !near || (position.z - ego.z).abs() > 3.0 {
         return None;
     }
+    if ego.standing_for > SQUEEZE_AFTER_S && v.speed < SQUEEZE_SPEED {
+        return squeeze_gap(map, v, ego).map(|gap| (gap, 0.0));
+    }
     let corridor = v.half.y + EGO_WATCH_MARGIN;
     let ego_velocity = DVec2::from_angle(ego.obb.yaw) * ego.speed;
-    let mut lanes = std::iter::once(v.lane).chain(v.next.iter().copied());
-    let mut lane = map.lane(lanes.next()?);
-    let mut s = v.s + v.half.x;
-    let mut along = 0.0;
-    while along <= EGO_WATCH {
-        while s > lane.length() {
-            s -= lane.length();
-            lane = map.lane(lanes.next()?);
-        }
-        let pose = lane.pose_at(s);
-        if ego.obb.distance_to(pose.position.truncate()) < corridor {
+    path_poses(map, v, v.s + v.half.x, EGO_WATCH_STEP).find_map(|(along, pose)| {
+        (ego.obb.distance_to(pose.position.truncate()) < corridor).then(|| {
             let speed = ego_velocity.dot(DVec2::from_angle(pose.yaw)).max(0.0);
-            return Some((along, speed));
+            (along, speed)
+        })
+    })
+}
+
+/// How far a vehicle can move along its path before its box, grown by [`SQUEEZE_MARGIN`],
+/// touches a standing ego's box (within [`EGO_WATCH`]); `None` when it passes clear.
+fn squeeze_gap(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<f64> {
+    let half = v.half + DVec2::splat(SQUEEZE_MARGIN);
+    path_poses(map, v, v.s, SQUEEZE_STEP).find_map(|(along, pose)| {
+        let obb = Obb {
+            centre: pose.position.truncate(),
+            yaw: pose.yaw,
+            half,
+        };
+        obb.overlaps(&ego.obb).then_some(along)
+    })
+}
+
+/// Poses along a vehicle's path (its lane, then the lanes it will take) from arc length `from`
+/// on its lane, every `step` metres for [`EGO_WATCH`] metres, each with the distance from
+/// `from`.
+fn path_poses<'a>(
+    map: &'a Map,
+    v: &'a Vehicle,
+    from: f64,
+    step: f64,
+) -> impl Iterator<Item = (f64, LanePose)> + 'a {
+    let mut lanes = std::iter::once(v.lane).chain(v.next.iter().copied());
+    let mut lane = lanes.next().map(|l| map.lane(l));
+    let mut s = from;
+    let mut along = 0.0;
+    std::iter::from_fn(move || {
+        if along > EGO_WATCH {
+            return None;
         }
-        s += EGO_WATCH_STEP;
-        along += EGO_WATCH_STEP;
-    }
-    None
+        let mut current = lane?;
+        while s > current.length() {
+            s -= current.length();
+            current = map.lane(lanes.next()?);
+            lane = Some(current);
+        }
+        let item = (along, current.pose_at(s));
+        s += step;
+        along += step;
+        Some(item)
+    })
 }
 
 /// The free gap to where a vehicle coming up the lane a waiting ego changes into holds back
