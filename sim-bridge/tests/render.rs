@@ -1,6 +1,6 @@
 //! The camera renderer: projection through a rolled, pitched and yawed camera, occlusion
 //! order, traffic-light colours in the pixels, lights seen from their stop lines, and
-//! determinism.
+//! determinism; and the top-down local view's plan and target overlay.
 
 mod common;
 
@@ -272,4 +272,46 @@ fn the_small_camera_sees_every_red_light_from_its_braking_distance() {
             map.lights.len()
         );
     }
+}
+
+#[test]
+fn the_local_view_draws_the_plan_and_the_target_point_where_the_ego_frame_puts_them() {
+    use sim_bridge::render::topdown::{Intent, local_view};
+    let map = town();
+    let route = sim_bridge::route::DenseRoute::new(Vec::new(), 0.0);
+    let ego = off_road(&map);
+    let (radius, side) = (30.0, 300);
+    let colour_at = |view: &sim_bridge::render::canvas::Canvas, ego_frame: DVec2| {
+        let world = to_world(&ego, [ego_frame.x as f32, ego_frame.y as f32, 0.0]);
+        let corner = ego.position.truncate() - DVec2::splat(radius);
+        let u = (world.x - corner.x) * view.scale();
+        let v = f64::from(side) - (world.y - corner.y) * view.scale();
+        pixel(view.pixels(), side, u as f32, v as f32)
+    };
+    let plan = [
+        DVec2::new(4.0, 0.5),
+        DVec2::new(8.0, 1.5),
+        DVec2::new(12.0, 3.0),
+    ];
+    let intent = Intent {
+        target_point: Some(DVec2::new(20.0, -6.0)),
+        plan: &plan,
+    };
+    let view = local_view(&map, &route, &ego, &[], intent, radius, side);
+    assert_eq!(
+        colour_at(&view, plan[2]),
+        [40, 230, 230],
+        "the plan's last waypoint"
+    );
+    assert_eq!(
+        colour_at(&view, DVec2::new(20.0, -6.0)),
+        [235, 60, 235],
+        "the target"
+    );
+    // Mirrored across the heading, where nothing was planned, the terrain shows.
+    let plain = local_view(&map, &route, &ego, &[], Intent::default(), radius, side);
+    assert_eq!(
+        colour_at(&view, DVec2::new(12.0, -3.0)),
+        colour_at(&plain, plan[2])
+    );
 }

@@ -14,7 +14,7 @@ use sim_bridge::client::local::LocalRole;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::render::bev_maps::{occupancy_panel, token_panel};
-use sim_bridge::render::topdown::local_view;
+use sim_bridge::render::topdown::{Intent, local_view};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::{DT, World};
@@ -220,11 +220,17 @@ impl Film<'_> {
         let cameras: Vec<RgbImage> = obs.frames.iter().map(|f| enlarge(f, zoom)).collect();
         let cameras_width = cameras.iter().map(|f| f.width).max().unwrap_or(0);
         let cameras_height: u32 = cameras.iter().map(|f| f.height).sum();
+        let plan = self.driver.agent().planned_trajectory();
+        let intent = Intent {
+            target_point: Some(obs.target_point),
+            plan: &plan,
+        };
         let topdown = local_view(
             world.map,
             route,
             &world.ego_state(),
             &world.actors(),
+            intent,
             self.args.topdown_radius,
             side,
         );

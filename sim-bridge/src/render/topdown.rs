@@ -1,7 +1,8 @@
 //! Top-down pictures: the whole of one route run (lanes coloured by type, the route in blue, the
 //! ego's trace in green, red where it ended, other actors at the end of the run, each
 //! infraction as a marker coloured by kind), and the local view around the ego at one instant
-//! that `sim-bridge render` puts beside the camera frames.
+//! that `sim-bridge render` puts beside the camera frames, with the agent's planned trajectory
+//! and target point drawn over it.
 
 use std::path::Path;
 
@@ -19,13 +20,31 @@ const MAX_SIDE: u32 = 1400;
 /// Terrain colour.
 const BACKGROUND: [u8; 3] = [34, 92, 46];
 
+/// What the driver intends at one instant, drawn over the local view in the ego frame (x
+/// forward, y left, metres, origin at the box centre): the route follower's target point and
+/// the trajectory the agent planned (empty for agents that plan none).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Intent<'a> {
+    /// The target point the agent was given.
+    pub target_point: Option<DVec2>,
+    /// The agent's planned waypoints.
+    pub plan: &'a [DVec2],
+}
+
+/// Colour of the planned trajectory.
+const PLAN_COLOUR: [u8; 3] = [40, 230, 230];
+/// Colour of the target point.
+const TARGET_COLOUR: [u8; 3] = [235, 60, 235];
+
 /// The `radius` metres around the ego at one instant, north up, `side` pixels square: lanes,
-/// stop lines, the route, the actors and the ego (white, with its heading).
+/// stop lines, the route, the actors, the ego (white, with its heading) and what it intends
+/// (the planned trajectory in cyan, the target point in magenta).
 pub fn local_view(
     map: &Map,
     route: &DenseRoute,
     ego: &EgoState,
     actors: &[ActorView],
+    intent: Intent<'_>,
     radius: f64,
     side: u32,
 ) -> Canvas {
@@ -40,6 +59,19 @@ pub fn local_view(
     draw_box(&mut c, &ego.obb(), [255, 255, 255]);
     let nose = centre + ego.forward() * ego.half_extent.x;
     c.line(centre, nose, 0.4, [240, 40, 40]);
+    let to_world = |p: DVec2| centre + ego.forward() * p.x + ego.forward().perp() * p.y;
+    let plan: Vec<DVec2> = std::iter::once(centre)
+        .chain(intent.plan.iter().map(|&p| to_world(p)))
+        .collect();
+    for w in plan.windows(2) {
+        c.line(w[0], w[1], 0.3, PLAN_COLOUR);
+    }
+    for &p in &plan[1..] {
+        c.disc(p, 0.45, PLAN_COLOUR);
+    }
+    if let Some(target) = intent.target_point {
+        c.disc(to_world(target), 0.9, TARGET_COLOUR);
+    }
     c
 }
 
