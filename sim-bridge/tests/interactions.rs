@@ -1,16 +1,16 @@
 //! Traffic and the expert at close quarters, on the hand-made two-lane road of
 //! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
 //! and y = -5.25): a follower keeps off an ego that pokes into its lane and creeps past one that
-//! has stood a while when there is room, and the expert does not
-//! wait for a car that ran into its rear. And on `maps/lane_add.xodr` (a lane that begins at
-//! x = 100): the expert waits for a gap to change lanes, then noses into a slow queue; traffic
-//! holds back for an ego that waits to change into its lane. And on `maps/signal_junction.xodr`
-//! (a light whose stop line is at x = 100): red and yellow hold the ego while its tail could
-//! still cross on red. And on `maps/short_sections.xodr`: lane sections a few centimetres long
-//! do not hide a standing ego from the traffic behind them. And on the bundled town of small
-//! T-junctions: at a junction without lights the ego takes its turn, and traffic gives it, and
-//! traffic does not enter a junction it cannot leave. And on `maps/cut_connector.xodr`:
-//! connectors conflict by their whole path through the junction.
+//! has stood a while when there is room, the expert does not speed up while its heading is off
+//! its route, and it does not wait for a car that ran into its rear. And on `maps/lane_add.xodr`
+//! (a lane that begins at x = 100): the expert waits for a gap to change lanes, then noses into
+//! a slow queue; traffic holds back for an ego that waits to change into its lane. And on
+//! `maps/signal_junction.xodr` (a light whose stop line is at x = 100): red and yellow hold the
+//! ego while its tail could still cross on red. And on `maps/short_sections.xodr`: lane sections
+//! a few centimetres long do not hide a standing ego from the traffic behind them. And on the
+//! bundled town of small T-junctions: at a junction without lights the ego takes its turn, and
+//! traffic gives it, and traffic does not enter a junction it cannot leave. And on
+//! `maps/cut_connector.xodr`: connectors conflict by their whole path through the junction.
 
 use glam::DVec3;
 use sim_bridge::expert::hazards::{self, HazardMemory};
@@ -152,6 +152,67 @@ fn a_follower_held_by_a_standing_ego_creeps_past_when_there_is_room() {
     assert!(
         x > 140.0,
         "once the ego has stood a while it creeps past and goes on (x = {x:.1})"
+    );
+}
+
+#[test]
+fn the_expert_does_not_speed_up_while_its_heading_is_off_its_route() {
+    use sim_bridge::agent::{Agent, Observation, RouteContext};
+    use sim_bridge::expert::Expert;
+    use sim_bridge::route::plan::{RouteFollower, global_plan, to_ego_frame};
+    let map = road();
+    let route = outer_lane_route(&map);
+    let mut world = quiet_world(&map, &route, 0);
+    // At 3 m/s on the outer lane, heading 0.7 rad off it: a turn its path has already left.
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(60.0, -5.25, 0.0), 0.7);
+    world.ego.speed = 3.0;
+    let plan = global_plan(&route);
+    let mut follower = RouteFollower::new(plan.clone());
+    let mut expert = Expert::new();
+    expert
+        .start_route(&RouteContext {
+            map: &map,
+            route: &route,
+            plan: &plan,
+            route_id: "0",
+            repetition: 0,
+            seed: 0,
+            ego_half_extent: world.ego_state().half_extent,
+        })
+        .unwrap();
+    let mut misaligned_ticks = 0;
+    for frame in 0..(12.0 / 0.05) as u64 {
+        let ego = world.ego_state();
+        let index = ego_index(&world, &route);
+        let error = sim_bridge::map::angle_diff(ego.yaw, route.points[index].yaw).abs();
+        if error > 0.35 {
+            misaligned_ticks += 1;
+            assert!(
+                ego.speed < 3.05,
+                "{:.2} m/s at {error:.2} rad off the route",
+                ego.speed
+            );
+        }
+        let node = follower.step(ego.position.truncate());
+        let obs = Observation {
+            time: world.time,
+            frame,
+            speed: ego.speed,
+            position: ego.position,
+            yaw: ego.yaw,
+            compass: Observation::compass_of(ego.yaw),
+            command: node.option,
+            target_point: to_ego_frame(node.position, ego.position, ego.yaw).truncate(),
+            frames: Vec::new(),
+        };
+        let control = expert.run_step(&obs, &world).unwrap();
+        world.step(control);
+    }
+    assert!(misaligned_ticks > 5, "it started misaligned");
+    assert!(
+        world.ego_state().speed > 5.0,
+        "aligned again, it speeds up ({:.2} m/s)",
+        world.ego_state().speed
     );
 }
 

@@ -33,6 +33,13 @@ pub const ROAD_SPEED: f64 = 8.0;
 pub const JUNCTION_SPEED: f64 = 5.0;
 /// Speed near walkers and cyclists, m/s.
 pub const WALKER_SPEED: f64 = 2.0;
+/// Heading error to the route (rad) beyond which the expert does not speed up: it is still in
+/// a turn its path has already left (pure pursuit lags in the tightest connectors, radius 5-6
+/// m on Town03), and accelerating there swings it wide across the next lane. The plan's
+/// rollout, which lies on the route's centre line, does not model it.
+const ALIGN_ERROR: f64 = 0.35;
+/// Speed it may still reach while misaligned, m/s.
+const ALIGN_SPEED: f64 = 3.0;
 /// How the expert follows: a shorter headway and harder comfortable braking than traffic, a
 /// longer standstill gap, and 2 m/s^2 of lateral acceleration in curves.
 pub(crate) const IDM: Idm = Idm {
@@ -109,7 +116,10 @@ impl Expert {
         let steer = pure_pursuit(route, self.index, &ego, &self.params);
 
         let view = hazards::scan(world, route, self.index, &mut self.hazards);
-        let target = target_speed(map, route, self.index, &view);
+        let mut target = target_speed(map, route, self.index, &view);
+        if angle_diff(ego.yaw, route.points[self.index].yaw).abs() > ALIGN_ERROR {
+            target = target.min(obs.speed.max(ALIGN_SPEED));
+        }
         self.plan = plan::plan(&plan::PlanStart {
             map,
             route,
