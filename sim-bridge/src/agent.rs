@@ -14,8 +14,9 @@ use ssrdrive_proto::v1;
 
 use crate::map::Map;
 use crate::route::DenseRoute;
-use crate::route::plan::PlanNode;
+use crate::route::plan::{PlanNode, to_ego_frame};
 use crate::world::World;
+use crate::world::state::EgoState;
 
 /// One camera image, rendered through the agent's rig.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -68,6 +69,28 @@ pub struct Observation {
 }
 
 impl Observation {
+    /// What the ego at `ego` is told on tick `frame` at `time`: its state, and the route
+    /// follower's `node` as command and target point in the ego frame.
+    pub fn of_ego(
+        time: f64,
+        frame: u64,
+        ego: &EgoState,
+        node: &PlanNode,
+        frames: Vec<CameraFrame>,
+    ) -> Self {
+        Self {
+            time,
+            frame,
+            speed: ego.speed,
+            position: ego.position,
+            yaw: ego.yaw,
+            compass: Self::compass_of(ego.yaw),
+            command: node.option,
+            target_point: to_ego_frame(node.position, ego.position, ego.yaw).truncate(),
+            frames,
+        }
+    }
+
     /// CARLA's compass for a world-frame yaw.
     pub fn compass_of(yaw: f64) -> f64 {
         (std::f64::consts::FRAC_PI_2 - yaw).rem_euclid(std::f64::consts::TAU)

@@ -323,10 +323,14 @@ fn a_killed_collection_resumes_without_losing_or_duplicating_frames() {
             out.to_string_lossy().into_owned(),
         ]
     };
+    // Complete episodes: renamed from their hidden `.NAME.partial` folder, where the episode
+    // file is written just before the rename (counting those raced the resume's own count).
     let complete = |out: &std::path::Path| {
         std::fs::read_dir(out.join("episodes")).map_or(0, |entries| {
             entries
-                .filter(|e| e.as_ref().unwrap().path().join("episode.json").exists())
+                .map(|e| e.unwrap().path())
+                .filter(|p| !p.file_name().unwrap().to_string_lossy().starts_with('.'))
+                .filter(|p| p.join("episode.json").exists())
                 .count()
         })
     };

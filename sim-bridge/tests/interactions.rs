@@ -159,7 +159,7 @@ fn a_follower_held_by_a_standing_ego_creeps_past_when_there_is_room() {
 fn the_expert_does_not_speed_up_while_its_heading_is_off_its_route() {
     use sim_bridge::agent::{Agent, Observation, RouteContext};
     use sim_bridge::expert::Expert;
-    use sim_bridge::route::plan::{RouteFollower, global_plan, to_ego_frame};
+    use sim_bridge::route::plan::{RouteFollower, global_plan};
     let map = road();
     let route = outer_lane_route(&map);
     let mut world = quiet_world(&map, &route, 0);
@@ -194,17 +194,7 @@ fn the_expert_does_not_speed_up_while_its_heading_is_off_its_route() {
             );
         }
         let node = follower.step(ego.position.truncate());
-        let obs = Observation {
-            time: world.time,
-            frame,
-            speed: ego.speed,
-            position: ego.position,
-            yaw: ego.yaw,
-            compass: Observation::compass_of(ego.yaw),
-            command: node.option,
-            target_point: to_ego_frame(node.position, ego.position, ego.yaw).truncate(),
-            frames: Vec::new(),
-        };
+        let obs = Observation::of_ego(world.time, frame, &ego, &node, Vec::new());
         let control = expert.run_step(&obs, &world).unwrap();
         world.step(control);
     }

@@ -15,7 +15,7 @@ use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::map::Map;
 use crate::render::{Appearance, CameraRenderer, SceneState};
 use crate::route::DenseRoute;
-use crate::route::plan::{RouteFollower, global_plan, to_ego_frame};
+use crate::route::plan::{RouteFollower, global_plan};
 use crate::route::xml::RouteSpec;
 use crate::scoring::{Infraction, RouteEnd, RouteRecord, RouteScorer, ScoringConfig};
 use crate::world::{ActorView, World, WorldConfig};
@@ -98,7 +98,6 @@ pub fn run_route(
         progress = dense.advance_index(progress, ego.position.truncate(), 5);
         world.trigger_scenarios(progress);
         let node = follower.step(ego.position.truncate());
-        let target = to_ego_frame(node.position, ego.position, ego.yaw);
         let frames = match &mut cameras {
             Some((rig, renderer)) if agent.wants_frames(frame) => {
                 let actors = world.actors();
@@ -111,17 +110,7 @@ pub fn run_route(
             }
             _ => Vec::new(),
         };
-        let obs = Observation {
-            time: world.time,
-            frame,
-            speed: ego.speed,
-            position: ego.position,
-            yaw: ego.yaw,
-            compass: Observation::compass_of(ego.yaw),
-            command: node.option,
-            target_point: target.truncate(),
-            frames,
-        };
+        let obs = Observation::of_ego(world.time, frame, &ego, &node, frames);
         let control = match agent.run_step(&obs, &world) {
             Ok(control) => control,
             Err(error) => {
