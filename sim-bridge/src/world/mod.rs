@@ -22,7 +22,7 @@ use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
 use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
 use traffic::{
-    EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, REQUEST_DISTANCE, STANDING_SPEED, Traffic,
+    EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, REQUEST_DISTANCE, Traffic, standing_time,
 };
 
 use crate::map::{LaneIdx, Map};
@@ -311,11 +311,7 @@ impl<'m> World<'m> {
             .flatten()
             .map(|lane| (lane, self.map.lane(lane).project(ego.position.truncate()).s));
         self.update_junction_request(on_lane.is_some_and(|(l, _)| self.map.lane(l).in_junction()));
-        self.ego_standing_for = if ego.speed < STANDING_SPEED {
-            self.ego_standing_for + DT
-        } else {
-            0.0
-        };
+        self.ego_standing_for = standing_time(self.ego_standing_for, ego.speed, DT);
         let presence = EgoPresence {
             on_lane,
             obb: ego.obb(),

@@ -101,8 +101,17 @@ const SQUEEZE_STEP: f64 = 0.25;
 /// Speed under which a vehicle held by the ego creeps past it with [`SQUEEZE_MARGIN`], m/s:
 /// faster, it keeps [`EGO_WATCH_MARGIN`] and brakes, so it passes at about this speed.
 const SQUEEZE_SPEED: f64 = 1.0;
-/// Speed under which the ego counts as standing, m/s.
+/// Speed under which a vehicle or the ego counts as standing, m/s.
 pub const STANDING_SPEED: f64 = 0.1;
+
+/// Seconds stood in a row after a step of `dt` at `speed`, from `before`.
+pub fn standing_time(before: f64, speed: f64, dt: f64) -> f64 {
+    if speed < STANDING_SPEED {
+        before + dt
+    } else {
+        0.0
+    }
+}
 
 /// Occupants per lane: (arc length, half length, speed, id).
 type Occupancy = HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>;
@@ -575,11 +584,7 @@ impl Traffic {
         let v1 = (v.speed + accel * dt).max(0.0);
         v.s += 0.5 * (v.speed + v1) * dt;
         v.speed = v1;
-        v.stopped_for = if v.speed < 0.1 {
-            v.stopped_for + dt
-        } else {
-            0.0
-        };
+        v.stopped_for = standing_time(v.stopped_for, v.speed, dt);
         if v.lateral != 0.0 {
             let step = LATERAL_SPEED * dt;
             v.lateral = if v.lateral.abs() <= step {
@@ -594,7 +599,7 @@ impl Traffic {
         }
         if self.stop_at_end.contains_key(&v.lane)
             && to_end < v.half.x + IDM.min_gap + 1.5
-            && v.speed < 0.1
+            && v.speed < STANDING_SPEED
         {
             v.stopped_at_sign = true;
         }
