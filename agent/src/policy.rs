@@ -9,16 +9,17 @@
 use std::collections::VecDeque;
 
 use burn::module::Module;
-use burn::tensor::activation::sigmoid;
+use burn::tensor::activation::{sigmoid, softmax};
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::camera::{Rig, RigError};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::image::RgbImage;
 
-use crate::control::{ControlConfig, ControlDecision, EpisodeController};
+use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController};
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use crate::model::config::SsrConfig;
+use crate::model::hazard::Hazard;
 use crate::model::occupancy::OCCUPANCY_CHANNELS;
 use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
 use crate::pose::{EgoMotion, Pose2};
@@ -438,6 +439,16 @@ impl SsrPolicy {
             .filter(|_| wants_debug || states.iter().any(|s| s.controller.config().safety.enabled))
             .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
         let channels = OCCUPANCY_CHANNELS.len();
+        // The hazard head runs only for the unstick rule's early creep.
+        let clear = self
+            .model
+            .hazard
+            .as_ref()
+            .filter(|_| states.iter().any(|s| s.controller.config().unstick.enabled))
+            .map(|head| {
+                let logits = head.forward(output.scene.tokens.clone());
+                float_values(softmax(logits, 1).narrow(1, Hazard::Clear.index(), 1))
+            });
 
         let mut results = Vec::with_capacity(b);
         for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
@@ -459,10 +470,14 @@ impl SsrPolicy {
                 }
                 _ => Vec::new(),
             };
+            let beliefs = Beliefs {
+                occupied: &occupied,
+                clear: clear.as_ref().map(|p| p[i]),
+            };
             let decision =
                 state
                     .controller
-                    .act(&path, input.target_point, input.speed, a, bt, &occupied);
+                    .act(&path, input.target_point, input.speed, a, bt, beliefs);
             let control_time = control_started.elapsed();
             let debug = (input.debug).then(|| {
                 let token_attention = attention.as_ref().map(|maps| {

@@ -4,10 +4,10 @@
 mod common;
 
 use common::{policy_of, rig, step_input, tiny_config};
-use ssr_agent::control::{ControlConfig, SafetyStop};
+use ssr_agent::control::{ControlConfig, SafetyStop, Unstick};
 use ssr_agent::model::bev::HISTORY_TICKS;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::policy::{InputError, SsrPolicy, StepError};
+use ssr_agent::policy::{InputError, SsrPolicy, StepError, StepInput};
 
 fn policy() -> SsrPolicy {
     policy_of(tiny_config())
@@ -209,4 +209,36 @@ fn the_safety_stop_reads_the_occupancy_head_at_its_threshold() {
         ..tiny_config()
     });
     assert!(!decide(&headless, safety(0.0)).safety_stop);
+}
+
+#[test]
+fn the_early_creep_reads_the_hazard_head_at_its_threshold() {
+    let policy = policy();
+    let rig = rig(1, 900, 256);
+    // Creep after one standing tick whose "clear" reaches `probability`.
+    let early = |probability: f32| ControlConfig {
+        unstick: Unstick {
+            clear_after_s: 0.05,
+            clear_probability: probability,
+            ..Unstick::default()
+        },
+        ..ControlConfig::default()
+    };
+    let decide = |policy: &SsrPolicy, control: ControlConfig| {
+        let mut episode = policy.new_episode_with(control);
+        let standing = StepInput {
+            speed: 0.0,
+            ..step_input(&rig, 0, 1)
+        };
+        policy.step(&mut episode, &standing).unwrap().decision
+    };
+    // Any probability reaches 0, none of the random head's reaches 1.
+    assert!(decide(&policy, early(0.0)).unsticking);
+    assert!(!decide(&policy, early(1.0)).unsticking);
+    // A network without the head gives the rule nothing to read.
+    let headless = policy_of(SsrConfig {
+        hazard_head: false,
+        ..tiny_config()
+    });
+    assert!(!decide(&headless, early(0.0)).unsticking);
 }

@@ -7,8 +7,10 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
 use common::{model_input, tiny_config};
+use ssr_agent::model::hazard::Hazard;
 use ssr_agent::model::tcp_head::SPEED_SCALE;
 use ssr_agent::model::{SsrModel, float_values};
+use ssr_agent::train::hazard::hazard_loss;
 use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
 use ssr_agent::train::occupancy::{batch_targets, occupancy_loss};
 use ssr_agent::train::special::{digamma, ln_gamma, ln_gamma_f64};
@@ -94,12 +96,15 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
             occupied.clone(),
             recorded.clone(),
         );
+        let hazards: Vec<Hazard> = (0..batch).map(|i| Hazard::ALL[i % 5]).collect();
+        let hazard = model.hazard.as_ref().expect("the presets have the head");
+        let hazard = hazard_loss(hazard.forward(output.scene.tokens.clone()), &hazards);
         losses(
             &output.head,
             &targets,
             Some((predicted, future_bev.clone())),
             AuxiliaryLosses {
-                hazard: None,
+                hazard: Some(hazard),
                 occupancy: Some(occupancy),
             },
             &weights,

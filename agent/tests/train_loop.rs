@@ -130,9 +130,9 @@ fn a_few_steps_lower_the_loss_and_the_checkpoint_round_trips() {
     let follow = &validation.by_situation["follow"];
     assert_eq!(follow.samples, validation.all.samples);
     assert_eq!(follow.l2_m, validation.all.l2_m);
-    // The hazard probe (on by default) trains beside the network and is validated.
+    // The hazard head (on by default) trains with the network and is validated.
     assert!(step_lines(&out).iter().all(|s| s.hazard.is_some()));
-    let accuracy = validation.all.hazard_accuracy.expect("a probe");
+    let accuracy = validation.all.hazard_accuracy.expect("a hazard head");
     assert!((0.0..=1.0).contains(&accuracy), "{accuracy}");
 
     // The final checkpoint loads back into the same network, with the rig and notes.
@@ -224,8 +224,8 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
         ..options(&data, out)
     };
 
-    // The hazard probe and the occupancy head train by default: their losses are logged,
-    // validation reports them, and the head is in the checkpoints.
+    // The hazard and occupancy heads train by default: their losses are logged, validation
+    // reports them, and the heads are in the checkpoints.
     let out = tmp.dir("probe-on");
     let done = train(config.clone(), options(&data, &out), open(&data, &config)).unwrap();
     assert!(
@@ -240,34 +240,38 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
         "{validation:?}"
     );
     let (model, _) = checkpoint::load(&done.checkpoint, &Device::flex()).unwrap();
-    assert!(model.occupancy.is_some());
+    assert!(model.occupancy.is_some() && model.hazard.is_some());
 
-    // Without its saved probe the run cannot go on as it was: the error names the file.
-    let lost = tmp.dir("probe-lost");
+    // Without its saved weights the run cannot go on as it was: the error names the file.
+    let lost = tmp.dir("weights-lost");
     train(config.clone(), stop_at(&lost), open(&data, &config)).unwrap();
-    std::fs::remove_file(lost.join("resume/hazard.bpk")).unwrap();
+    std::fs::remove_file(lost.join("resume/model.bpk")).unwrap();
     let error = train(config.clone(), resume(&lost), open(&data, &config))
         .err()
         .unwrap();
     assert!(
-        matches!(error, TrainError::Resume { .. }) && error.to_string().contains("hazard.bpk"),
+        matches!(error, TrainError::Resume { .. }) && error.to_string().contains("model.bpk"),
         "{error}"
     );
 
-    // The occupancy head trains exactly when its loss has a weight.
+    // Each head trains exactly when its loss has a weight.
     let mut untrained = config.clone();
     untrained.loss.occupancy = 0.0;
     let error = train_error(untrained, &data, &tmp.dir("head-untrained"));
     assert!(error.to_string().contains("occupancy_head"), "{error}");
+    let mut untrained = config.clone();
+    untrained.loss.hazard = 0.0;
+    let error = train_error(untrained, &data, &tmp.dir("hazard-untrained"));
+    assert!(error.to_string().contains("hazard_head"), "{error}");
 
     // Weight 0 and no head: no loss, nothing saved for them; the run still resumes.
     let mut plain = config.clone();
     plain.loss.hazard = 0.0;
     plain.loss.occupancy = 0.0;
     plain.model.occupancy_head = false;
+    plain.model.hazard_head = false;
     let out = tmp.dir("probe-off");
     train(plain.clone(), stop_at(&out), open(&data, &plain)).unwrap();
-    assert!(!out.join("resume/hazard.bpk").exists());
     let done = train(plain.clone(), resume(&out), open(&data, &plain)).unwrap();
     assert_eq!(done.steps_done, 4);
     assert!(
@@ -279,9 +283,9 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
     assert_eq!(validation.all.hazard_accuracy, None);
     assert!(validation.occupancy_accuracy.is_empty());
     let (model, _) = checkpoint::load(&done.checkpoint, &Device::flex()).unwrap();
-    assert!(model.occupancy.is_none());
+    assert!(model.occupancy.is_none() && model.hazard.is_none());
 
-    // A fine-tune adds the head to a checkpoint without one.
+    // A fine-tune adds the heads to a checkpoint without them.
     let added = TrainConfig {
         init: Some(done.checkpoint),
         ..config.clone()
@@ -289,7 +293,7 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
     let out = tmp.dir("head-added");
     let tuned = train(added, options(&data, &out), open(&data, &config)).unwrap();
     let (model, _) = checkpoint::load(&tuned.checkpoint, &Device::flex()).unwrap();
-    assert!(model.occupancy.is_some());
+    assert!(model.occupancy.is_some() && model.hazard.is_some());
 }
 
 #[test]

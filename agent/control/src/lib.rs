@@ -199,6 +199,18 @@ pub struct ControlDecision {
     pub safety_stop: bool,
 }
 
+/// What the network believes of the scene beyond its plan, read by the rules that may override
+/// the plan: the [`safety`] stop and the [`unstick`] rule's early creep. The default believes
+/// nothing (an agent without those heads, or an oracle).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Beliefs<'a> {
+    /// Ego-frame points the occupancy head believes occupied.
+    pub occupied: &'a [[f32; 2]],
+    /// The hazard head's probability that nothing holds the car ("clear"); `None` without
+    /// the head.
+    pub clear: Option<f32>,
+}
+
 /// Everything the control side remembers about one episode.
 #[derive(Debug, Clone)]
 pub struct EpisodeController {
@@ -225,8 +237,8 @@ impl EpisodeController {
     }
 
     /// One tick: `waypoints` ego frame (x forward, y left), `target_point` likewise, `speed`
-    /// m/s, the control branch's Beta parameters for [acceleration, steer], and the ego-frame
-    /// points the network believes occupied (for the [`safety`] stop).
+    /// m/s, the control branch's Beta parameters for [acceleration, steer], and what the
+    /// network believes of the scene (for the [`safety`] stop and the [`unstick`] rule).
     pub fn act(
         &mut self,
         waypoints: &[[f32; 2]],
@@ -234,10 +246,10 @@ impl EpisodeController {
         speed: f32,
         alpha: [f32; 2],
         beta: [f32; 2],
-        occupied: &[[f32; 2]],
+        beliefs: Beliefs,
     ) -> ControlDecision {
         let branch = beta::control_from_beta(alpha, beta);
-        self.act_with_branch(waypoints, target_point, speed, Some(branch), occupied)
+        self.act_with_branch(waypoints, target_point, speed, Some(branch), beliefs)
     }
 
     /// [`EpisodeController::act`] with the control branch's control already decided (an oracle
@@ -249,7 +261,7 @@ impl EpisodeController {
         target_point: [f32; 2],
         speed: f32,
         branch: Option<Control>,
-        occupied: &[[f32; 2]],
+        beliefs: Beliefs,
     ) -> ControlDecision {
         let trajectory = self
             .follower
@@ -257,10 +269,17 @@ impl EpisodeController {
         let branch = branch.unwrap_or(trajectory);
         let turning = self.fusion.turning();
         let fused = self.fusion.fuse(trajectory, branch, &self.config);
-        let (control, unsticking) =
-            self.unstick
-                .apply(fused, speed, trajectory.steer, &self.config.unstick);
-        let safety_stop = self.config.safety.blocked(waypoints, speed, occupied);
+        let (control, unsticking) = self.unstick.apply(
+            fused,
+            speed,
+            trajectory.steer,
+            beliefs.clear,
+            &self.config.unstick,
+        );
+        let safety_stop = self
+            .config
+            .safety
+            .blocked(waypoints, speed, beliefs.occupied);
         let control = if safety_stop {
             Control {
                 steer: control.steer,

@@ -5,7 +5,7 @@ use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
 use ssr_control::fusion::Fusion;
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
-use ssr_control::{ControlConfig, EpisodeController, SafetyStop, Unstick, Vehicle};
+use ssr_control::{Beliefs, ControlConfig, EpisodeController, SafetyStop, Unstick, Vehicle};
 use ssrdrive_proto::control::Control;
 
 fn near(a: f32, b: f32) -> bool {
@@ -270,7 +270,7 @@ fn episode_controller_reports_both_sources() {
         3.0,
         [3.0, 2.0],
         [2.0, 2.0],
-        &[],
+        Beliefs::default(),
     );
     assert_eq!(d.trajectory.throttle, 0.75);
     assert!(near(d.branch.throttle, 1.0 / 3.0));
@@ -298,7 +298,13 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     let mut controller = EpisodeController::new(config.clone());
     let mut decisions = Vec::new();
     for _ in 0..wait_ticks + creep_ticks + 10 {
-        decisions.push(controller.act_with_branch(&hold, left_target, 0.0, None, &[]));
+        decisions.push(controller.act_with_branch(
+            &hold,
+            left_target,
+            0.0,
+            None,
+            Beliefs::default(),
+        ));
     }
     assert!(
         decisions[..wait_ticks - 1]
@@ -329,16 +335,22 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
         let speed = if tick == wait_ticks / 2 { 1.0 } else { 0.0 };
         assert!(
             !controller
-                .act_with_branch(&hold, left_target, speed, None, &[])
+                .act_with_branch(&hold, left_target, speed, None, Beliefs::default())
                 .unsticking
         );
     }
     assert!(
         controller
-            .act_with_branch(&hold, left_target, 0.0, None, &[])
+            .act_with_branch(&hold, left_target, 0.0, None, Beliefs::default())
             .unsticking
     );
-    let creep = controller.act_with_branch(&hold, left_target, rule.creep_speed + 0.1, None, &[]);
+    let creep = controller.act_with_branch(
+        &hold,
+        left_target,
+        rule.creep_speed + 0.1,
+        None,
+        Beliefs::default(),
+    );
     assert!(
         creep.unsticking && creep.control.throttle == 0.0,
         "{creep:?}"
@@ -353,7 +365,7 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     };
     let mut controller = EpisodeController::new(off);
     for _ in 0..wait_ticks * 3 {
-        let d = controller.act_with_branch(&hold, left_target, 0.0, None, &[]);
+        let d = controller.act_with_branch(&hold, left_target, 0.0, None, Beliefs::default());
         assert!(!d.unsticking && d.control.brake == 1.0);
     }
 }
@@ -404,6 +416,45 @@ fn the_safety_stop_brakes_for_what_lies_on_the_path_within_the_stopping_distance
 }
 
 #[test]
+fn a_stop_the_hazard_head_calls_clear_ends_in_an_early_creep() {
+    let config = ControlConfig::default();
+    let rule = config.unstick.clone();
+    let clear_ticks = (rule.clear_after_s * 20.0) as usize;
+    assert!(clear_ticks * 5 < (rule.after_s * 20.0) as usize);
+    let confident = Some(rule.clear_probability + 0.05);
+    let unsure = Some(rule.clear_probability - 0.05);
+    // The first tick that creeps, over `ticks` ticks at `speed` with the head's `clear` given
+    // by the tick.
+    let first_creep = |ticks: usize, speed: f32, clear: &dyn Fn(usize) -> Option<f32>| {
+        let mut controller = EpisodeController::new(config.clone());
+        (0..ticks).find(|&tick| {
+            let beliefs = Beliefs {
+                occupied: &[],
+                clear: clear(tick),
+            };
+            let hold = [[0.0, 0.0]; 4];
+            let d = controller.act_with_branch(&hold, [10.0, 0.0], speed, None, beliefs);
+            d.unsticking && d.control.throttle == rule.creep_throttle && d.control.brake == 0.0
+        })
+    };
+    assert_eq!(
+        first_creep(clear_ticks * 3, 0.0, &|_| confident),
+        Some(clear_ticks - 1)
+    );
+    // One unsure tick restarts the count.
+    let glitch = clear_ticks / 2;
+    let one_unsure = |tick| if tick == glitch { unsure } else { confident };
+    assert_eq!(
+        first_creep(clear_ticks * 3, 0.0, &one_unsure),
+        Some(glitch + clear_ticks)
+    );
+    // Without the head, or unsure, or rolling, no early creep.
+    assert_eq!(first_creep(clear_ticks * 3, 0.0, &|_| None), None);
+    assert_eq!(first_creep(clear_ticks * 3, 0.0, &|_| unsure), None);
+    assert_eq!(first_creep(clear_ticks * 3, 1.0, &|_| confident), None);
+}
+
+#[test]
 fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
     let config = ControlConfig {
         safety: SafetyStop {
@@ -414,7 +465,14 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
     };
     let ahead = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]];
     let mut controller = EpisodeController::new(config.clone());
-    let free = controller.act(&ahead, [20.0, 0.0], 3.0, [3.0, 2.0], [2.0, 2.0], &[]);
+    let free = controller.act(
+        &ahead,
+        [20.0, 0.0],
+        3.0,
+        [3.0, 2.0],
+        [2.0, 2.0],
+        Beliefs::default(),
+    );
     assert!(!free.safety_stop && free.control.throttle > 0.5);
     let stop = controller.act(
         &ahead,
@@ -422,7 +480,10 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
         3.0,
         [3.0, 2.0],
         [2.0, 2.0],
-        &[[5.0, 0.0]],
+        Beliefs {
+            occupied: &[[5.0, 0.0]],
+            clear: None,
+        },
     );
     assert!(stop.safety_stop, "{stop:?}");
     assert_eq!((stop.control.throttle, stop.control.brake), (0.0, 1.0));
@@ -433,7 +494,13 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
     let wait_ticks = (config.unstick.after_s * 20.0) as usize;
     let mut controller = EpisodeController::new(config);
     let decisions: Vec<_> = (0..wait_ticks + 5)
-        .map(|_| controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, &[[3.0, 0.0]]))
+        .map(|_| {
+            let beliefs = Beliefs {
+                occupied: &[[3.0, 0.0]],
+                clear: None,
+            };
+            controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, beliefs)
+        })
         .collect();
     let last = decisions.last().unwrap();
     assert!(last.unsticking && last.safety_stop && last.control.throttle == 0.0);

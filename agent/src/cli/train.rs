@@ -87,8 +87,10 @@ pub struct TrainArgs {
     /// Weight of the future-BEV loss (SSR: 1).
     #[arg(long, default_value_t = 1.0)]
     bev_weight: f32,
-    /// Weight of the hazard probe's loss: a training-only classifier of what the expert brakes
-    /// for (a light, a sign, a road user, a lane change) from the scene tokens; 0 = no probe.
+    /// Weight of the hazard head's loss: a classifier of what the expert brakes for (a light, a
+    /// sign, a road user, a lane change, or nothing) from the scene tokens, part of the network
+    /// and its checkpoints (the unstick rule creeps early while it says "clear"). Fine-tuning a
+    /// checkpoint without the head adds one; 0 = no head.
     #[arg(long, default_value_t = 0.5)]
     hazard_weight: f32,
     /// Weight of the occupancy head's loss: a per-cell classifier of where the road users are,
@@ -138,6 +140,7 @@ impl TrainArgs {
         model.tokens.gate_target_point &= !self.gate_command_only;
         model.ego_status |= self.ego_status;
         model.occupancy_head = self.occupancy_weight > 0.0;
+        model.hazard_head = self.hazard_weight > 0.0;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
         }

@@ -43,6 +43,11 @@ pub struct SsrConfig {
     /// Checkpoints from before it have none.
     #[serde(default)]
     pub occupancy_head: bool,
+    /// Whether the network has the hazard head ([`super::hazard`]): what the car waits for,
+    /// from the scene tokens, trained from the expert's brake reasons and kept in checkpoints.
+    /// Checkpoints from before it have none.
+    #[serde(default)]
+    pub hazard_head: bool,
 }
 
 fn ego_status_default() -> bool {
@@ -258,6 +263,7 @@ impl SsrConfig {
             },
             ego_status: false,
             occupancy_head: true,
+            hazard_head: true,
         }
     }
 
@@ -316,6 +322,7 @@ impl SsrConfig {
             },
             ego_status: false,
             occupancy_head: true,
+            hazard_head: true,
         }
     }
 

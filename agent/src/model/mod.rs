@@ -1,7 +1,7 @@
 //! The SSR network: image backbone -> BEV encoder (spatial cross-attention through the camera
 //! calibration, temporal self-attention over the episode's previous BEV) -> Scenes TokenLearner
 //! (navigation-gated) -> TCP head; plus the Future Feature Predictor used in training and, where
-//! the config has it, the occupancy head on the BEV.
+//! the config has them, the occupancy head on the BEV and the hazard head on the scene tokens.
 //!
 //! [`SsrModel::forward`] is one tick for a batch of episodes. Everything episode-specific
 //! (calibration, ego motion, previous BEV) comes in through [`ModelInput`]; the model holds no
@@ -13,6 +13,7 @@ pub mod config;
 pub mod cpu_kernels;
 pub mod ffp;
 pub mod fused;
+pub mod hazard;
 pub(crate) mod init;
 mod norm;
 pub mod occupancy;
@@ -28,6 +29,7 @@ use backbone::Backbone;
 use bev::{BevEncoder, GeometryTensors};
 use config::SsrConfig;
 use ffp::FutureFeaturePredictor;
+use hazard::{HazardHead, HazardHeadConfig};
 use occupancy::{OccupancyHead, OccupancyHeadConfig};
 use stl::{SceneTokenLearner, SceneTokens};
 use tcp_head::{HeadOutput, TcpHead};
@@ -78,6 +80,8 @@ pub struct SsrModel {
     pub ffp: FutureFeaturePredictor,
     /// Occupancy head, where the config has one.
     pub occupancy: Option<OccupancyHead>,
+    /// Hazard head, where the config has one.
+    pub hazard: Option<HazardHead>,
 }
 
 impl SsrConfig {
@@ -90,7 +94,19 @@ impl SsrConfig {
             head: TcpHead::new(self, device),
             ffp: FutureFeaturePredictor::new(self, device),
             occupancy: self.init_occupancy_head(device),
+            hazard: self.init_hazard_head(device),
         }
+    }
+
+    /// A freshly initialised hazard head, where the config has one.
+    pub fn init_hazard_head(&self, device: &Device) -> Option<HazardHead> {
+        self.hazard_head.then(|| {
+            HazardHeadConfig {
+                channels: self.channels,
+                hidden: self.head.hidden_dim,
+            }
+            .init(device)
+        })
     }
 
     /// A freshly initialised occupancy head, where the config has one.

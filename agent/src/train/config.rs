@@ -160,12 +160,16 @@ impl TrainConfig {
         if let Some((field, value)) = finite.iter().find(|(_, v)| !v.is_finite() || *v < 0.0) {
             return Err(format!("{field} must be finite and >= 0, got {value}"));
         }
-        if (self.loss.occupancy > 0.0) != self.model.occupancy_head {
-            return Err(format!(
-                "loss.occupancy = {} but model.occupancy_head = {}: the head trains exactly when \
-                 its loss has a weight (an untrained head would ship in the checkpoints)",
-                self.loss.occupancy, self.model.occupancy_head
-            ));
+        for (head, weight, has) in [
+            ("occupancy", self.loss.occupancy, self.model.occupancy_head),
+            ("hazard", self.loss.hazard, self.model.hazard_head),
+        ] {
+            if (weight > 0.0) != has {
+                return Err(format!(
+                    "loss.{head} = {weight} but model.{head}_head = {has}: the head trains exactly \
+                     when its loss has a weight (an untrained head would ship in the checkpoints)"
+                ));
+            }
         }
         Ok(())
     }

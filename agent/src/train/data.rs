@@ -28,11 +28,11 @@ use ssrdrive_proto::dataset::{
 };
 
 use super::augment::Photometric;
-use super::hazard::Hazard;
 use super::loss::{BetaTargets, ImitationTargets};
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
 use crate::model::config::SsrConfig;
+use crate::model::hazard::Hazard;
 use crate::model::{ModelInput, float_tensor};
 use crate::pose::{EgoMotion, Pose2};
 
@@ -485,7 +485,7 @@ impl Batch {
         self.brake_reasons[i]
     }
 
-    /// What the expert brakes for in each sample: the hazard probe's labels.
+    /// What the expert brakes for in each sample: the hazard head's labels.
     pub fn hazards(&self) -> Vec<Hazard> {
         self.brake_reasons.iter().map(|&r| Hazard::of(r)).collect()
     }

@@ -1,121 +1,11 @@
-//! The hazard probe, a training aid: from the scene tokens the control branch reads, classify
-//! what the expert brakes for now ([`Hazard`]: nothing, a light, a stop sign, a road user or
-//! traffic on the lane it changes into), with a cross-entropy loss beside TCP's.
-//!
-//! Imitation alone gives a red lamp of one or two pixels a weak, indirect gradient: the brake
-//! label is also explained by the speed, the history and the junction ahead. The probe asks the
-//! tokens for the cause itself (LAV and TransFuser++ use such auxiliary labels for the same
-//! reason). It lives beside the network in a training run (`resume/hazard.bpk`), never in a
-//! checkpoint: the served network is the same with or without it.
+//! The hazard head's loss: cross-entropy of its logits ([`crate::model::hazard`]) to what the
+//! expert brakes for in each frame ([`Hazard::of`] its brake reason), beside TCP's losses.
 
-use burn::module::Module;
-use burn::tensor::activation::{log_softmax, relu};
-use burn::tensor::{Device, Tensor};
-use ssrdrive_proto::dataset::BrakeReason;
+use burn::tensor::Tensor;
+use burn::tensor::activation::log_softmax;
 
 use crate::model::float_tensor;
-use crate::model::fused::FusedLinear;
-use crate::model::init::xavier_linear;
-
-/// What the expert brakes or holds for: the probe's classes, in logit order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Hazard {
-    /// Nothing: it drives on (or brakes only to follow its speed profile).
-    Clear,
-    /// A red light, or a yellow one it can still stop for.
-    Light,
-    /// A stop sign it has not yet stopped at.
-    Sign,
-    /// A vehicle, walker, obstacle or forecast collision.
-    RoadUser,
-    /// Traffic on the lane it must change into.
-    LaneChange,
-}
-
-impl Hazard {
-    /// Every class, in logit order.
-    pub const ALL: [Hazard; 5] = [
-        Hazard::Clear,
-        Hazard::Light,
-        Hazard::Sign,
-        Hazard::RoadUser,
-        Hazard::LaneChange,
-    ];
-
-    /// The class of a frame whose expert brakes for `reason` (if anything).
-    pub fn of(reason: Option<BrakeReason>) -> Self {
-        match reason {
-            None => Hazard::Clear,
-            Some(BrakeReason::TrafficLight) => Hazard::Light,
-            Some(BrakeReason::StopSign) => Hazard::Sign,
-            Some(BrakeReason::LaneChange) => Hazard::LaneChange,
-            Some(
-                BrakeReason::Vehicle
-                | BrakeReason::Walker
-                | BrakeReason::Obstacle
-                | BrakeReason::PredictedCollision,
-            ) => Hazard::RoadUser,
-        }
-    }
-
-    /// The logit index.
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// The validation group of frames braking for this hazard (`brake:light`, ...); `None`
-    /// for [`Hazard::Clear`].
-    pub fn situation(self) -> Option<&'static str> {
-        match self {
-            Hazard::Clear => None,
-            Hazard::Light => Some("brake:light"),
-            Hazard::Sign => Some("brake:sign"),
-            Hazard::RoadUser => Some("brake:road-user"),
-            Hazard::LaneChange => Some("brake:lane-change"),
-        }
-    }
-}
-
-/// Size of a [`HazardProbe`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct HazardProbeConfig {
-    /// Channels of the scene tokens (the network's `channels`).
-    pub channels: usize,
-    /// Width of the hidden layer.
-    pub hidden: usize,
-}
-
-impl HazardProbeConfig {
-    /// A randomly initialised probe.
-    pub fn init(&self, device: &Device) -> HazardProbe {
-        HazardProbe {
-            hidden: xavier_linear(2 * self.channels, self.hidden, device),
-            out: xavier_linear(self.hidden, Hazard::ALL.len(), device),
-        }
-    }
-}
-
-/// Mean- and max-pooled scene tokens, one hidden layer, a logit per [`Hazard`].
-#[derive(Module, Debug)]
-pub struct HazardProbe {
-    hidden: FusedLinear,
-    out: FusedLinear,
-}
-
-impl HazardProbe {
-    /// Hazard logits of the scene tokens.
-    ///
-    /// # Shapes
-    /// - tokens: `[B, S, C]`
-    /// - output: `[B, 5]` (in [`Hazard::ALL`] order)
-    pub fn forward(&self, tokens: Tensor<3>) -> Tensor<2> {
-        let [b, _, c] = tokens.dims();
-        let mean = tokens.clone().mean_dim(1).reshape([b, c]);
-        let max = tokens.max_dim(1).reshape([b, c]);
-        self.out
-            .forward(relu(self.hidden.forward(Tensor::cat(vec![mean, max], 1))))
-    }
-}
+use crate::model::hazard::Hazard;
 
 /// Mean cross-entropy of `logits` `[B, 5]` against the classes `labels` (one per sample).
 pub fn hazard_loss(logits: Tensor<2>, labels: &[Hazard]) -> Tensor<1> {
@@ -129,47 +19,11 @@ pub fn hazard_loss(logits: Tensor<2>, labels: &[Hazard]) -> Tensor<1> {
     (log_softmax(logits, 1) * targets).sum_dim(1).mean().neg()
 }
 
-/// The most likely class of each row of `logits` (`[B, 5]` values, row-major).
-pub fn predicted(logits: &[f32]) -> Vec<Hazard> {
-    logits
-        .chunks(Hazard::ALL.len())
-        .map(|row| {
-            let best = row
-                .iter()
-                .enumerate()
-                .max_by(|a, b| a.1.total_cmp(b.1))
-                .map_or(0, |(i, _)| i);
-            Hazard::ALL[best]
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::model::float_values;
-
-    #[test]
-    fn every_brake_reason_has_a_class_and_a_group() {
-        for reason in [
-            BrakeReason::Vehicle,
-            BrakeReason::Walker,
-            BrakeReason::Obstacle,
-            BrakeReason::TrafficLight,
-            BrakeReason::StopSign,
-            BrakeReason::LaneChange,
-            BrakeReason::PredictedCollision,
-        ] {
-            let hazard = Hazard::of(Some(reason));
-            assert_ne!(hazard, Hazard::Clear);
-            assert!(hazard.situation().unwrap().starts_with("brake:"));
-        }
-        assert_eq!(Hazard::of(None), Hazard::Clear);
-        assert_eq!(Hazard::Clear.situation(), None);
-        for (i, hazard) in Hazard::ALL.iter().enumerate() {
-            assert_eq!(hazard.index(), i);
-        }
-    }
+    use burn::tensor::Device;
 
     #[test]
     fn loss_is_the_cross_entropy_and_falls_as_the_right_logit_grows() {
@@ -180,27 +34,8 @@ mod tests {
         let mut logits = vec![0.0; 10];
         logits[Hazard::Light.index()] = 4.0;
         logits[5 + Hazard::Clear.index()] = 4.0;
-        let confident = float_tensor(logits.clone(), [2, 5], &device);
+        let confident = float_tensor(logits, [2, 5], &device);
         let better = float_values(hazard_loss(confident, &[Hazard::Light, Hazard::Clear]))[0];
         assert!(better < 0.1, "{better}");
-        assert_eq!(predicted(&logits), vec![Hazard::Light, Hazard::Clear]);
-    }
-
-    #[test]
-    fn probe_maps_tokens_to_a_logit_per_class() {
-        let device = Device::flex();
-        let probe = HazardProbeConfig {
-            channels: 8,
-            hidden: 16,
-        }
-        .init(&device);
-        let tokens = float_tensor(
-            (0..2 * 3 * 8).map(|v| v as f32 * 0.01).collect(),
-            [2, 3, 8],
-            &device,
-        );
-        let logits = probe.forward(tokens);
-        assert_eq!(logits.dims(), [2, 5]);
-        assert!(float_values(logits).iter().all(|v| v.is_finite()));
     }
 }

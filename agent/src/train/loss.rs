@@ -7,7 +7,7 @@
 //!   concentration k = [`LossWeights::target_concentration`]);
 //! - speed: L1 of the speed head to speed / 12;
 //! - BEV: MSE of the FFP's predicted BEV to the detached BEV of the future frame;
-//! - hazard: cross-entropy of the hazard probe ([`super::hazard`]) to what the expert brakes
+//! - hazard: cross-entropy of the hazard head ([`super::hazard`]) to what the expert brakes
 //!   for;
 //! - occupancy: balanced binary cross-entropy of the occupancy head ([`super::occupancy`]) to
 //!   the cells road users cover.
@@ -31,7 +31,7 @@ pub struct LossWeights {
     pub speed: f32,
     /// Weight of the future-BEV MSE.
     pub bev: f32,
-    /// Weight of the hazard probe's cross-entropy; 0 = no probe (runs from before it existed).
+    /// Weight of the hazard head's cross-entropy; 0 = no head (runs from before it existed).
     #[serde(default)]
     pub hazard: f32,
     /// Weight of the occupancy head's cross-entropy; 0 = no head (runs from before it
@@ -135,17 +135,17 @@ pub struct Losses {
     pub speed: Tensor<1>,
     /// Future-BEV MSE; `None` without an FFP prediction.
     pub bev: Option<Tensor<1>>,
-    /// Hazard cross-entropy; `None` without a hazard probe.
+    /// Hazard cross-entropy; `None` without a hazard head.
     pub hazard: Option<Tensor<1>>,
     /// Occupancy cross-entropy; `None` without an occupancy head.
     pub occupancy: Option<Tensor<1>>,
 }
 
-/// The auxiliary losses on a batch (hazard probe, occupancy head), each `None` without its
+/// The auxiliary losses on a batch (hazard head, occupancy head), each `None` without its
 /// output.
 #[derive(Debug, Clone, Default)]
 pub struct AuxiliaryLosses {
-    /// The hazard probe's cross-entropy.
+    /// The hazard head's cross-entropy.
     pub hazard: Option<Tensor<1>>,
     /// The occupancy head's cross-entropy.
     pub occupancy: Option<Tensor<1>>,

@@ -7,8 +7,8 @@
 //! <out>/metrics.jsonl              a line per step ("kind": "step") and per validation
 //! <out>/checkpoints/step-NNNNNN.safetensors   servable checkpoints (config, rig, notes)
 //! <out>/final.safetensors          the last step's weights
-//! <out>/resume/                    weights with parameter ids (and the hazard probe's, see
-//!                                  [`super::probes`]), AdamW state, progress
+//! <out>/resume/                    weights with parameter ids, AdamW state, progress
+//!                                  ([`super::resume`])
 //! ```
 //! Guarantees: resuming a run continues from its last checkpoint with the same batches,
 //! augmentation and optimiser state, so its loss curve is the one the uninterrupted run would
@@ -29,17 +29,18 @@ use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::dataset::DatasetError;
 
+use super::auxiliary::AuxiliaryOutputs;
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
-use super::hazard::predicted;
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::occupancy::confusion;
-use super::probes::{AuxiliaryOutputs, Probes, load_weights, save_weights};
+use super::resume::{Progress, load_model, read_progress, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::ControlConfig;
 use crate::model::config::SsrConfig;
+use crate::model::hazard::predicted;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
 
@@ -133,7 +134,7 @@ pub struct StepMetrics {
     pub speed: f32,
     /// Future-BEV MSE; `None` without the FFP.
     pub bev: Option<f32>,
-    /// Hazard cross-entropy; `None` without the hazard probe.
+    /// Hazard cross-entropy; `None` without the hazard head.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hazard: Option<f32>,
     /// Occupancy cross-entropy; `None` without the occupancy head.
@@ -161,13 +162,6 @@ pub struct RunSummary {
     pub checkpoint: PathBuf,
 }
 
-/// Where the run stands, saved with the resume state.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct Progress {
-    step: u64,
-    config: TrainConfig,
-}
-
 /// The training notes stored in every checkpoint.
 #[derive(Debug, Serialize)]
 struct TrainingNotes<'a> {
@@ -189,9 +183,6 @@ struct Trainer {
     inner: Device,
     /// Always set between steps (taken for the optimiser's update).
     model: Option<SsrModel>,
-    /// The probes the run trains (taken for the update like the model); the optimiser keeps
-    /// both modules' state, by parameter id. Always set between steps.
-    probes: Option<Probes>,
     optimizer: ModuleOptimizer,
     step: u64,
     metrics: std::fs::File,
@@ -213,30 +204,21 @@ pub fn resumed_config(out: &Path) -> Result<TrainConfig, TrainError> {
     Ok(read_progress(out)?.config)
 }
 
-fn read_progress(out: &Path) -> Result<Progress, TrainError> {
-    let path = out.join("resume").join("progress.json");
-    let resume = |problem: String| TrainError::Resume {
-        path: path.clone(),
-        problem,
-    };
-    let text = std::fs::read_to_string(&path).map_err(|e| resume(e.to_string()))?;
-    let progress: Progress = serde_json::from_str(&text).map_err(|e| resume(e.to_string()))?;
-    progress.config.validate().map_err(resume)?;
-    Ok(progress)
-}
-
 /// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
 /// (a fine-tune changes the training, not the network), except that a fine-tune may add the
-/// occupancy head to a checkpoint without one: the head starts from random weights.
+/// occupancy or the hazard head to a checkpoint without one: the head starts from random
+/// weights.
 fn initial_weights(
     path: &Path,
     model: &SsrConfig,
     device: &Device,
 ) -> Result<SsrModel, TrainError> {
     let (mut weights, info) = checkpoint::load(path, device)?;
-    let adds_head = model.occupancy_head && !info.config.occupancy_head;
+    let adds_occupancy = model.occupancy_head && !info.config.occupancy_head;
+    let adds_hazard = model.hazard_head && !info.config.hazard_head;
     let saved = SsrConfig {
         occupancy_head: info.config.occupancy_head || model.occupancy_head,
+        hazard_head: info.config.hazard_head || model.hazard_head,
         ..info.config
     };
     let differences = saved.differences(model);
@@ -247,8 +229,11 @@ fn initial_weights(
             differences.join("; ")
         )));
     }
-    if adds_head {
+    if adds_occupancy {
         weights.occupancy = model.init_occupancy_head(device);
+    }
+    if adds_hazard {
+        weights.hazard = model.init_hazard_head(device);
     }
     Ok(weights)
 }
@@ -271,7 +256,7 @@ impl Trainer {
         std::fs::create_dir_all(&out).map_err(io_error(&out))?;
         let device = Device::flex().autodiff();
         let metrics_path = out.join("metrics.jsonl");
-        let (config, model, probes, optimizer, step) = if options.resume {
+        let (config, model, optimizer, step) = if options.resume {
             let resume_dir = out.join("resume");
             let progress = read_progress(&out)?;
             let fail = |problem: String| TrainError::Resume {
@@ -282,15 +267,12 @@ impl Trainer {
             config
                 .validate()
                 .map_err(|e| fail(format!("train_config: {e}")))?;
-            let mut model = config.model.init(&device);
-            load_weights(&mut model, &resume_dir, "model.bpk").map_err(fail)?;
-            let mut probes = Probes::new(&config, &device);
-            probes.load(&resume_dir).map_err(fail)?;
+            let model = load_model(&resume_dir, &config.model, &device).map_err(fail)?;
             let record = OptimizerRecord::load(resume_dir.join("optimizer.bpk"))
                 .map_err(|e| fail(format!("optimizer.bpk: {e}")))?;
             let optimizer = optimizer_for(&config).load_record(record);
             keep_metrics_until(&metrics_path, progress.step)?;
-            (config, model, probes, optimizer, progress.step)
+            (config, model, optimizer, progress.step)
         } else {
             config.validate().map_err(TrainError::Config)?;
             device.seed(config.seed);
@@ -304,9 +286,8 @@ impl Trainer {
             )
             .map_err(io_error(&out))?;
             std::fs::write(&metrics_path, b"").map_err(io_error(&metrics_path))?;
-            let probes = Probes::new(&config, &device);
             let optimizer = optimizer_for(&config);
-            (config, model, probes, optimizer, 0)
+            (config, model, optimizer, 0)
         };
         let metrics = std::fs::OpenOptions::new()
             .append(true)
@@ -319,7 +300,6 @@ impl Trainer {
             device,
             inner: Device::flex(),
             model: Some(model),
-            probes: Some(probes),
             optimizer,
             step,
             metrics,
@@ -331,12 +311,6 @@ impl Trainer {
         self.model
             .as_ref()
             .expect("the model is back after every step")
-    }
-
-    fn probes(&self) -> &Probes {
-        self.probes
-            .as_ref()
-            .expect("the probes are back after every step")
     }
 
     fn log(&mut self, line: &MetricsLine) -> Result<(), TrainError> {
@@ -423,7 +397,6 @@ impl Trainer {
         let frozen = self.model().valid();
         let (terms, _, _) = batch_losses(
             self.model(),
-            self.probes(),
             &frozen,
             batch,
             config,
@@ -444,12 +417,6 @@ impl Trainer {
             .take()
             .expect("the model is back after every step");
         self.model = Some(self.optimizer.step(metrics.lr, model, model_grads));
-        let probes = self
-            .probes
-            .take()
-            .expect("the probes are back after every step");
-        let probe_grads = GradientsParams::from_module(&mut grads, &probes);
-        self.probes = Some(self.optimizer.step(metrics.lr, probes, probe_grads));
         self.step += 1;
         Ok(metrics)
     }
@@ -459,7 +426,6 @@ impl Trainer {
         let config = &self.config;
         let samples = spread(&self.data.validation, config.validation_samples);
         let model = self.model().valid();
-        let probes = self.probes().valid();
         let device = &self.inner;
         let p = config.model.head.pred_len;
         let mut sums = ValidationSums::default();
@@ -468,7 +434,7 @@ impl Trainer {
                 .data
                 .batch(chunk, &config.model, |_| SampleDraw::default())?;
             let (terms, head, outputs) =
-                batch_losses(&model, &probes, &model, &batch, config, device, device);
+                batch_losses(&model, &model, &batch, config, device, device);
             let hazards = outputs
                 .hazard
                 .map(|logits| predicted(&float_values(logits)));
@@ -541,7 +507,6 @@ impl Trainer {
             source: std::io::Error::other(problem),
         };
         save_weights(self.model(), &partial, "model.bpk").map_err(fail)?;
-        self.probes().save(&partial).map_err(fail)?;
         self.optimizer
             .to_record()
             .save(partial.join("optimizer.bpk"))
@@ -561,12 +526,11 @@ impl Trainer {
     }
 }
 
-/// The losses of a batch, the head's output and the probes' outputs. `context_model` (without
+/// The losses of a batch, the head's output and the auxiliary heads' outputs. `context_model` (without
 /// gradients, on `inner`) gives the history BEVs (each from its own history frame, as serving
 /// does) and the FFP's targets; `model` (on `device`) runs the current frames.
 fn batch_losses(
     model: &SsrModel,
-    probes: &Probes,
     context_model: &SsrModel,
     batch: &Batch,
     config: &TrainConfig,
@@ -594,7 +558,7 @@ fn batch_losses(
         config.loss.target_concentration,
         device,
     );
-    let outputs = probes.run(model, &output, batch, config, device);
+    let outputs = AuxiliaryOutputs::of(model, &output, batch, config, device);
     (
         losses(
             &output.head,

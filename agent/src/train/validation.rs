@@ -2,7 +2,7 @@
 //! waypoints at 1, 2 and 3 s, the control branch's errors, and the same per situation (each
 //! command, start-ups from standstill, and what the expert brakes for), since a mean over a
 //! validation set that is half lane following hides the turns, starts and stops closed-loop
-//! driving depends on; with the hazard probe on, how often it names that cause; with the
+//! driving depends on; with the hazard head on, how often it names that cause; with the
 //! occupancy head on, its balanced accuracy on the BEV cells.
 
 use std::collections::BTreeMap;
@@ -11,10 +11,10 @@ use serde::{Deserialize, Serialize};
 use ssrdrive_proto::dataset::BrakeReason;
 
 use super::data::{Batch, SampleRef};
-use super::hazard::Hazard;
 use super::occupancy::{Confusion, OCCUPANCY_CHANNELS};
 use crate::control::beta::control_from_beta;
 use crate::model::float_values;
+use crate::model::hazard::Hazard;
 use crate::model::tcp_head::HeadOutput;
 
 /// Horizons of the open-loop L2, seconds.
@@ -35,7 +35,7 @@ pub struct GroupMetrics {
     /// Mean absolute error of the control branch's brake against the expert's.
     pub brake_mae: f32,
     /// Share of the samples whose cause of braking ([`Hazard`], `clear` included) the hazard
-    /// probe names; `None` in runs without the probe.
+    /// head names; `None` in runs without the head.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hazard_accuracy: Option<f32>,
 }
@@ -55,14 +55,14 @@ pub struct ValidationMetrics {
     pub by_situation: BTreeMap<String, GroupMetrics>,
     /// Per occupancy channel ([`OCCUPANCY_CHANNELS`]) with occupied and empty cells, the
     /// occupancy head's balanced accuracy ([`Confusion::balanced_accuracy`]) over the samples
-    /// that record their actors; empty without the probe.
+    /// that record their actors; empty without the head.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub occupancy_accuracy: BTreeMap<String, f32>,
 }
 
 impl ValidationMetrics {
     /// One line: L2 and steer error over all samples, then the 2 s L2 per situation, then
-    /// the hazard probe's accuracy (with a probe).
+    /// the hazard head's accuracy (with the head).
     pub fn summary(&self) -> String {
         let per: Vec<String> = self
             .by_situation
@@ -78,7 +78,7 @@ impl ValidationMetrics {
                 .get("brake:light")
                 .and_then(|g| g.hazard_accuracy);
             format!(
-                "; hazard probe right on {:.0} % ({} of light stops)",
+                "; hazard head right on {:.0} % ({} of light stops)",
                 100.0 * all,
                 lights.map_or("-".into(), |v| format!("{:.0} %", 100.0 * v))
             )
@@ -150,7 +150,7 @@ struct GroupSums {
     steer: f64,
     throttle: f64,
     brake: f64,
-    /// Samples the hazard probe named the cause of (counted only with a probe).
+    /// Samples the hazard head named the cause of (counted only with the head).
     hazard_hits: Option<usize>,
 }
 
@@ -194,12 +194,12 @@ pub struct ValidationSums {
     loss: f64,
     all: GroupSums,
     by_situation: BTreeMap<&'static str, GroupSums>,
-    /// Per occupancy channel: how the probe's cells compare with the labels.
+    /// Per occupancy channel: how the head's cells compare with the labels.
     occupancy: [Confusion; OCCUPANCY_CHANNELS.len()],
 }
 
 impl ValidationSums {
-    /// Adds a batch's head output (with `p` waypoints), the hazard probe's classes and the
+    /// Adds a batch's head output (with `p` waypoints), the hazard head's classes and the
     /// occupancy head's [`Confusion`] per channel (each where the run has it) and mean loss.
     pub fn add(
         &mut self,

@@ -4,7 +4,7 @@
 //! controller: if perfect waypoints do not drive, no network will.
 
 use glam::DVec2;
-use ssr_control::{ControlConfig, EpisodeController, Vehicle};
+use ssr_control::{Beliefs, ControlConfig, EpisodeController, Vehicle};
 use ssrdrive_proto::control::Control;
 
 use super::Expert;
@@ -88,7 +88,7 @@ impl Agent for OraclePlan {
             to_f32(obs.target_point),
             obs.speed as f32,
             branch,
-            &[],
+            Beliefs::default(),
         );
         Ok(decision.control)
     }

@@ -1,0 +1,61 @@
+//! The auxiliary outputs a run trains beside the imitation losses: the network's hazard head on
+//! the scene tokens ([`crate::model::hazard`]; loss in [`super::hazard`]) and its occupancy
+//! head on the BEV ([`crate::model::occupancy`]; labels and loss in [`super::occupancy`]);
+//! their outputs and losses on a batch.
+
+use burn::tensor::{Device, Tensor};
+
+use super::config::TrainConfig;
+use super::data::Batch;
+use super::hazard::hazard_loss;
+use super::loss::AuxiliaryLosses;
+use super::occupancy::{batch_targets, occupancy_loss};
+use crate::model::{ModelOutput, SsrModel};
+
+/// The hazard head's and the occupancy head's outputs on a batch, each `None` where the
+/// network has no such head.
+#[derive(Debug, Clone, Default)]
+pub struct AuxiliaryOutputs {
+    /// `[B, 5]` hazard logits.
+    pub hazard: Option<Tensor<2>>,
+    /// `[B, Q, 2]` occupancy logits of the network's head, their targets, and `[B]` 1 for the
+    /// samples that record their actors.
+    pub occupancy: Option<(Tensor<3>, Tensor<3>, Tensor<1>)>,
+}
+
+impl AuxiliaryOutputs {
+    /// `model`'s auxiliary heads on the network's `output` for `batch` (targets on `device`).
+    pub fn of(
+        model: &SsrModel,
+        output: &ModelOutput,
+        batch: &Batch,
+        config: &TrainConfig,
+        device: &Device,
+    ) -> Self {
+        Self {
+            hazard: model
+                .hazard
+                .as_ref()
+                .map(|head| head.forward(output.scene.tokens.clone())),
+            occupancy: model.occupancy.as_ref().map(|head| {
+                let (targets, recorded) =
+                    batch_targets(batch.actors(), &config.model.bev.grid, device);
+                (head.forward(output.bev.clone()), targets, recorded)
+            }),
+        }
+    }
+
+    /// The heads' losses against `batch`'s labels.
+    pub fn losses(&self, batch: &Batch) -> AuxiliaryLosses {
+        AuxiliaryLosses {
+            hazard: self
+                .hazard
+                .clone()
+                .map(|logits| hazard_loss(logits, &batch.hazards())),
+            occupancy: self
+                .occupancy
+                .clone()
+                .map(|(logits, targets, recorded)| occupancy_loss(logits, targets, recorded)),
+        }
+    }
+}
