@@ -1,7 +1,11 @@
 //! The inference API: an [`SsrPolicy`] (network + controller settings on a device) steps
 //! episodes, each with its own [`EpisodeState`] (its recent BEVs and poses, PID windows, fusion
-//! history). A step attends to the BEV of the step [`HISTORY_TICKS`] before it (0.5 s at
-//! 20 Hz), the history age the network was trained with. [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
+//! history). A step plans from training's history chain ([`History::Chain`], the default): its
+//! BEV attends to the BEV of the step [`HISTORY_TICKS`] before it (0.5 s at 20 Hz), which
+//! attended to the first-frame BEV of the step [`HISTORY_TICKS`] before that, and to nothing
+//! older; checkpoints validated before the chain are served as they were
+//! ([`History::Recursive`]: each step's BEV is the history of the step 0.5 s later).
+//! [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
 //!
 //! Every input is checked before anything runs; a bad input returns a [`StepError`] naming the
 //! episode and the field, and leaves every episode's state as it was.
@@ -15,13 +19,13 @@ use ssrdrive_proto::camera::{Rig, RigError};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::image::RgbImage;
 
-use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController};
+use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController, History};
 use crate::model::backbone::frame_to_input;
-use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, SampleGeometry};
+use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, ImageFeatures, SampleGeometry};
 use crate::model::config::SsrConfig;
 use crate::model::hazard::Hazard;
 use crate::model::occupancy::OCCUPANCY_CHANNELS;
-use crate::model::{ModelInput, SsrModel, float_tensor, float_values};
+use crate::model::{ModelInput, ModelOutput, SsrModel, float_tensor, float_values};
 use crate::pose::{EgoMotion, Pose2};
 
 /// Largest target-point distance accepted, metres.
@@ -121,12 +125,27 @@ pub enum StepError {
     },
 }
 
+/// The BEVs one step leaves for the step [`HISTORY_TICKS`] after it: the two links of
+/// training's history chain (`crate::train::data::Batch::deep_input`, `context_input`).
+#[derive(Debug, Clone)]
+struct ChainLinks {
+    /// `[1, Q, C]` the step's BEV without history (training's "deep" BEV): the history of the
+    /// later step's context BEV.
+    deep: Tensor<3>,
+    /// `[1, Q, C]` the step's BEV attending to the deep BEV before it (training's "context"
+    /// BEV; with [`History::Recursive`], the BEV the step planned from): the history the later
+    /// step attends to.
+    context: Tensor<3>,
+    /// The ego pose of the step.
+    pose: Pose2,
+}
+
 /// What one episode remembers between ticks.
 #[derive(Debug, Clone)]
 pub struct EpisodeState {
-    /// The BEVs and poses of the last [`HISTORY_TICKS`] steps, oldest first: the oldest is the
+    /// The chain links of the last [`HISTORY_TICKS`] steps, oldest first: the oldest is the
     /// history of the next step once the queue is full.
-    recent: VecDeque<(Tensor<3>, Pose2)>,
+    recent: VecDeque<ChainLinks>,
     controller: EpisodeController,
     ticks: u64,
 }
@@ -143,7 +162,7 @@ impl EpisodeState {
         self.history().is_some()
     }
 
-    fn history(&self) -> Option<&(Tensor<3>, Pose2)> {
+    fn history(&self) -> Option<&ChainLinks> {
         self.recent
             .front()
             .filter(|_| self.recent.len() == HISTORY_TICKS)
@@ -280,9 +299,10 @@ impl SsrPolicy {
         check_input(input)
     }
 
-    /// Bytes of tensor state one episode keeps (its last [`HISTORY_TICKS`] BEVs).
+    /// Bytes of tensor state one episode keeps (two BEVs of each of its last
+    /// [`HISTORY_TICKS`] steps).
     pub fn episode_state_bytes(&self) -> usize {
-        HISTORY_TICKS
+        2 * HISTORY_TICKS
             * self.config.bev.grid.cells()
             * self.config.channels
             * std::mem::size_of::<f32>()
@@ -363,32 +383,28 @@ impl SsrPolicy {
         let b = inputs.len();
         let (q, c) = (self.config.bev.grid.cells(), self.config.channels);
         let heights = &self.config.bev.pillar_heights;
+        let geometry = |input: &StepInput, motion: Option<EgoMotion>| {
+            let speed = self.config.shown_speed(input.speed);
+            SampleGeometry::new(&self.config.bev.grid, heights, &input.rig, motion, speed)
+        };
         let geometries: Vec<SampleGeometry> = inputs
             .iter()
             .zip(states.iter())
             .map(|(input, state)| {
                 let motion = state
                     .history()
-                    .map(|(_, pose)| EgoMotion::between(*pose, input.pose));
-                SampleGeometry::new(
-                    &self.config.bev.grid,
-                    heights,
-                    &input.rig,
-                    motion,
-                    self.config.shown_speed(input.speed),
-                )
+                    .map(|links| EgoMotion::between(links.pose, input.pose));
+                geometry(input, motion)
             })
             .collect();
-        let previous_bev = Tensor::cat(
-            states
-                .iter()
-                .map(|s| match s.history() {
-                    Some((bev, _)) => bev.clone(),
-                    None => Tensor::zeros([1, q, c], &self.device),
-                })
-                .collect(),
-            0,
-        );
+        let history = |link: fn(&ChainLinks) -> &Tensor<3>| {
+            let bevs = states.iter().map(|s| match s.history() {
+                Some(links) => link(links).clone(),
+                None => Tensor::zeros([1, q, c], &self.device),
+            });
+            Tensor::cat(bevs.collect(), 0)
+        };
+        let previous_bev = history(|links| &links.context);
         let command: Vec<f32> = inputs.iter().flat_map(|i| i.command.one_hot()).collect();
         let model_input = ModelInput {
             images: self.images(inputs),
@@ -415,7 +431,28 @@ impl SsrPolicy {
             ),
             command: float_tensor(command, [b, COMMANDS], &self.device),
         };
-        let output = self.model.forward(&model_input);
+        let features = self.model.image_features(model_input.images.clone());
+        let chained = states
+            .iter()
+            .any(|s| s.has_previous_bev() && s.controller.config().history == History::Chain);
+        let chain = if chained {
+            let first_frames: Vec<SampleGeometry> =
+                inputs.iter().map(|input| geometry(input, None)).collect();
+            self.encode_chain(
+                features,
+                &model_input,
+                &first_frames,
+                &geometries,
+                history(|links| &links.deep),
+            )
+        } else {
+            // No history anywhere: every link is the first-frame BEV.
+            let bev = self.model.encode_bev(features, &model_input);
+            [bev.clone(), bev.clone(), bev]
+        };
+        let [deep, context, bev] = chain;
+        let (scene, head) = self.model.plan(bev.clone(), &model_input);
+        let output = ModelOutput { bev, scene, head };
 
         let pred_len = self.config.head.pred_len;
         let waypoints = float_values(output.head.waypoints.clone());
@@ -509,9 +546,15 @@ impl SsrPolicy {
             if state.recent.len() == HISTORY_TICKS {
                 state.recent.pop_front();
             }
-            state
-                .recent
-                .push_back((output.bev.clone().narrow(0, i, 1), input.pose));
+            let context = match state.controller.config().history {
+                History::Chain => &context,
+                History::Recursive => &output.bev,
+            };
+            state.recent.push_back(ChainLinks {
+                deep: deep.clone().narrow(0, i, 1),
+                context: context.clone().narrow(0, i, 1),
+                pose: input.pose,
+            });
             state.ticks += 1;
             results.push(StepOutput {
                 decision,
@@ -521,6 +564,59 @@ impl SsrPolicy {
             });
         }
         results
+    }
+}
+
+impl SsrPolicy {
+    /// The three BEVs of a step with history, in one pass of 3B samples: its first-frame BEV
+    /// ("deep"), its BEV attending to the deep BEV of the step [`HISTORY_TICKS`] before
+    /// ("context"), and the BEV it plans from, attending to that step's context BEV (in
+    /// `input.previous_bev`). So the BEV the head reads has the history chain training gives
+    /// it (the frame 0.5 s back, itself with the frame 1 s back as history, and nothing
+    /// earlier) instead of a recursion of unbounded depth, whose history BEVs training never
+    /// showed the network (the v6 learner stopped and started every 0.5 s in a period-two
+    /// cycle of the recursion).
+    ///
+    /// # Shapes
+    /// - features: `[B * cameras, C, h, w]` (the backbone's)
+    /// - deep_history: `[B, Q, C]`
+    /// - output: three `[B, Q, C]`
+    fn encode_chain(
+        &self,
+        features: Tensor<4>,
+        input: &ModelInput,
+        first_frames: &[SampleGeometry],
+        with_history: &[SampleGeometry],
+        deep_history: Tensor<3>,
+    ) -> [Tensor<3>; 3] {
+        let b = first_frames.len();
+        let features = self.model.bev.image_features(features, input.cameras);
+        let tripled = ImageFeatures {
+            values: Tensor::cat(vec![features.values.clone(); 3], 0),
+            ..features
+        };
+        let geometries: Vec<SampleGeometry> = first_frames
+            .iter()
+            .chain(with_history)
+            .chain(with_history)
+            .cloned()
+            .collect();
+        let geometry = GeometryTensors::batch(
+            &geometries,
+            &self.config.bev.grid,
+            self.config.bev.pillar_heights.len(),
+            &self.device,
+        );
+        let previous = Tensor::cat(
+            vec![
+                Tensor::zeros(deep_history.dims(), &self.device),
+                deep_history,
+                input.previous_bev.clone(),
+            ],
+            0,
+        );
+        let bevs = self.model.bev.forward(&tripled, &geometry, previous);
+        [0, 1, 2].map(|k| bevs.clone().narrow(0, k * b, b))
     }
 }
 

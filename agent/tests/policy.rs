@@ -4,7 +4,7 @@
 mod common;
 
 use common::{policy_of, rig, step_input, tiny_config};
-use ssr_agent::control::{ControlConfig, SafetyStop, Unstick};
+use ssr_agent::control::{ControlConfig, History, SafetyStop, Unstick};
 use ssr_agent::model::bev::HISTORY_TICKS;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::policy::{InputError, SsrPolicy, StepError, StepInput};
@@ -54,7 +54,50 @@ fn an_episode_keeps_its_bev_and_debug_maps_come_back() {
         .step(&mut episode, &step_input(&rig, HISTORY_TICKS as u32, 1))
         .unwrap();
     assert!(episode.has_previous_bev() && episode.ticks() == HISTORY_TICKS as u64 + 1);
-    assert_eq!(policy.episode_state_bytes(), HISTORY_TICKS * 8 * 8 * 16 * 4);
+    assert_eq!(
+        policy.episode_state_bytes(),
+        2 * HISTORY_TICKS * 8 * 8 * 16 * 4
+    );
+}
+
+#[test]
+fn a_step_sees_the_history_chain_training_gives_it_and_nothing_older() {
+    // Training plans from a frame whose history is the frame 0.5 s back, itself with the frame
+    // 1 s back as its history. Serving does the same: the plan at tick t depends on the frames
+    // of ticks t, t - 10 and t - 20 (and the poses), not on the frame of tick t - 30.
+    let policy = policy();
+    let rig = rig(1, 900, 256);
+    let t = 3 * HISTORY_TICKS as u32;
+    let chain = [t - 2 * HISTORY_TICKS as u32, t - HISTORY_TICKS as u32, t];
+    let plan_at_t = |history: History, seed_of: &dyn Fn(u32) -> u32| {
+        let mut episode = policy.new_episode_with(ControlConfig {
+            history,
+            ..ControlConfig::default()
+        });
+        let mut last = None;
+        for tick in 0..=t {
+            let input = step_input(&rig, tick, seed_of(tick));
+            last = Some(policy.step(&mut episode, &input).unwrap());
+        }
+        last.unwrap().waypoints
+    };
+    let outside_differ = |tick| if chain.contains(&tick) { 1 } else { 2 };
+    let reference = plan_at_t(History::Chain, &|_| 1);
+    let others_differ = plan_at_t(History::Chain, &outside_differ);
+    assert_eq!(
+        reference, others_differ,
+        "frames outside the chain changed the plan"
+    );
+    let chain_differs = plan_at_t(History::Chain, &|tick| if tick == chain[0] { 2 } else { 1 });
+    assert_ne!(
+        reference, chain_differs,
+        "the frame 1 s back is part of the chain"
+    );
+    // The recursion of checkpoints validated before the chain reaches back further.
+    assert_ne!(
+        plan_at_t(History::Recursive, &|_| 1),
+        plan_at_t(History::Recursive, &outside_differ)
+    );
 }
 
 #[test]

@@ -5,7 +5,9 @@ use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
 use ssr_control::fusion::Fusion;
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
-use ssr_control::{Beliefs, ControlConfig, EpisodeController, SafetyStop, Unstick, Vehicle};
+use ssr_control::{
+    Beliefs, ControlConfig, EpisodeController, History, SafetyStop, Unstick, Vehicle,
+};
 use ssrdrive_proto::control::Control;
 
 fn near(a: f32, b: f32) -> bool {
@@ -504,4 +506,17 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
         .collect();
     let last = decisions.last().unwrap();
     assert!(last.unsticking && last.safety_stop && last.control.throttle == 0.0);
+}
+
+#[test]
+fn settings_without_a_history_mode_are_served_as_they_were_validated() {
+    assert_eq!(ControlConfig::default().history, History::Chain);
+    let mut json = serde_json::to_value(ControlConfig::default()).unwrap();
+    json.as_object_mut().unwrap().remove("history");
+    let older: ControlConfig = serde_json::from_value(json).unwrap();
+    assert_eq!(older.history, History::Recursive);
+    assert_eq!("chain".parse(), Ok(History::Chain));
+    assert_eq!("recursive".parse(), Ok(History::Recursive));
+    let error = "sideways".parse::<History>().unwrap_err();
+    assert!(error.contains("sideways"), "{error}");
 }

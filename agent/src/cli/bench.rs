@@ -9,9 +9,9 @@ use anyhow::Context as _;
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
-use ssr_agent::control::ControlConfig;
+use ssr_agent::control::{ControlConfig, History};
 use ssr_agent::device::Backend;
-use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
+use ssr_agent::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::{ModelInput, float_tensor};
 use ssr_agent::policy::{SsrPolicy, StepInput};
@@ -223,22 +223,33 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
                 .map(|k| ((k * 2654435761) >> 24) as u8)
                 .collect(),
         };
-        let mut episode = policy.new_episode();
-        let mut tick = 0;
-        let step = time_ms(w, i, || {
-            tick += 1;
-            let input = StepInput {
-                frames: vec![frame.clone()],
-                rig: Rig::tcp(),
-                pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
-                speed: 6.0,
-                command: RoadOption::LaneFollow,
-                target_point: [12.0, 1.0],
-                debug: false,
+        // Timed in the steady state, where the episode has its history (the first steps of an
+        // episode encode one BEV; later ones three on training's chain, one on the recursion).
+        for (history, row) in [
+            (History::Chain, "policy_step_900x256_ms"),
+            (History::Recursive, "policy_step_900x256_recursive_ms"),
+        ] {
+            let mut episode = policy.new_episode_with(ControlConfig {
+                history,
+                ..policy.control().clone()
+            });
+            let mut tick = 0;
+            let mut step_once = || {
+                tick += 1;
+                let input = StepInput {
+                    frames: vec![frame.clone()],
+                    rig: Rig::tcp(),
+                    pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
+                    speed: 6.0,
+                    command: RoadOption::LaneFollow,
+                    target_point: [12.0, 1.0],
+                    debug: false,
+                };
+                policy.step(&mut episode, &input).expect("valid input");
             };
-            policy.step(&mut episode, &input).expect("valid input");
-        });
-        rows.push(("policy_step_900x256_ms", step));
+            (0..HISTORY_TICKS).for_each(|_| step_once());
+            rows.push((row, time_ms(w, i, step_once)));
+        }
         rows.push(("episode_state_bytes", policy.episode_state_bytes() as f64));
     }
     Report {

@@ -5,6 +5,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::Args;
+use ssr_agent::control::History;
 use ssr_agent::device::Backend;
 use ssr_agent::serve::{self, LogFormat, ServeConfig};
 
@@ -85,6 +86,12 @@ pub struct ServeArgs {
     /// (`ssr-agent control`)].
     #[arg(long, env = "SSR_AGENT_SAFETY_STOP")]
     safety_stop: Option<bool>,
+    /// How the network gets its history: `chain` (training's: the frame 0.5 s back with the
+    /// frame 1 s back as its history; three BEV passes a step) or `recursive` (each step's
+    /// BEV is the history of the step 0.5 s later; one pass) [default: the checkpoint's
+    /// setting (`ssr-agent control`); `recursive` for checkpoints from before the chain].
+    #[arg(long, env = "SSR_AGENT_HISTORY")]
+    history: Option<History>,
     /// Also shut down (draining as on SIGTERM) when standard input reaches its end: a parent
     /// that keeps a pipe to it open (sim-bridge's local server does) takes the server with it
     /// when it ends, even when it is killed.
@@ -150,6 +157,7 @@ impl ServeArgs {
         set(&mut config.backend, &self.backend);
         config.unstick = self.unstick.or(config.unstick);
         config.safety_stop = self.safety_stop.or(config.safety_stop);
+        config.history = self.history.or(config.history);
         config.validate()?;
         Ok(config)
     }

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use ssrdrive_proto::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
 use ssrdrive_proto::files::{CappedReadError, read_capped_text};
 
+use crate::control::History;
 use crate::device::Backend;
 
 /// Largest config file read, bytes.
@@ -81,6 +82,10 @@ pub struct ServeConfig {
     /// path just ahead occupied; see `ssr_control::safety`) on or off for every episode;
     /// `None` keeps the checkpoint's setting. On needs a checkpoint with the head.
     pub safety_stop: Option<bool>,
+    /// How the network gets its history (`ssr_control::History`: training's chain, or the
+    /// recursion of checkpoints validated before it) for every episode; `None` keeps the
+    /// checkpoint's setting.
+    pub history: Option<History>,
 }
 
 impl Default for ServeConfig {
@@ -107,6 +112,7 @@ impl Default for ServeConfig {
             backend: Backend::Cpu,
             unstick: None,
             safety_stop: None,
+            history: None,
         }
     }
 }

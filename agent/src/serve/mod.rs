@@ -96,6 +96,7 @@ pub fn load_policy(
     let mut control = control;
     control.unstick.enabled = config.unstick.unwrap_or(control.unstick.enabled);
     control.safety.enabled = config.safety_stop.unwrap_or(control.safety.enabled);
+    control.history = config.history.unwrap_or(control.history);
     if control.safety.enabled && model.occupancy.is_none() {
         anyhow::bail!(
             "the safety stop reads the network's occupancy head, and {} has none \
@@ -107,6 +108,7 @@ pub fn load_policy(
         checkpoint = %info.checkpoint,
         safety_stop = control.safety.enabled,
         unstick = control.unstick.enabled,
+        history = ?control.history,
         wheelbase_m = control.vehicle.wheelbase,
         max_wheel_angle_deg = control.vehicle.max_wheel_angle,
         "controller"

@@ -19,11 +19,11 @@ use crate::model::sampling::{bilinear_sample, deformable_aggregate};
 const SLOTS: usize = 2;
 
 /// How old the history BEV is, seconds, in training and serving alike (one temporal contract):
-/// SSR trains on 2 Hz keyframes with a queue of two. Serving attends to the BEV it computed
-/// [`HISTORY_TICKS`] steps earlier, itself computed with the one before it (ten interleaved
-/// recursive chains at 0.5 s); training encodes the frame 0.5 s back with the frame 1 s back as
-/// its own history, so both the BEV and the ego motion fed to the can-bus have the age and the
-/// distribution they have when serving.
+/// SSR trains on 2 Hz keyframes with a queue of two. Training encodes the frame 0.5 s back with
+/// the frame 1 s back as its own history (and nothing older), and serving computes exactly that
+/// chain from the frames [`HISTORY_TICKS`] and twice [`HISTORY_TICKS`] steps earlier
+/// (`crate::policy`), so the history BEV, its own history and the ego motion have the age and
+/// the distribution they have in training.
 pub const HISTORY_S: f64 = 0.5;
 /// [`HISTORY_S`] in steps of the leaderboard's 20 Hz.
 pub const HISTORY_TICKS: usize = 10;
