@@ -259,6 +259,10 @@ pub struct EpisodeController {
     follower: TrajectoryFollower,
     fusion: Fusion,
     unstick: UnstickState,
+    /// Consecutive ticks the safety stop has held the car stopped.
+    held_ticks: u32,
+    /// Whether the safety stop lets the current creep through (it held the car too long).
+    yielding: bool,
     config: ControlConfig,
 }
 
@@ -274,6 +278,8 @@ impl EpisodeController {
             follower: TrajectoryFollower::new(&config),
             fusion: Fusion::new(config.turn_window),
             unstick: UnstickState::default(),
+            held_ticks: 0,
+            yielding: false,
             config,
         }
     }
@@ -318,10 +324,18 @@ impl EpisodeController {
             beliefs.clear,
             &self.config.unstick,
         );
-        let safety_stop = self
-            .config
-            .safety
-            .blocked(waypoints, speed, beliefs.occupied);
+        let safety = &self.config.safety;
+        let blocked = safety.blocked(waypoints, speed, beliefs.occupied);
+        self.held_ticks = if blocked && speed < unstick::STOPPED_SPEED {
+            self.held_ticks + 1
+        } else {
+            0
+        };
+        let held_too_long =
+            self.held_ticks as f32 >= safety.yield_after_s * unstick::TICKS_PER_SECOND;
+        // Once it yields, the stop lets the whole creep through, not just its first tick.
+        self.yielding = unsticking && (self.yielding || held_too_long);
+        let safety_stop = blocked && !self.yielding;
         let control = if safety_stop {
             Control {
                 steer: control.steer,

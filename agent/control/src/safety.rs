@@ -14,6 +14,12 @@
 //!
 //! Where the plan is shorter than the distance checked (a car planning to stand still), the
 //! path goes on straight along its last direction (straight ahead for a plan without one).
+//!
+//! The stop never turns a wait into a block: once it has held a stopped car for
+//! [`SafetyStop::yield_after_s`] (the controller counts), it lets the unstick rule's creep
+//! through. The leaderboard ends a route after 180 s stopped ("agent blocked", the rest of the
+//! route lost), while a contact at a crawl costs a penalty and the route goes on; a bundled
+//! agent stood for good at a right turn of the home routes, held by cells beside its path.
 
 use serde::{Deserialize, Serialize};
 
@@ -37,6 +43,9 @@ pub struct SafetyStop {
     pub reaction_s: f32,
     /// Deceleration the braking distance assumes, m/s^2.
     pub decel: f32,
+    /// Seconds the stop may hold a stopped car before it lets the unstick rule's creep
+    /// through.
+    pub yield_after_s: f32,
 }
 
 impl Default for SafetyStop {
@@ -49,6 +58,7 @@ impl Default for SafetyStop {
             margin: 1.5,
             reaction_s: 0.5,
             decel: 5.0,
+            yield_after_s: 100.0,
         }
     }
 }
@@ -63,6 +73,7 @@ impl SafetyStop {
             ("safety.margin", self.margin, 0.0, 20.0),
             ("safety.reaction_s", self.reaction_s, 0.0, 5.0),
             ("safety.decel", self.decel, 0.5, 20.0),
+            ("safety.yield_after_s", self.yield_after_s, 0.05, 3600.0),
         ];
         super::check_ranges(&fields)
     }

@@ -509,6 +509,52 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
 }
 
 #[test]
+fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
+    let config = ControlConfig {
+        safety: SafetyStop {
+            enabled: true,
+            ..SafetyStop::default()
+        },
+        ..ControlConfig::default()
+    };
+    let hold = [[0.0, 0.0]; 4];
+    let beliefs = Beliefs {
+        occupied: &[[3.0, 0.0]],
+        clear: None,
+    };
+    let mut controller = EpisodeController::new(config.clone());
+    // Stopped and held: the creeps before `yield_after_s` are braked, the first one after it
+    // goes through, all of it, while the car gathers speed.
+    let yield_ticks = (config.safety.yield_after_s * 20.0) as usize;
+    let mut speed = 0.0;
+    let mut through = Vec::new();
+    for tick in 0..yield_ticks + 3 * (config.unstick.after_s * 20.0) as usize {
+        let d = controller.act_with_branch(&hold, [10.0, 0.0], speed, None, beliefs);
+        if d.unsticking && !d.safety_stop {
+            assert!(d.control.throttle > 0.0 && d.control.brake == 0.0, "{d:?}");
+            through.push(tick);
+            speed = 1.0;
+        } else {
+            assert!(d.control.brake == 1.0, "tick {tick}: {d:?}");
+            speed = 0.0;
+        }
+    }
+    let creep_ticks = (config.unstick.creep_s * 20.0) as usize;
+    assert!(through[0] >= yield_ticks, "yielded at tick {}", through[0]);
+    assert_eq!(
+        through[..creep_ticks],
+        (through[0]..through[0] + creep_ticks).collect::<Vec<_>>()[..],
+        "the whole creep goes through"
+    );
+    assert!(
+        through
+            .iter()
+            .all(|&t| t < through[0] + creep_ticks || t >= through[0] + yield_ticks),
+        "then the stop holds again until it has held too long again"
+    );
+}
+
+#[test]
 fn settings_without_a_history_mode_are_served_as_they_were_validated() {
     assert_eq!(ControlConfig::default().history, History::Chain);
     let mut json = serde_json::to_value(ControlConfig::default()).unwrap();
