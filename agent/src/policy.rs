@@ -446,7 +446,8 @@ impl SsrPolicy {
                 history(|links| &links.deep),
             )
         } else {
-            // No history anywhere: every link is the first-frame BEV.
+            // No episode on the chain has history yet: one pass gives each its BEV (the
+            // first-frame BEV, or a recursive episode's), which is every link it keeps.
             let bev = self.model.encode_bev(features, &model_input);
             [bev.clone(), bev.clone(), bev]
         };
