@@ -575,7 +575,7 @@ impl SsrPolicy {
     /// `input.previous_bev`). So the BEV the head reads has the history chain training gives
     /// it (the frame 0.5 s back, itself with the frame 1 s back as history, and nothing
     /// earlier) instead of a recursion of unbounded depth, whose history BEVs training never
-    /// showed the network (the v6 learner stopped and started every 0.5 s in a period-two
+    /// showed the network (the v6 learner stopped and started every second in a period-two
     /// cycle of the recursion).
     ///
     /// # Shapes
