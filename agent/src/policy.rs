@@ -130,7 +130,7 @@ pub enum StepError {
 #[derive(Debug, Clone)]
 struct ChainLinks {
     /// `[1, Q, C]` the step's BEV without history (training's "deep" BEV): the history of the
-    /// later step's context BEV.
+    /// later step's context BEV (not read for [`History::Recursive`] episodes).
     deep: Tensor<3>,
     /// `[1, Q, C]` the step's BEV attending to the deep BEV before it (training's "context"
     /// BEV; with [`History::Recursive`], the BEV the step planned from): the history the later
