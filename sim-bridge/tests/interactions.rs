@@ -2,7 +2,8 @@
 //! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
 //! and y = -5.25): a follower keeps off an ego that pokes into its lane and creeps past one that
 //! has stood a while when there is room, the expert does not speed up while its heading is off
-//! its route, and it does not wait for a car that ran into its rear. And on `maps/lane_add.xodr`
+//! its route, and it does not wait for a car that ran into its rear; an ego caught on a car
+//! at an angle scrapes past it, one that hits it head-on cannot drive into it. And on `maps/lane_add.xodr`
 //! (a lane that begins at x = 100): the expert waits for a gap to change lanes, then noses into
 //! a slow queue; traffic holds back for an ego that waits to change into its lane. And on
 //! `maps/signal_junction.xodr` (a light whose stop line is at x = 100): red and yellow hold the
@@ -225,6 +226,81 @@ fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
     let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
     let (gap, _) = view.obstacle.expect("the car ahead");
     assert!(gap > 0.0 && gap <= 3.0, "gap {gap}");
+}
+
+/// A world with one car standing on lane -1 at s = 130 and the ego caught on it: heading `yaw`
+/// (rad, towards the car's lane when positive) with the corner of its box that leads towards
+/// the car (front-left for a positive yaw) `depth` m inside the car's right side, `along` m
+/// ahead of the car's rear. Returns the world and the car's id.
+fn ego_caught_on_a_standing_car<'m>(
+    map: &'m Map,
+    route: &DenseRoute,
+    yaw: f64,
+    depth: f64,
+    along: f64,
+) -> (World<'m>, u32) {
+    let mut world = world_with_one_vehicle(map, route, ("1", -1), 130.0, 0.0);
+    let (car, _) = world.traffic.vehicles[0].pose(map);
+    let half = world.traffic.vehicles[0].half;
+    let corner = glam::DVec2::new(car.x - half.x + along, car.y - half.y + depth);
+    let ego_half = EgoParams::default().half_extent;
+    let centre = corner - glam::DVec2::from_angle(yaw).rotate(ego_half);
+    world.ego = Ego::new(EgoParams::default(), centre.extend(0.0), yaw);
+    let id = world.traffic.vehicles[0].id;
+    (world, id)
+}
+
+const PUSH: Control = Control {
+    steer: 0.0,
+    throttle: 0.5,
+    brake: 0.0,
+};
+
+#[test]
+fn an_ego_caught_at_an_angle_on_a_standing_car_scrapes_past_it() {
+    let map = road();
+    let route = outer_lane_route(&map);
+    let (mut world, car) = ego_caught_on_a_standing_car(&map, &route, 0.25, 0.3, 1.0);
+    let mut touched = false;
+    for _ in 0..200 {
+        touched |= world.step(PUSH).iter().any(|c| c.other_id == car);
+    }
+    let (car_centre, _) = world.traffic.vehicles[0].pose(&map);
+    let ego = world.ego_state();
+    assert!(touched, "the boxes touched");
+    assert!(
+        ego.position.x - ego.half_extent.x > car_centre.x,
+        "the ego slid past the car: its rear at x = {:.2}, the car's centre at {:.2}",
+        ego.position.x - ego.half_extent.x,
+        car_centre.x
+    );
+    assert!(ego.speed > 1.0, "and drives on ({:.2} m/s)", ego.speed);
+}
+
+#[test]
+fn an_ego_cannot_drive_into_a_car_it_hits_head_on() {
+    let map = road();
+    let route = outer_lane_route(&map);
+    // Square behind the car, 0.3 m into its rear, pushing on (the car creeps off).
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), 130.0, 0.0);
+    let (car, _) = world.traffic.vehicles[0].pose(&map);
+    let half = world.traffic.vehicles[0].half;
+    let ego_half = EgoParams::default().half_extent;
+    world.ego = Ego::new(
+        EgoParams::default(),
+        DVec3::new(car.x - half.x - ego_half.x + 0.3, car.y, 0.0),
+        0.0,
+    );
+    for _ in 0..200 {
+        world.step(PUSH);
+        let (car, _) = world.traffic.vehicles[0].pose(&map);
+        let depth = world.ego_state().position.x + ego_half.x - (car.x - half.x);
+        assert!(
+            depth <= 0.3 + 1e-9,
+            "the ego drove {depth:.3} m into the car at t = {:.2} s",
+            world.time
+        );
+    }
 }
 
 #[test]

@@ -14,7 +14,7 @@ pub mod state;
 pub mod traffic;
 
 use ego::{Ego, EgoParams};
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use lights::LightController;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -298,6 +298,7 @@ impl<'m> World<'m> {
 
     /// Apply `control` to the ego and advance everything by [`DT`]; returns the ego's contacts.
     pub fn step(&mut self, control: Control) -> Vec<CollisionEvent> {
+        let before = self.ego.position;
         self.ego.step(control, DT);
         self.settle_ego_height();
         let ego = self.ego.state();
@@ -334,26 +335,30 @@ impl<'m> World<'m> {
         for c in &mut self.crossers {
             c.step(DT);
         }
-        self.collisions()
+        self.collisions(before)
     }
 
-    /// Contacts of the ego box with every other actor. A contact with something ahead of the
-    /// ego (within 60 degrees of its heading) stops it, since it cannot drive through; one at
-    /// its side or rear does not, so a scrape does not pin the ego in place for as long as the
+    /// Contacts of the ego box with every other actor, and what they do to the ego's move this
+    /// tick (from `before`). The ego cannot drive into what it touches, but it slides along it:
+    /// the part of its move into the face it touches (the face of the other box it overlaps
+    /// least) is taken away, and its speed shrinks with its move. Head-on, that stops it; a
+    /// scrape along a side goes on; a corner caught on a car at an angle slides past, as
+    /// CARLA's physics would let it, where stopping it would pin the ego for as long as the
     /// boxes touch (the kinematic model has no physics to push them apart). A hit walker or
     /// cyclist leaves the scene.
-    fn collisions(&mut self) -> Vec<CollisionEvent> {
+    fn collisions(&mut self, before: DVec3) -> Vec<CollisionEvent> {
         let ego = self.ego.state();
         let ego_box = ego.obb();
+        let moved = (ego.position - before).truncate();
+        let mut kept = moved;
         let mut events = Vec::new();
-        let mut blocked = false;
         for a in self.actors() {
             let offset = a.obb.centre - ego_box.centre;
             if (a.z - ego.position.z).abs() > 3.0 || offset.length() > 8.0 {
                 continue;
             }
-            if a.obb.overlaps(&ego_box) {
-                blocked |= offset.dot(ego.forward()) > 0.5 * offset.length();
+            if let Some(face) = ego_box.contact_face_of(&a.obb) {
+                kept -= kept.dot(face).min(0.0) * face;
                 events.push(CollisionEvent {
                     other_id: a.id,
                     class: a.kind.collision_class(),
@@ -361,8 +366,10 @@ impl<'m> World<'m> {
                 });
             }
         }
-        if blocked {
-            self.ego.speed = 0.0;
+        if kept != moved {
+            self.ego.position = before + kept.extend(0.0);
+            self.ego.position.z = ego.position.z;
+            self.ego.speed *= kept.length() / moved.length();
         }
         let hit: Vec<u32> = events.iter().map(|e| e.other_id).collect();
         for c in self.crossers.iter_mut().filter(|c| hit.contains(&c.id)) {

@@ -37,6 +37,25 @@ impl Obb {
         true
     }
 
+    /// Where `other` overlaps this box, the normal of the face of `other` it overlaps least:
+    /// the unit axis of `other` pointing out of it towards this box's side, the face this box
+    /// can slide along. `None` when the boxes do not overlap.
+    pub fn contact_face_of(&self, other: &Obb) -> Option<DVec2> {
+        if !self.overlaps(other) {
+            return None;
+        }
+        let d = self.centre - other.centre;
+        let (a0, a1) = self.axes();
+        let (b0, b1) = other.axes();
+        let depth = |axis: DVec2| {
+            let ra = self.half.x * a0.dot(axis).abs() + self.half.y * a1.dot(axis).abs();
+            let rb = other.half.x * b0.dot(axis).abs() + other.half.y * b1.dot(axis).abs();
+            ra + rb - d.dot(axis).abs()
+        };
+        let axis = if depth(b0) <= depth(b1) { b0 } else { b1 };
+        Some(if d.dot(axis) >= 0.0 { axis } else { -axis })
+    }
+
     /// Plan distance from a point to the box (0 inside).
     pub fn distance_to(&self, p: DVec2) -> f64 {
         let (f, l) = self.axes();
