@@ -1,9 +1,10 @@
 //! The inference API: an [`SsrPolicy`] (network + controller settings on a device) steps
 //! episodes, each with its own [`EpisodeState`] (its recent BEVs and poses, PID windows, fusion
-//! history). A step plans from training's history chain ([`History::Chain`], the default): its
-//! BEV attends to the BEV of the step [`HISTORY_TICKS`] before it (0.5 s at 20 Hz), which
-//! attended to the first-frame BEV of the step [`HISTORY_TICKS`] before that, and to nothing
-//! older; checkpoints validated before the chain are served as they were
+//! history). A step plans from the history its network trained with: on [`History::Chain`]
+//! (the default) its BEV attends to the BEV of the step [`HISTORY_TICKS`] before it (0.5 s at
+//! 20 Hz), which attended to the first-frame BEV of the step [`HISTORY_TICKS`] before that, and
+//! to nothing older; on [`History::Link`] it attends to the first-frame BEV of the step
+//! [`HISTORY_TICKS`] before it; checkpoints validated before the chain are served as they were
 //! ([`History::Recursive`]: each step's BEV is the history of the step 0.5 s later).
 //! [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
 //!
@@ -125,16 +126,17 @@ pub enum StepError {
     },
 }
 
-/// The BEVs one step leaves for the step [`HISTORY_TICKS`] after it: the two links of
-/// training's history chain (`crate::train::data::Batch::deep_input`, `context_input`).
+/// The BEVs one step leaves for the step [`HISTORY_TICKS`] after it: the links of training's
+/// history (`crate::train::data::Batch::deep_input`, `context_input`).
 #[derive(Debug, Clone)]
 struct ChainLinks {
     /// `[1, Q, C]` the step's BEV without history (training's "deep" BEV): the history of the
-    /// later step's context BEV (not read for [`History::Recursive`] episodes).
+    /// later step's context BEV ([`History::Chain`]) or of the BEV it plans from
+    /// ([`History::Link`]); not read for [`History::Recursive`] episodes.
     deep: Tensor<3>,
     /// `[1, Q, C]` the step's BEV attending to the deep BEV before it (training's "context"
     /// BEV; with [`History::Recursive`], the BEV the step planned from): the history the later
-    /// step attends to.
+    /// step plans from (not read for [`History::Link`] episodes).
     context: Tensor<3>,
     /// The ego pose of the step.
     pose: Pose2,
@@ -404,7 +406,20 @@ impl SsrPolicy {
             });
             Tensor::cat(bevs.collect(), 0)
         };
-        let previous_bev = history(|links| &links.context);
+        // The history the BEV each step plans from attends to (zeros before there is one).
+        let previous_bev = Tensor::cat(
+            states
+                .iter()
+                .map(|s| match s.history() {
+                    Some(links) => match s.controller.config().history {
+                        History::Chain | History::Recursive => links.context.clone(),
+                        History::Link => links.deep.clone(),
+                    },
+                    None => Tensor::zeros([1, q, c], &self.device),
+                })
+                .collect(),
+            0,
+        );
         let command: Vec<f32> = inputs.iter().flat_map(|i| i.command.one_hot()).collect();
         let model_input = ModelInput {
             images: self.images(inputs),
@@ -432,26 +447,29 @@ impl SsrPolicy {
             command: float_tensor(command, [b, COMMANDS], &self.device),
         };
         let features = self.model.image_features(model_input.images.clone());
-        let chained = states
-            .iter()
-            .any(|s| s.has_previous_bev() && s.controller.config().history == History::Chain);
-        let chain = if chained {
-            let first_frames: Vec<SampleGeometry> =
-                inputs.iter().map(|input| geometry(input, None)).collect();
-            self.encode_chain(
-                features,
-                &model_input,
-                &first_frames,
-                &geometries,
-                history(|links| &links.deep),
-            )
-        } else {
-            // No episode on the chain has history yet: one pass gives each its BEV (the
-            // first-frame BEV, or a recursive episode's), which is every link it keeps.
-            let bev = self.model.encode_bev(features, &model_input);
-            [bev.clone(), bev.clone(), bev]
+        let with_history = |mode: History| {
+            states
+                .iter()
+                .any(|s| s.has_previous_bev() && s.controller.config().history == mode)
         };
-        let [deep, context, bev] = chain;
+        // Chained episodes keep the context BEV (the step's BEV attending to the deep one
+        // before it); chained and linked ones the deep BEV (the step's first-frame BEV).
+        let context_pass = with_history(History::Chain);
+        let deep_pass = context_pass || with_history(History::Link);
+        let mut passes = vec![(geometries.clone(), model_input.previous_bev.clone())];
+        if deep_pass {
+            let first_frames = inputs.iter().map(|input| geometry(input, None)).collect();
+            passes.push((first_frames, Tensor::zeros([b, q, c], &self.device)));
+        }
+        if context_pass {
+            passes.push((geometries, history(|links| &links.deep)));
+        }
+        let bevs = self.encode_passes(features, cameras, passes);
+        let bev = bevs[0].clone();
+        // Without a pass of its own, a link is the planning BEV: the first-frame BEV of an
+        // episode without history yet, or a recursive episode's.
+        let deep = bevs.get(1).unwrap_or(&bev).clone();
+        let context = bevs.get(2).unwrap_or(&bev).clone();
         let (scene, head) = self.model.plan(bev.clone(), &model_input);
         let output = ModelOutput { bev, scene, head };
 
@@ -549,7 +567,7 @@ impl SsrPolicy {
             }
             let context = match state.controller.config().history {
                 History::Chain => &context,
-                History::Recursive => &output.bev,
+                History::Recursive | History::Link => &output.bev,
             };
             state.recent.push_back(ChainLinks {
                 deep: deep.clone().narrow(0, i, 1),
@@ -569,55 +587,46 @@ impl SsrPolicy {
 }
 
 impl SsrPolicy {
-    /// The three BEVs of a step with history, in one pass of 3B samples: its first-frame BEV
-    /// ("deep"), its BEV attending to the deep BEV of the step [`HISTORY_TICKS`] before
-    /// ("context"), and the BEV it plans from, attending to that step's context BEV (in
-    /// `input.previous_bev`). So the BEV the head reads has the history chain training gives
-    /// it (the frame 0.5 s back, itself with the frame 1 s back as history, and nothing
-    /// earlier) instead of a recursion of unbounded depth, whose history BEVs training never
-    /// showed the network (the v6 learner stopped and started every second in a period-two
-    /// cycle of the recursion).
+    /// The BEVs of the current frames under several histories, in one pass of `passes.len()`
+    /// times B samples: each pass is B geometries (the ego motion since the history's frame,
+    /// none for a first-frame BEV) and the `[B, Q, C]` history BEVs they attend to. A chained
+    /// step needs three (the BEV it plans from, attending to the context BEV 0.5 s back; its
+    /// first-frame "deep" BEV; its context BEV, attending to the deep BEV 0.5 s back), a linked
+    /// one two, a recursive one one: so the BEV the head reads has the history training gave
+    /// it (`crate::train::data::Batch`) instead of a recursion of unbounded depth, whose
+    /// history BEVs training never showed the network (the v6 learner stopped and started
+    /// every second in a period-two cycle of the recursion).
     ///
     /// # Shapes
     /// - features: `[B * cameras, C, h, w]` (the backbone's)
-    /// - deep_history: `[B, Q, C]`
-    /// - output: three `[B, Q, C]`
-    fn encode_chain(
+    /// - output: one `[B, Q, C]` a pass, in the order given
+    fn encode_passes(
         &self,
         features: Tensor<4>,
-        input: &ModelInput,
-        first_frames: &[SampleGeometry],
-        with_history: &[SampleGeometry],
-        deep_history: Tensor<3>,
-    ) -> [Tensor<3>; 3] {
-        let b = first_frames.len();
-        let features = self.model.bev.image_features(features, input.cameras);
-        let tripled = ImageFeatures {
-            values: Tensor::cat(vec![features.values.clone(); 3], 0),
+        cameras: usize,
+        passes: Vec<(Vec<SampleGeometry>, Tensor<3>)>,
+    ) -> Vec<Tensor<3>> {
+        let (count, b) = (passes.len(), passes[0].0.len());
+        let features = self.model.bev.image_features(features, cameras);
+        let repeated = ImageFeatures {
+            values: Tensor::cat(vec![features.values.clone(); count], 0),
             ..features
         };
-        let geometries: Vec<SampleGeometry> = first_frames
-            .iter()
-            .chain(with_history)
-            .chain(with_history)
-            .cloned()
-            .collect();
+        let (geometries, previous): (Vec<Vec<SampleGeometry>>, Vec<Tensor<3>>) =
+            passes.into_iter().unzip();
         let geometry = GeometryTensors::batch(
-            &geometries,
+            &geometries.concat(),
             &self.config.bev.grid,
             self.config.bev.pillar_heights.len(),
             &self.device,
         );
-        let previous = Tensor::cat(
-            vec![
-                Tensor::zeros(deep_history.dims(), &self.device),
-                deep_history,
-                input.previous_bev.clone(),
-            ],
-            0,
-        );
-        let bevs = self.model.bev.forward(&tripled, &geometry, previous);
-        [0, 1, 2].map(|k| bevs.clone().narrow(0, k * b, b))
+        let bevs = self
+            .model
+            .bev
+            .forward(&repeated, &geometry, Tensor::cat(previous, 0));
+        (0..count)
+            .map(|k| bevs.clone().narrow(0, k * b, b))
+            .collect()
     }
 }
 

@@ -93,11 +93,65 @@ fn a_step_sees_the_history_chain_training_gives_it_and_nothing_older() {
         reference, chain_differs,
         "the frame 1 s back is part of the chain"
     );
+    // One link: the frame 0.5 s back, on its own.
+    let link = [t - HISTORY_TICKS as u32, t];
+    let link_reference = plan_at_t(History::Link, &|_| 1);
+    assert_eq!(
+        link_reference,
+        plan_at_t(History::Link, &|tick| if link.contains(&tick) {
+            1
+        } else {
+            2
+        }),
+        "frames outside the link changed the plan"
+    );
+    assert_ne!(
+        link_reference,
+        plan_at_t(History::Link, &|tick| if tick == link[0] { 2 } else { 1 }),
+        "the frame 0.5 s back is the link"
+    );
     // The recursion of checkpoints validated before the chain reaches back further.
     assert_ne!(
         plan_at_t(History::Recursive, &|_| 1),
         plan_at_t(History::Recursive, &outside_differ)
     );
+}
+
+#[test]
+fn episodes_of_every_history_mode_step_in_one_batch_as_alone() {
+    // A batch runs the passes its most demanding episode needs; each episode still plans from
+    // its own history.
+    let policy = policy();
+    let rig = rig(1, 900, 256);
+    let modes = [History::Link, History::Chain, History::Recursive];
+    let episode = |history| {
+        policy.new_episode_with(ControlConfig {
+            history,
+            ..ControlConfig::default()
+        })
+    };
+    let mut alone: Vec<_> = modes.iter().map(|&m| episode(m)).collect();
+    let mut together: Vec<_> = modes.iter().map(|&m| episode(m)).collect();
+    for tick in 0..=2 * HISTORY_TICKS as u32 + 1 {
+        let inputs: Vec<_> = (0..modes.len())
+            .map(|i| step_input(&rig, tick, tick % 3 + i as u32))
+            .collect();
+        let expected: Vec<_> = alone
+            .iter_mut()
+            .zip(&inputs)
+            .map(|(e, i)| policy.step(e, i).unwrap())
+            .collect();
+        let mut refs: Vec<_> = together.iter_mut().collect();
+        let got = policy.step_batch(&mut refs, &inputs).unwrap();
+        for ((a, b), mode) in expected.iter().zip(&got).zip(modes) {
+            for (wa, wb) in a.waypoints.iter().zip(&b.waypoints) {
+                assert!(
+                    (wa[0] - wb[0]).abs() < 1e-4 && (wa[1] - wb[1]).abs() < 1e-4,
+                    "{mode:?} at tick {tick}: {wa:?} vs {wb:?}"
+                );
+            }
+        }
+    }
 }
 
 #[test]

@@ -11,6 +11,7 @@ use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use ssr_agent::checkpoint;
+use ssr_agent::control::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::float_values;
 use ssr_agent::train::augment::Photometric;
@@ -360,9 +361,11 @@ fn a_dropped_history_trains_the_first_frame_path() {
     let model = config.model.init(&device);
     let waypoints = |drop_history: bool, history_value: f32| {
         let batch = set
-            .batch(&with_history, &config.model, |_| SampleDraw {
-                photometric: None,
-                drop_history,
+            .batch(&with_history, &config.model, History::Chain, |_| {
+                SampleDraw {
+                    photometric: None,
+                    drop_history,
+                }
             })
             .unwrap();
         let shape = [2, config.model.bev.grid.cells(), config.model.channels];
@@ -398,6 +401,42 @@ fn a_dropped_history_trains_the_first_frame_path() {
 }
 
 #[test]
+fn a_link_trains_without_the_frame_1_s_back_and_its_checkpoints_are_served_so() {
+    let _rng = device_rng();
+    let tmp = Scratch::new();
+    let data = tmp.fixture("link");
+    let mut config = config(2);
+    config.history = History::Link;
+    let set = open(&data, &config);
+    let deep: Vec<_> = set
+        .train
+        .iter()
+        .filter(|s| s.frame >= 2)
+        .take(2)
+        .copied()
+        .collect();
+    let deep_frames = |history| {
+        let batch = set
+            .batch(&deep, &config.model, history, |_| SampleDraw::default())
+            .unwrap();
+        let images = batch.deep_input(&config.model, &Device::flex()).images;
+        float_values(images.abs().sum())[0]
+    };
+    assert!(deep_frames(History::Chain) > 0.0, "the chain reads it");
+    assert_eq!(deep_frames(History::Link), 0.0, "the link does not");
+
+    let out = tmp.dir("link-run");
+    let summary = train(config.clone(), options(&data, &out), set).unwrap();
+    let info = checkpoint::inspect(&summary.checkpoint).unwrap();
+    let control = checkpoint::control_config(&info).unwrap();
+    assert_eq!(control.history, History::Link);
+
+    config.history = History::Recursive;
+    let error = config.validate().unwrap_err();
+    assert!(error.contains("history must be chain or link"), "{error}");
+}
+
+#[test]
 fn labels_come_from_the_plan_or_the_driven_path_and_datasets_without_plans_are_refused() {
     let tmp = Scratch::new();
     let data = tmp.fixture("labels");
@@ -405,7 +444,9 @@ fn labels_come_from_the_plan_or_the_driven_path_and_datasets_without_plans_are_r
     let lateral = |config: &TrainConfig| {
         let set = open(&data, config);
         let batch = set
-            .batch(&set.train[..1], &config.model, |_| SampleDraw::default())
+            .batch(&set.train[..1], &config.model, History::Chain, |_| {
+                SampleDraw::default()
+            })
             .unwrap();
         batch.waypoints[1]
     };

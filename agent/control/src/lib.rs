@@ -107,11 +107,15 @@ pub struct ControlConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum History {
-    /// Training's chain: the step's BEV attends to the BEV of the frame 0.5 s back, which
-    /// attended to the first-frame BEV of the frame 1 s back, and nothing older (three BEV
-    /// passes a step).
+    /// Two links: the step's BEV attends to the BEV of the frame 0.5 s back, which attended to
+    /// the first-frame BEV of the frame 1 s back, and nothing older (three BEV passes a step;
+    /// checkpoints trained with `--history chain`).
     #[default]
     Chain,
+    /// One link: the step's BEV attends to the first-frame BEV of the frame 0.5 s back, which
+    /// attended to nothing (two BEV passes a step; checkpoints trained with
+    /// `--history link`).
+    Link,
     /// The BEV each step plans from is the history of the step 0.5 s later: a recursion of
     /// unbounded depth (one BEV pass a step).
     Recursive,
@@ -130,9 +134,10 @@ impl std::str::FromStr for History {
     fn from_str(text: &str) -> Result<Self, Self::Err> {
         match text {
             "chain" => Ok(History::Chain),
+            "link" => Ok(History::Link),
             "recursive" => Ok(History::Recursive),
             other => Err(format!(
-                "unknown history mode '{other}' (chain or recursive)"
+                "unknown history mode '{other}' (chain, link or recursive)"
             )),
         }
     }

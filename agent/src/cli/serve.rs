@@ -86,10 +86,12 @@ pub struct ServeArgs {
     /// (`ssr-agent control`)].
     #[arg(long, env = "SSR_AGENT_SAFETY_STOP")]
     safety_stop: Option<bool>,
-    /// How the network gets its history: `chain` (training's: the frame 0.5 s back with the
-    /// frame 1 s back as its history; three BEV passes a step) or `recursive` (each step's
-    /// BEV is the history of the step 0.5 s later; one pass) [default: the checkpoint's
-    /// setting (`ssr-agent control`); `recursive` for checkpoints from before the chain].
+    /// How the network gets its history: `chain` (the frame 0.5 s back with the frame 1 s back
+    /// as its history; three BEV passes a step), `link` (the frame 0.5 s back on its own; two
+    /// passes) or `recursive` (each step's BEV is the history of the step 0.5 s later; one
+    /// pass). Serve a checkpoint with the history it was trained with (`ssr-agent train
+    /// --history`) [default: the checkpoint's setting (`ssr-agent control`); `recursive` for
+    /// checkpoints from before the chain].
     #[arg(long, env = "SSR_AGENT_HISTORY")]
     history: Option<History>,
     /// Also shut down (draining as on SIGTERM) when standard input reaches its end: a parent

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use ssr_agent::checkpoint;
+use ssr_agent::control::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::train::config::{Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, TrainingData};
@@ -72,6 +73,12 @@ pub struct TrainArgs {
     /// episode's first tick, so the network cannot just repeat what the expert was doing.
     #[arg(long, default_value_t = 0.0)]
     history_dropout: f64,
+    /// The history the network trains with, written into its checkpoints as their serving
+    /// setting: `chain` (the frame 0.5 s back attending to the frame 1 s back; served with
+    /// three BEV passes a step) or `link` (the frame 0.5 s back on its own; two passes, about
+    /// a third less time a step, and a training step without the frame 1 s back).
+    #[arg(long, default_value = "chain")]
+    history: History,
     /// Waypoint labels: the expert's plan from each frame's state, or the positions it went on
     /// to drive (perturbations included).
     #[arg(long, value_enum, default_value = "plan")]
@@ -175,6 +182,7 @@ impl TrainArgs {
         config.clip_norm = self.clip_norm;
         config.augment = self.augment;
         config.history_dropout = self.history_dropout;
+        config.history = self.history;
         config.labels = self.labels;
         config.balanced = !self.uniform_sampling;
         config.init = self.init.clone();

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::data::Labels;
 use super::loss::LossWeights;
+use crate::control::History;
 use crate::model::config::SsrConfig;
 
 /// How the learning rate decays after the warm-up.
@@ -55,6 +56,11 @@ pub struct TrainConfig {
     /// expert was just doing from the history instead of the scene); 0 = never.
     #[serde(default)]
     pub history_dropout: f64,
+    /// The history the network trains with, and is then served with: the frame 0.5 s back
+    /// attending to the frame 1 s back ([`History::Chain`], three BEV passes a sample) or
+    /// encoded on its own ([`History::Link`], two).
+    #[serde(default)]
+    pub history: History,
     /// Where the waypoint labels come from (runs from before the switch: driven positions).
     #[serde(default)]
     pub labels: Labels,
@@ -95,6 +101,7 @@ impl TrainConfig {
             future_bev: true,
             augment: 1.0,
             history_dropout: 0.0,
+            history: History::Chain,
             labels: Labels::Plan,
             balanced: true,
             init: None,
@@ -143,6 +150,9 @@ impl TrainConfig {
                 "history_dropout must be in [0, 1], got {}",
                 self.history_dropout
             ));
+        }
+        if self.history == History::Recursive {
+            return Err("history must be chain or link: training gives no recursion".into());
         }
         if !(0.0..1.0).contains(&self.validation_fraction) {
             return Err(format!(

@@ -29,6 +29,7 @@ use ssrdrive_proto::dataset::{
 
 use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
+use crate::control::History;
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
 use crate::model::config::SsrConfig;
@@ -286,11 +287,13 @@ impl TrainingData {
 
     /// Reads and prepares a batch. `draw` gives each sample's variation: its photometric jitter
     /// (the same for its history, current and future frames, so they still show one scene) and
-    /// whether its history is dropped.
+    /// whether its history is dropped. The frame 1 s back (the deep frame) is read only for
+    /// [`History::Chain`].
     pub fn batch(
         &self,
         samples: &[SampleRef],
         config: &SsrConfig,
+        history_mode: History,
         mut draw: impl FnMut(usize) -> SampleDraw,
     ) -> Result<Batch, DatasetError> {
         let rig = self.rig();
@@ -318,7 +321,9 @@ impl TrainingData {
             let history = (!drop_history)
                 .then(|| self.record(sample, -back))
                 .flatten();
-            let deep = history.and_then(|_| self.record(sample, -2 * back));
+            let deep = history
+                .filter(|_| history_mode == History::Chain)
+                .and_then(|_| self.record(sample, -2 * back));
             let jitter = photometric.as_ref();
             let blank = batch.cameras * 3 * config.image_height * config.image_width;
             self.images(sample, now, config, jitter, &mut batch.current_images)?;

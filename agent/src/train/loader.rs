@@ -74,7 +74,7 @@ impl BatchLoader {
                         .take(batch_size)
                         .copied()
                         .collect();
-                    let batch = data.batch(&samples, &config.model, |i| {
+                    let batch = data.batch(&samples, &config.model, config.history, |i| {
                         draw(&config, sample_seed(seed, step, i))
                     });
                     let failed = batch.is_err();

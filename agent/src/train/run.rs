@@ -38,7 +38,7 @@ use super::occupancy::confusion;
 use super::resume::{Progress, load_model, read_progress, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
-use crate::control::ControlConfig;
+use crate::control::{ControlConfig, History};
 use crate::model::config::SsrConfig;
 use crate::model::hazard::predicted;
 use crate::model::tcp_head::HeadOutput;
@@ -430,9 +430,9 @@ impl Trainer {
         let p = config.model.head.pred_len;
         let mut sums = ValidationSums::default();
         for chunk in samples.chunks(config.batch_size) {
-            let batch = self
-                .data
-                .batch(chunk, &config.model, |_| SampleDraw::default())?;
+            let batch = self.data.batch(chunk, &config.model, config.history, |_| {
+                SampleDraw::default()
+            })?;
             let (terms, head, outputs) =
                 batch_losses(&model, &model, &batch, config, device, device);
             let hazards = outputs
@@ -483,7 +483,11 @@ impl Trainer {
                 (checkpoint::RIG_KEY, rig),
                 (
                     checkpoint::CONTROL_KEY,
-                    serde_json::to_string(&ControlConfig::default()).expect("configs serialise"),
+                    serde_json::to_string(&ControlConfig {
+                        history: self.config.history,
+                        ..ControlConfig::default()
+                    })
+                    .expect("configs serialise"),
                 ),
                 (
                     checkpoint::TRAINING_KEY,
@@ -538,9 +542,16 @@ fn batch_losses(
     device: &Device,
 ) -> (Losses, HeadOutput, AuxiliaryOutputs) {
     let b = batch.size;
-    let deep = batch.deep_input(&config.model, inner);
-    let deep_bev =
-        context_model.encode_bev(context_model.image_features(deep.images.clone()), &deep);
+    let deep_bev = match config.history {
+        History::Link => Tensor::zeros(
+            [b, config.model.bev.grid.cells(), config.model.channels],
+            inner,
+        ),
+        _ => {
+            let deep = batch.deep_input(&config.model, inner);
+            context_model.encode_bev(context_model.image_features(deep.images.clone()), &deep)
+        }
+    };
     let context = batch.context_input(&config.model, deep_bev, config.future_bev, inner);
     let context_bev = context_model.encode_bev(
         context_model.image_features(context.images.clone()),
