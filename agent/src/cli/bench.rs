@@ -224,9 +224,11 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
                 .collect(),
         };
         // Timed in the steady state, where the episode has its history (the first steps of an
-        // episode encode one BEV; later ones three on training's chain, one on the recursion).
+        // episode encode one BEV; later ones three on the chain, two on the link, one on the
+        // recursion).
         for (history, row) in [
             (History::Chain, "policy_step_900x256_ms"),
+            (History::Link, "policy_step_900x256_link_ms"),
             (History::Recursive, "policy_step_900x256_recursive_ms"),
         ] {
             let mut episode = policy.new_episode_with(ControlConfig {
