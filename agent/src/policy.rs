@@ -26,7 +26,7 @@ use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, ImageFeatures, 
 use crate::model::config::SsrConfig;
 use crate::model::hazard::Hazard;
 use crate::model::occupancy::OCCUPANCY_CHANNELS;
-use crate::model::{ModelInput, ModelOutput, SsrModel, float_tensor, float_values};
+use crate::model::{ModelOutput, Navigation, SsrModel, float_tensor, float_values};
 use crate::pose::{EgoMotion, Pose2};
 
 /// Largest target-point distance accepted, metres.
@@ -421,16 +421,7 @@ impl SsrPolicy {
             0,
         );
         let command: Vec<f32> = inputs.iter().flat_map(|i| i.command.one_hot()).collect();
-        let model_input = ModelInput {
-            images: self.images(inputs),
-            cameras,
-            geometry: GeometryTensors::batch(
-                &geometries,
-                &self.config.bev.grid,
-                heights.len(),
-                &self.device,
-            ),
-            previous_bev,
+        let navigation = Navigation {
             speed: float_tensor(
                 inputs
                     .iter()
@@ -446,7 +437,7 @@ impl SsrPolicy {
             ),
             command: float_tensor(command, [b, COMMANDS], &self.device),
         };
-        let features = self.model.image_features(model_input.images.clone());
+        let features = self.model.image_features(self.images(inputs));
         let with_history = |mode: History| {
             states
                 .iter()
@@ -456,7 +447,7 @@ impl SsrPolicy {
         // before it); chained and linked ones the deep BEV (the step's first-frame BEV).
         let context_pass = with_history(History::Chain);
         let deep_pass = context_pass || with_history(History::Link);
-        let mut passes = vec![(geometries.clone(), model_input.previous_bev.clone())];
+        let mut passes = vec![(geometries.clone(), previous_bev)];
         if deep_pass {
             let first_frames = inputs.iter().map(|input| geometry(input, None)).collect();
             passes.push((first_frames, Tensor::zeros([b, q, c], &self.device)));
@@ -470,7 +461,7 @@ impl SsrPolicy {
         // episode without history yet, or a recursive episode's.
         let deep = bevs.get(1).unwrap_or(&bev).clone();
         let context = bevs.get(2).unwrap_or(&bev).clone();
-        let (scene, head) = self.model.plan(bev.clone(), &model_input);
+        let (scene, head) = self.model.plan(bev.clone(), &navigation);
         let output = ModelOutput { bev, scene, head };
 
         let pred_len = self.config.head.pred_len;

@@ -13,7 +13,7 @@ use ssr_agent::control::{ControlConfig, History};
 use ssr_agent::device::Backend;
 use ssr_agent::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::{ModelInput, float_tensor};
+use ssr_agent::model::{ModelInput, Navigation, float_tensor};
 use ssr_agent::policy::{SsrPolicy, StepInput};
 use ssr_agent::pose::{EgoMotion, Pose2};
 use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
@@ -104,9 +104,11 @@ fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput 
             Distribution::Normal(0.0, 1.0),
             device,
         ),
-        speed: Tensor::full([batch, 1], 6.0, device),
-        target_point: float_tensor([12.0, 1.0].repeat(batch), [batch, 2], device),
-        command: float_tensor(command, [batch, COMMANDS], device),
+        navigation: Navigation {
+            speed: Tensor::full([batch, 1], 6.0, device),
+            target_point: float_tensor([12.0, 1.0].repeat(batch), [batch, 2], device),
+            command: float_tensor(command, [batch, COMMANDS], device),
+        },
     }
 }
 
@@ -150,8 +152,8 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
     let scene = model.stl.forward(
         bev.clone(),
         model.bev.positions(),
-        input.command.clone(),
-        input.target_point.clone(),
+        input.navigation.command.clone(),
+        input.navigation.target_point.clone(),
     );
     let mut rows = vec![
         ("params", model.num_params() as f64),
@@ -182,8 +184,8 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
                 model.stl.forward(
                     bev.clone(),
                     model.bev.positions(),
-                    input.command.clone(),
-                    input.target_point.clone(),
+                    input.navigation.command.clone(),
+                    input.navigation.target_point.clone(),
                 );
                 sync(device);
             }),
@@ -193,9 +195,9 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
             time_ms(w, i, || {
                 model.head.forward(
                     scene.tokens.clone(),
-                    input.speed.clone(),
-                    input.target_point.clone(),
-                    input.command.clone(),
+                    input.navigation.speed.clone(),
+                    input.navigation.target_point.clone(),
+                    input.navigation.command.clone(),
                 );
                 sync(device);
             }),

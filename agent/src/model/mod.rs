@@ -45,6 +45,13 @@ pub struct ModelInput {
     pub geometry: GeometryTensors,
     /// `[B, Q, C]`; ignored (may be zeros) where `geometry.has_previous` is 0.
     pub previous_bev: Tensor<3>,
+    /// What the planner reads besides the BEV.
+    pub navigation: Navigation,
+}
+
+/// The planner's inputs besides the BEV, for a batch of B episodes.
+#[derive(Debug, Clone)]
+pub struct Navigation {
     /// `[B, 1]` m/s.
     pub speed: Tensor<2>,
     /// `[B, 2]` ego frame, m.
@@ -135,7 +142,7 @@ impl SsrModel {
     }
 
     /// STL and the head over a BEV.
-    pub fn plan(&self, bev: Tensor<3>, input: &ModelInput) -> (SceneTokens, HeadOutput) {
+    pub fn plan(&self, bev: Tensor<3>, input: &Navigation) -> (SceneTokens, HeadOutput) {
         let scene = self.stl.forward(
             bev,
             self.bev.positions(),
@@ -154,7 +161,7 @@ impl SsrModel {
     /// One tick: backbone -> BEV -> STL -> head.
     pub fn forward(&self, input: &ModelInput) -> ModelOutput {
         let bev = self.encode_bev(self.image_features(input.images.clone()), input);
-        let (scene, head) = self.plan(bev.clone(), input);
+        let (scene, head) = self.plan(bev.clone(), &input.navigation);
         ModelOutput { bev, scene, head }
     }
 

@@ -34,7 +34,7 @@ use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
 use crate::model::config::SsrConfig;
 use crate::model::hazard::Hazard;
-use crate::model::{ModelInput, float_tensor};
+use crate::model::{ModelInput, Navigation, float_tensor};
 use crate::pose::{EgoMotion, Pose2};
 
 /// Seconds from a frame to the future frame whose BEV the FFP predicts (SSR's code: 1.5 s).
@@ -531,9 +531,11 @@ impl Batch {
                 device,
             ),
             previous_bev,
-            speed: repeated(&self.shown_speed, 1),
-            target_point: repeated(&self.target_point, 2),
-            command: repeated(&self.command, COMMANDS),
+            navigation: Navigation {
+                speed: repeated(&self.shown_speed, 1),
+                target_point: repeated(&self.target_point, 2),
+                command: repeated(&self.command, COMMANDS),
+            },
         }
     }
 

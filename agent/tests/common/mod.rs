@@ -6,7 +6,7 @@ pub mod fixture;
 use burn::tensor::{Device, Distribution, Tensor};
 use ssr_agent::model::bev::{GeometryTensors, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::{ModelInput, float_tensor};
+use ssr_agent::model::{ModelInput, Navigation, float_tensor};
 use ssr_agent::policy::StepInput;
 use ssr_agent::pose::{EgoMotion, Pose2};
 use ssrdrive_proto::camera::{CameraSpec, Rig};
@@ -112,13 +112,15 @@ pub fn model_input(
             Distribution::Normal(0.0, 1.0),
             device,
         ),
-        speed: Tensor::full([batch, 1], 5.0, device),
-        target_point: float_tensor(
-            (0..batch).flat_map(|b| [10.0 + b as f32, 2.0]).collect(),
-            [batch, 2],
-            device,
-        ),
-        command: float_tensor(command, [batch, COMMANDS], device),
+        navigation: Navigation {
+            speed: Tensor::full([batch, 1], 5.0, device),
+            target_point: float_tensor(
+                (0..batch).flat_map(|b| [10.0 + b as f32, 2.0]).collect(),
+                [batch, 2],
+                device,
+            ),
+            command: float_tensor(command, [batch, COMMANDS], device),
+        },
     }
 }
 
