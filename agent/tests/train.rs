@@ -195,7 +195,7 @@ fn validation_situations_follow_the_command_start_ups_and_brake_causes() {
 }
 
 #[test]
-fn balanced_sampling_favours_starts_slowing_light_waits_stop_signs_turns_recoveries_and_the_learners_states()
+fn balanced_sampling_favours_starts_slowing_light_waits_stop_signs_walkers_turns_recoveries_and_the_learners_states()
  {
     use ssr_agent::train::data::sampling_weight;
     use ssrdrive_proto::dataset::{BrakeReason, FrameRecord};
@@ -234,6 +234,12 @@ fn balanced_sampling_favours_starts_slowing_light_waits_stop_signs_turns_recover
     assert!(
         sampling_weight(&for_sign, false) > starting,
         "slowing for a stop sign"
+    );
+    let mut for_walker = record(2.0, 0.0, 1.0, 4, false);
+    for_walker.brake_reason = Some(BrakeReason::Walker);
+    assert!(
+        sampling_weight(&for_walker, false) > starting,
+        "braking for a walker"
     );
     assert!(frame(8.0, 0.5, 0.0, 1, false) > cruising, "a turn");
     assert!(

@@ -50,22 +50,29 @@ pub fn occupancy_targets(actors: &[ActorRecord], grid: &BevGrid) -> Vec<f32> {
 }
 
 /// Balanced binary cross-entropy of `logits` to `targets` (both `[B, Q, 2]`) over the samples
-/// whose `recorded` entry (`[B]`) is 1: the mean over occupied cells plus the mean over empty
-/// ones, halved, so the few occupied cells weigh as much as the many empty ones. 0 when no
-/// sample in the batch has actors recorded.
+/// whose `recorded` entry (`[B]`) is 1, balanced per channel: the mean of the per-channel means
+/// over occupied cells and over empty ones (those the batch has), so a channel's few occupied
+/// cells weigh as much as its many empty ones, and the walkers' few cells as much as the
+/// vehicles' many (pooled over channels, the walker cells were a small part of the occupied
+/// half: the head found walkers with 61 % balanced accuracy against 84 % for vehicles). 0 when
+/// no sample in the batch has actors recorded.
 pub fn occupancy_loss(logits: Tensor<3>, targets: Tensor<3>, recorded: Tensor<1>) -> Tensor<1> {
-    let [b, _, _] = logits.dims();
+    let [b, q, k] = logits.dims();
     // log(1 + e^x) - y x, written to stay finite for large |x|.
     let softplus = relu(logits.clone()) + logits.clone().abs().neg().exp().log1p();
-    let per_cell = softplus - logits * targets.clone();
+    let per_cell = (softplus - logits * targets.clone()).reshape([b * q, k]);
     let recorded: Tensor<3> = recorded.reshape([b, 1, 1]);
-    let occupied = targets.clone() * recorded.clone();
-    let empty = (targets.neg() + 1.0) * recorded;
-    let mean_over = |mask: Tensor<3>| {
-        let count = mask.clone().sum().clamp_min(1.0);
-        (per_cell.clone() * mask).sum() / count
+    let occupied = (targets.clone() * recorded.clone()).reshape([b * q, k]);
+    let empty = ((targets.neg() + 1.0) * recorded).reshape([b * q, k]);
+    // Per channel: the summed loss over the mask's cells, and whether it has any (0 or 1).
+    let per_channel = |mask: Tensor<2>| {
+        let count = mask.clone().sum_dim(0);
+        let mean = (per_cell.clone() * mask).sum_dim(0) / count.clone().clamp_min(1.0);
+        (mean.sum(), count.clamp_max(1.0).sum())
     };
-    (mean_over(occupied) + mean_over(empty)).mul_scalar(0.5)
+    let (occupied_loss, occupied_terms) = per_channel(occupied);
+    let (empty_loss, empty_terms) = per_channel(empty);
+    (occupied_loss + empty_loss) / (occupied_terms + empty_terms).clamp_min(1.0)
 }
 
 /// Targets `[B, Q, 2]` and the recorded mask `[B]` of a batch's frames (`None`: the frame
@@ -217,7 +224,7 @@ mod tests {
     }
 
     #[test]
-    fn the_loss_balances_occupied_and_empty_cells_and_skips_unrecorded_frames() {
+    fn the_loss_balances_occupied_and_empty_cells_per_channel_and_skips_unrecorded_frames() {
         let device = Device::flex();
         let grid = grid();
         let car = actor(ActorClass::Vehicle, [10.0, 0.0], 0.0, [2.4, 1.0]);
@@ -252,6 +259,23 @@ mod tests {
         // Everything called occupied: chance.
         let all = confusion(&vec![1.0; logits.len()], &labels, &[1.0, 0.0]);
         assert_eq!(all[0].balanced_accuracy(), Some(0.5));
+        // Per channel: a walker's one cell weighs as much as a car's many. Everything right but
+        // the walker's cell, 8 nats off: a quarter of that (four terms: occupied and empty
+        // cells of each channel), where pooling the channels' occupied cells would dilute it.
+        let walker = actor(ActorClass::Walker, [6.0, 3.0], 0.0, [0.25, 0.25]);
+        let (targets, recorded) = batch_targets(&[Some(vec![car, walker])], &grid, &device);
+        let labels = float_values(targets.clone());
+        let walker_cell = grid.cell_of([6.0, 3.0]).unwrap() * 2 + 1;
+        let logits: Vec<f32> = (0..labels.len())
+            .map(|i| match (i == walker_cell, labels[i] > 0.5) {
+                (true, _) => -8.0,
+                (false, true) => 30.0,
+                (false, false) => -30.0,
+            })
+            .collect();
+        let missed = float_tensor(logits, [1, q, 2], &device);
+        let loss = float_values(occupancy_loss(missed, targets, recorded))[0];
+        assert!((loss - 8.0 / 4.0).abs() < 1e-2, "{loss}");
         // Nothing recorded: no loss.
         let (none, nothing) = batch_targets(&[None], &grid, &device);
         let zeros = float_tensor(vec![3.0; q * 2], [1, q, 2], &device);
