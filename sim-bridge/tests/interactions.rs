@@ -2,7 +2,8 @@
 //! `maps/lane_drop.xodr` (road 1: lanes -1 and -2 eastbound, 3.5 m wide, centres at y = -1.75
 //! and y = -5.25): a follower keeps off an ego that pokes into its lane and creeps past one that
 //! has stood a while when there is room, the expert does not speed up while its heading is off
-//! its route, and it does not wait for a car that ran into its rear; an ego caught on a car
+//! its route, and it does not wait for a car that ran into its rear; it keeps its speed past a
+//! walker on the sidewalk and waits for one crossing; an ego caught on a car
 //! at an angle scrapes past it, one that hits it head-on cannot drive into it. And on `maps/lane_add.xodr`
 //! (a lane that begins at x = 100): the expert waits for a gap to change lanes, then noses into
 //! a slow queue; traffic holds back for an ego that waits to change into its lane. And on
@@ -13,13 +14,16 @@
 //! traffic gives it, and traffic does not enter a junction it cannot leave. And on
 //! `maps/cut_connector.xodr`: connectors conflict by their whole path through the junction.
 
-use glam::DVec3;
+use std::f64::consts::FRAC_PI_2;
+
+use glam::{DVec2, DVec3};
 use sim_bridge::expert::hazards::{self, HazardMemory};
 use sim_bridge::map::{LaneIdx, Map, MapOptions};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::towngen::{self, TownStyle};
 use sim_bridge::world::ego::{Ego, EgoParams};
-use sim_bridge::world::state::LightState;
+use sim_bridge::world::scenarios::Crosser;
+use sim_bridge::world::state::{ActorKind, LightState};
 use sim_bridge::world::traffic::Vehicle;
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::control::Control;
@@ -226,6 +230,49 @@ fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
     let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
     let (gap, _) = view.obstacle.expect("the car ahead");
     assert!(gap > 0.0 && gap <= 3.0, "gap {gap}");
+}
+
+#[test]
+fn the_expert_keeps_its_speed_past_a_walker_on_the_sidewalk_and_waits_for_one_crossing() {
+    let map = road();
+    let route = outer_lane_route(&map);
+    let mut world = quiet_world(&map, &route, 0);
+    world.ego = Ego::new(EgoParams::default(), DVec3::new(100.0, -5.25, 0.0), 0.0);
+    let index = ego_index(&world, &route);
+    // A walker at 1.5 m/s starting 12 m ahead, at `y`, heading `yaw` (rad from east).
+    let mut scan_with_walker = |y: f64, yaw: f64| {
+        world.crossers = vec![Crosser {
+            id: 100_000,
+            kind: ActorKind::Walker,
+            position: DVec3::new(112.0, y, 0.0),
+            yaw,
+            speed: 1.5,
+            remaining: 50.0,
+            moving: true,
+            half: DVec2::splat(0.3),
+            patrol: true,
+            gone: false,
+        }];
+        hazards::scan(&world, &route, index, &mut HazardMemory::default())
+    };
+    // Walking along the sidewalk beside the outer lane (its edge at y = -7): nothing to do.
+    let along = scan_with_walker(-9.0, 0.0);
+    assert!(!along.walker_near && along.obstacle.is_none(), "{along:?}");
+    // Stepping onto the road: the expert waits where the walker will cross.
+    let crossing = scan_with_walker(-9.0, FRAC_PI_2);
+    assert!(crossing.walker_near, "{crossing:?}");
+    assert_eq!(crossing.cause, Some(BrakeReason::Walker));
+    let (gap, speed) = crossing.obstacle.unwrap();
+    assert!(
+        (5.0..12.0).contains(&gap) && speed == 0.0,
+        "gap {gap}, speed {speed}"
+    );
+    // Heading for the road from further away: walking pace, no stop yet.
+    let coming = scan_with_walker(-12.5, FRAC_PI_2);
+    assert!(
+        coming.walker_near && coming.obstacle.is_none(),
+        "{coming:?}"
+    );
 }
 
 /// A world with one car standing on lane -1 at s = 130 and the ego caught on it: heading `yaw`

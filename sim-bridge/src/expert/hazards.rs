@@ -1,6 +1,7 @@
 //! What the expert must slow or stop for, read from the true world state: the nearest obstacle
-//! on its path (lead actor, red/yellow stop line, unserved stop sign), walkers nearby, and a
-//! constant-velocity collision forecast.
+//! on its path (lead actor, red/yellow stop line, unserved stop sign, where a walker or cyclist
+//! will cross), walkers and cyclists heading into it, and a constant-velocity collision
+//! forecast.
 
 use glam::DVec2;
 use ssrdrive_proto::dataset::BrakeReason;
@@ -35,6 +36,17 @@ const FOLLOWER_DECEL: f64 = 3.0;
 const LANE_CHANGE_PATIENCE: f64 = 8.0;
 const NOSE_IN_SPEED: f64 = 3.0;
 
+/// A moving walker or cyclist that, going on at its velocity, enters the corridor on the next
+/// [`WALKER_AHEAD`] m of the path in the next [`WALKER_TRACK_S`] s is waited for where it will
+/// cross (a driver yields to someone stepping onto the road); one that only comes within
+/// [`WALKER_TRACK_MARGIN`] m of the corridor slows the expert to walking pace. One walking
+/// along the sidewalk does neither: the rule before (walking pace for any moving walker less
+/// than 10 m to the side and 20 m ahead) held the expert at walking pace in 18.5 % of its
+/// frames with 20 background walkers, and the learner crept at 2 m/s on empty roads.
+const WALKER_AHEAD: f64 = 20.0;
+const WALKER_TRACK_S: f64 = 3.0;
+const WALKER_TRACK_MARGIN: f64 = 1.0;
+
 /// What the scan remembers between ticks: stop signs already served on this route, and since
 /// when it has been waiting for a gap to change lanes.
 #[derive(Debug, Default)]
@@ -50,7 +62,7 @@ pub struct HazardView {
     pub obstacle: Option<(f64, f64)>,
     /// What the nearest obstacle is.
     pub cause: Option<BrakeReason>,
-    /// A walker or cyclist is near the path ahead.
+    /// A walker or cyclist is on the path ahead or heading into it ([`WALKER_AHEAD`]).
     pub walker_near: bool,
     /// Changing lanes into a slow queue, nosing in at walking pace.
     pub nosing_in: bool,
@@ -84,6 +96,7 @@ pub fn scan(
     let front = (index..=end)
         .find(|&j| along(route, index, j) >= ego.half_extent.x)
         .unwrap_or(end);
+    let walker_end = ahead_end(route, index, WALKER_AHEAD);
     for a in &actors {
         let rel = a.obb.centre - ego.position.truncate();
         if rel.length() > SCAN_AHEAD + 10.0 || (a.z - ego.position.z).abs() > 3.0 {
@@ -101,15 +114,17 @@ pub fn scan(
             };
             view.obstacle(gap, speed, cause);
         }
-        let local = DVec2::new(rel.dot(ego.forward()), rel.perp_dot(ego.forward()).abs());
-        let vulnerable = matches!(a.kind, ActorKind::Walker | ActorKind::Cyclist);
-        if vulnerable
-            && a.velocity.length() > 0.1
-            && local.x > -2.0
-            && local.x < 20.0
-            && local.y < 10.0
-        {
-            view.walker_near = true;
+        match track(a, route, front, walker_end, corridor) {
+            Track::Clear => {}
+            Track::Near => view.walker_near = true,
+            Track::Crossing(j) => {
+                view.walker_near = true;
+                let cause = match a.kind {
+                    ActorKind::Walker => BrakeReason::Walker,
+                    _ => BrakeReason::Vehicle,
+                };
+                view.obstacle(along(route, index, j) - ego.half_extent.x, 0.0, cause);
+            }
         }
     }
     lane_change_gap(world, route, index, end, memory, &mut view);
@@ -119,6 +134,48 @@ pub fn scan(
     junction_turn(world, route, index, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
     view
+}
+
+/// Where a walker's or cyclist's track meets the path (see [`WALKER_AHEAD`]).
+enum Track {
+    /// Not moving, not a walker or cyclist, or its track stays clear of the path.
+    Clear,
+    /// Its track comes near the corridor.
+    Near,
+    /// Its track enters the corridor, first at this route point.
+    Crossing(usize),
+}
+
+/// The track of `actor` over the next [`WALKER_TRACK_S`] at its velocity against the corridor
+/// (half width `corridor`) along route points `from..=to`.
+fn track(actor: &ActorView, route: &DenseRoute, from: usize, to: usize, corridor: f64) -> Track {
+    if !matches!(actor.kind, ActorKind::Walker | ActorKind::Cyclist)
+        || actor.velocity.length() <= 0.1
+    {
+        return Track::Clear;
+    }
+    let reach = corridor + WALKER_TRACK_MARGIN;
+    let travel = WALKER_TRACK_S * actor.velocity.length();
+    // Nothing on this stretch of the path can come near.
+    let start = route.points[from].position.truncate();
+    if actor.obb.centre.distance(start) > WALKER_AHEAD + travel + reach {
+        return Track::Clear;
+    }
+    let mut near = false;
+    for k in 0..=6 {
+        let moved = Obb {
+            centre: actor.obb.centre + actor.velocity * (WALKER_TRACK_S * k as f64 / 6.0),
+            ..actor.obb
+        };
+        for j in from..=to {
+            let distance = moved.distance_to(route.points[j].position.truncate());
+            if distance < corridor {
+                return Track::Crossing(j);
+            }
+            near |= distance < reach;
+        }
+    }
+    if near { Track::Near } else { Track::Clear }
 }
 
 /// Before a lane change on the path, wait at its start while a vehicle on the target lane is

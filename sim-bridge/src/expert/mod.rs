@@ -3,11 +3,11 @@
 //!
 //! - Lateral: pure pursuit on the dense route, look-ahead 4-10 m growing with speed.
 //! - Speed targets: [`ROAD_SPEED`] on road, [`JUNCTION_SPEED`] in and just before junctions,
-//!   [`WALKER_SPEED`] near walkers and cyclists and when nosing into a slow queue, capped by
-//!   the curvature ahead.
+//!   [`WALKER_SPEED`] near walkers and cyclists heading into its path and when nosing into a
+//!   slow queue, capped by the curvature ahead.
 //! - Longitudinal: IDM towards the nearest obstacle on the path ahead ([`hazards`]): a lead
 //!   actor, the stop line of a red or yellow light (yellow only when it can still stop), a
-//!   stop sign it has not yet stopped at.
+//!   stop sign it has not yet stopped at, where a walker or cyclist will cross.
 //! - A short-horizon collision forecast (2 s, 4 s near junctions) of the ego along its route
 //!   against every moving actor at constant velocity brakes hard on a predicted overlap.
 //! - Each tick it also states its plan ([`plan`]): where these rules take it over the next 3 s.
@@ -31,7 +31,7 @@ use crate::world::idm::Idm;
 pub const ROAD_SPEED: f64 = 8.0;
 /// Speed in junctions, m/s.
 pub const JUNCTION_SPEED: f64 = 5.0;
-/// Speed near walkers and cyclists, m/s.
+/// Speed near walkers and cyclists heading into the path, m/s.
 pub const WALKER_SPEED: f64 = 2.0;
 /// Heading error to the route (rad) beyond which the expert does not speed up: it is still in
 /// a turn its path has already left (pure pursuit lags in the tightest connectors, radius 5-6
