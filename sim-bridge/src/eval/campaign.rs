@@ -1,7 +1,8 @@
-//! An evaluation campaign: every selected route times every repetition, in the leaderboard's
-//! order (all routes of repetition 0, then of repetition 1, ...), driven by several worker
-//! threads that each make their own agent (its own connection and episode on a gRPC server,
-//! which can batch them). Results are the same as one run at a time.
+//! An evaluation campaign: every selected route times every repetition, recorded in the
+//! leaderboard's order (all routes of repetition 0, then of repetition 1, ...), driven by
+//! several worker threads that each make their own agent (its own connection and episode on a
+//! gRPC server, which can batch them), longest routes first. Results are the same as one run
+//! at a time.
 //!
 //! The results file is rewritten whole after every run (atomically: a failed write leaves the
 //! previous one), so an interrupted campaign keeps what it scored; with `resume` a campaign
@@ -164,6 +165,15 @@ pub fn run_campaign<O: CampaignObserver>(
         records,
         crashes: 0,
     });
+    let lengths: Vec<f64> = campaign
+        .routes
+        .iter()
+        .map(|(spec, dense)| match dense {
+            Ok(dense) => dense.length(),
+            Err(_) => spec.keypoint_length(),
+        })
+        .collect();
+    let order = dispatch_order(&lengths, campaign.repetitions, jobs);
     let next_run = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);
     let worker = |job: usize| -> Result<(), CampaignError> {
@@ -172,10 +182,9 @@ pub fn run_campaign<O: CampaignObserver>(
             observer.agent_ready(&agent.name(), jobs);
         }
         while !failed.load(Ordering::Relaxed) {
-            let index = next_run.fetch_add(1, Ordering::Relaxed);
-            if index >= total {
+            let Some(&index) = order.get(next_run.fetch_add(1, Ordering::Relaxed)) else {
                 break;
-            }
+            };
             if scored.lock().expect("no worker panics holding it").records[index].is_some() {
                 continue;
             }
@@ -258,6 +267,20 @@ pub fn run_campaign<O: CampaignObserver>(
     })
 }
 
+/// The order in which workers take the runs (indices in leaderboard order) of routes of these
+/// lengths (m) driven `repetitions` times: the leaderboard's with one worker; with several, the
+/// longest routes first (ties in the leaderboard's order), so that no long run is left to drive
+/// alone at the end while the other workers idle. In leaderboard order the main job's longest
+/// route (25, 2.1 km) came last and drove alone for its last five minutes. Results do not
+/// depend on the order: each run's world is seeded by its repetition.
+fn dispatch_order(lengths: &[f64], repetitions: usize, jobs: usize) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..lengths.len() * repetitions).collect();
+    if jobs > 1 {
+        order.sort_by(|&a, &b| lengths[b % lengths.len()].total_cmp(&lengths[a % lengths.len()]));
+    }
+    order
+}
+
 /// Runs scored so far, by index.
 struct Scored {
     records: Vec<Option<RouteRecord>>,
@@ -337,4 +360,17 @@ fn earlier_records(
         }
     }
     Ok(records)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::dispatch_order;
+
+    #[test]
+    fn several_workers_take_the_longest_routes_first_and_one_takes_them_in_order() {
+        let lengths = [300.0, 2100.0, 800.0];
+        assert_eq!(dispatch_order(&lengths, 2, 1), [0, 1, 2, 3, 4, 5]);
+        // Route 1 of both repetitions, then route 2's, then route 0's.
+        assert_eq!(dispatch_order(&lengths, 2, 2), [1, 4, 2, 5, 0, 3]);
+    }
 }
