@@ -53,9 +53,10 @@ pub struct EvalArgs {
     /// Runs of each route; repetition r uses seed S + r.
     #[arg(long, default_value_t = 1, value_parser = parse_count)]
     repetitions: usize,
-    /// Runs at once, each with its own agent; results are the same as one at a time (a
-    /// `local` agent steps one run per forward pass; a remote server that batches the runs'
-    /// steps rounds differently with the batch, and learned agents may then diverge)
+    /// Runs at once, each with its own agent, longest routes first; results are the same as
+    /// one at a time (a `local` agent steps one run per forward pass; a remote server that
+    /// batches the runs' steps rounds differently with the batch, and learned agents may then
+    /// diverge)
     #[arg(long, default_value_t = 1, value_parser = parse_count)]
     jobs: usize,
     /// End every route after this many simulated seconds (a timeout without penalty) instead
