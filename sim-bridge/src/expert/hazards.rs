@@ -46,6 +46,8 @@ const NOSE_IN_SPEED: f64 = 3.0;
 const WALKER_AHEAD: f64 = 20.0;
 const WALKER_TRACK_S: f64 = 3.0;
 const WALKER_TRACK_MARGIN: f64 = 1.0;
+/// The track is checked every `WALKER_TRACK_S / TRACK_STEPS` s (0.5 s: 0.9 m at walking pace).
+const TRACK_STEPS: usize = 6;
 
 /// What the scan remembers between ticks: stop signs already served on this route, and since
 /// when it has been waiting for a gap to change lanes.
@@ -107,23 +109,15 @@ pub fn scan(
         {
             let gap = along(route, index, j) - ego.half_extent.x;
             let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
-            let cause = match a.kind {
-                ActorKind::Vehicle | ActorKind::Cyclist => BrakeReason::Vehicle,
-                ActorKind::Walker => BrakeReason::Walker,
-                ActorKind::Static => BrakeReason::Obstacle,
-            };
-            view.obstacle(gap, speed, cause);
+            view.obstacle(gap, speed, brake_reason(a.kind));
         }
         match track(a, route, front, walker_end, corridor) {
             Track::Clear => {}
             Track::Near => view.walker_near = true,
             Track::Crossing(j) => {
                 view.walker_near = true;
-                let cause = match a.kind {
-                    ActorKind::Walker => BrakeReason::Walker,
-                    _ => BrakeReason::Vehicle,
-                };
-                view.obstacle(along(route, index, j) - ego.half_extent.x, 0.0, cause);
+                let gap = along(route, index, j) - ego.half_extent.x;
+                view.obstacle(gap, 0.0, brake_reason(a.kind));
             }
         }
     }
@@ -134,6 +128,15 @@ pub fn scan(
     junction_turn(world, route, index, &mut view);
     view.collision_predicted = forecast(world, route, index, &actors);
     view
+}
+
+/// What the expert brakes for when an actor of `kind` is in its way.
+fn brake_reason(kind: ActorKind) -> BrakeReason {
+    match kind {
+        ActorKind::Vehicle | ActorKind::Cyclist => BrakeReason::Vehicle,
+        ActorKind::Walker => BrakeReason::Walker,
+        ActorKind::Static => BrakeReason::Obstacle,
+    }
 }
 
 /// Where a walker's or cyclist's track meets the path (see [`WALKER_AHEAD`]).
@@ -162,9 +165,10 @@ fn track(actor: &ActorView, route: &DenseRoute, from: usize, to: usize, corridor
         return Track::Clear;
     }
     let mut near = false;
-    for k in 0..=6 {
+    for k in 0..=TRACK_STEPS {
+        let seconds = WALKER_TRACK_S * k as f64 / TRACK_STEPS as f64;
         let moved = Obb {
-            centre: actor.obb.centre + actor.velocity * (WALKER_TRACK_S * k as f64 / 6.0),
+            centre: actor.obb.centre + actor.velocity * seconds,
             ..actor.obb
         };
         for j in from..=to {
