@@ -14,7 +14,7 @@
 use std::collections::VecDeque;
 
 use burn::module::Module;
-use burn::tensor::activation::{sigmoid, softmax};
+use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::camera::{Rig, RigError};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
@@ -24,7 +24,7 @@ use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController,
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, ImageFeatures, SampleGeometry};
 use crate::model::config::SsrConfig;
-use crate::model::hazard::Hazard;
+use crate::model::hazard::{Hazard, probabilities};
 use crate::model::occupancy::OCCUPANCY_CHANNELS;
 use crate::model::{ModelOutput, Navigation, SsrModel, float_tensor, float_values};
 use crate::pose::{EgoMotion, Pose2};
@@ -487,15 +487,12 @@ impl SsrPolicy {
             .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
         let channels = OCCUPANCY_CHANNELS.len();
         // The hazard head runs only for the unstick rule's early creep.
-        let clear = self
+        let hazards = self
             .model
             .hazard
             .as_ref()
             .filter(|_| states.iter().any(|s| s.controller.config().unstick.enabled))
-            .map(|head| {
-                let logits = head.forward(output.scene.tokens.clone());
-                float_values(softmax(logits, 1).narrow(1, Hazard::Clear.index(), 1))
-            });
+            .map(|head| probabilities(&float_values(head.forward(output.scene.tokens.clone()))));
 
         let mut results = Vec::with_capacity(b);
         for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
@@ -519,7 +516,8 @@ impl SsrPolicy {
             };
             let beliefs = Beliefs {
                 occupied: &occupied,
-                clear: clear.as_ref().map(|p| p[i]),
+                clear: hazards.as_ref().map(|p| p[i][Hazard::Clear.index()]),
+                stop_sign: hazards.as_ref().map(|p| p[i][Hazard::Sign.index()]),
             };
             let decision =
                 state

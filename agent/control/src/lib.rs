@@ -256,6 +256,8 @@ pub struct Beliefs<'a> {
     /// The hazard head's probability that nothing holds the car ("clear"); `None` without
     /// the head.
     pub clear: Option<f32>,
+    /// The hazard head's probability that a stop sign holds it; `None` without the head.
+    pub stop_sign: Option<f32>,
 }
 
 /// Everything the control side remembers about one episode.
@@ -326,7 +328,7 @@ impl EpisodeController {
             fused,
             speed,
             trajectory.steer,
-            beliefs.clear,
+            self.config.unstick.free_to_go(beliefs.clear, beliefs.stop_sign),
             &self.config.unstick,
         );
         let safety = &self.config.safety;

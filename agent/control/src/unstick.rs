@@ -2,7 +2,8 @@
 //! "standing still", and standing still is what the expert did next in most such frames: the
 //! inertia problem). After [`Unstick::after_s`] seconds below [`STOPPED_SPEED`], or after
 //! [`Unstick::clear_after_s`] seconds below it during which the network's hazard head kept
-//! saying "nothing to wait for" (probability at least [`Unstick::clear_probability`]), the car
+//! saying "nothing to wait for" (probability at least [`Unstick::clear_probability`]; a stop
+//! sign counts as nothing for a stopped car, [`Unstick::served_stop_signs`]), the car
 //! creeps along its plan for [`Unstick::creep_s`] seconds at up to [`Unstick::creep_speed`],
 //! then the counts start again.
 //!
@@ -11,7 +12,7 @@
 //! the creep. The plain wait is set longer than the longest red light of a four-way junction
 //! (about 45 s in sim-bridge and CARLA), so a car held at a light is not pushed over its line,
 //! and well under the leaderboard's 180 s "agent blocked". The early creep needs the hazard head
-//! (`ssr_agent::model::hazard`), which tells a red light or a stop sign from a free road
+//! (`ssr_agent::model::hazard`), which tells a red light from a free road
 //! (its "clear" on the frames where the expert starts from standstill: 96.7 %, and 96.0 % of
 //! light stops named as such, v6 validation); without it only the plain wait acts. While
 //! creeping, the trajectory's steer follows the plan (or the target point when the plan gives
@@ -37,6 +38,10 @@ pub struct Unstick {
     pub clear_after_s: f32,
     /// The hazard head's probability of "clear" from which a tick counts as clear.
     pub clear_probability: f32,
+    /// Whether the head's "stop sign" counts as clear: a car that has stopped has served the
+    /// sign (the leaderboard's criterion: below 0.1 m/s inside the sign's area), and the
+    /// network, with 0.5 s of history, cannot tell a served sign from one still to serve.
+    pub served_stop_signs: bool,
     /// Seconds of creeping.
     pub creep_s: f32,
     /// Speed the creep does not exceed, m/s.
@@ -52,6 +57,7 @@ impl Default for Unstick {
             after_s: 50.0,
             clear_after_s: 3.0,
             clear_probability: 0.9,
+            served_stop_signs: true,
             creep_s: 2.0,
             creep_speed: 2.0,
             creep_throttle: 0.5,
@@ -76,6 +82,14 @@ impl Unstick {
             ("unstick.creep_throttle", self.creep_throttle, 0.0, 1.0),
         ];
         super::check_ranges(&fields)
+    }
+
+    /// The probability, for a stopped car, that nothing holds it: the hazard head's "clear",
+    /// plus its "stop sign" where [`Unstick::served_stop_signs`] says so; `None` without the
+    /// head.
+    pub fn free_to_go(&self, clear: Option<f32>, stop_sign: Option<f32>) -> Option<f32> {
+        let served = stop_sign.filter(|_| self.served_stop_signs).unwrap_or(0.0);
+        clear.map(|p| p + served)
     }
 }
 

@@ -431,8 +431,8 @@ fn a_stop_the_hazard_head_calls_clear_ends_in_an_early_creep() {
         let mut controller = EpisodeController::new(config.clone());
         (0..ticks).find(|&tick| {
             let beliefs = Beliefs {
-                occupied: &[],
                 clear: clear(tick),
+                ..Beliefs::default()
             };
             let hold = [[0.0, 0.0]; 4];
             let d = controller.act_with_branch(&hold, [10.0, 0.0], speed, None, beliefs);
@@ -454,6 +454,38 @@ fn a_stop_the_hazard_head_calls_clear_ends_in_an_early_creep() {
     assert_eq!(first_creep(clear_ticks * 3, 0.0, &|_| None), None);
     assert_eq!(first_creep(clear_ticks * 3, 0.0, &|_| unsure), None);
     assert_eq!(first_creep(clear_ticks * 3, 1.0, &|_| confident), None);
+}
+
+#[test]
+fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
+    // The head is sure something holds the car, and most likely a stop sign.
+    let sign = Beliefs {
+        clear: Some(0.3),
+        stop_sign: Some(0.65),
+        ..Beliefs::default()
+    };
+    let creeps_early = |served_stop_signs: bool| {
+        let config = ControlConfig {
+            unstick: Unstick {
+                served_stop_signs,
+                ..Unstick::default()
+            },
+            ..ControlConfig::default()
+        };
+        let ticks = (config.unstick.clear_after_s * 20.0) as usize + 1;
+        let mut controller = EpisodeController::new(config);
+        let hold = [[0.0, 0.0]; 4];
+        (0..ticks).any(|_| {
+            controller
+                .act_with_branch(&hold, [10.0, 0.0], 0.0, None, sign)
+                .unsticking
+        })
+    };
+    assert!(creeps_early(true), "on by default");
+    assert!(!creeps_early(false));
+    let rule = Unstick::default();
+    assert_eq!(rule.free_to_go(Some(0.3), None), Some(0.3));
+    assert_eq!(rule.free_to_go(None, Some(0.65)), None, "no head, no early creep");
 }
 
 #[test]
@@ -484,7 +516,7 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
         [2.0, 2.0],
         Beliefs {
             occupied: &[[5.0, 0.0]],
-            clear: None,
+            ..Beliefs::default()
         },
     );
     assert!(stop.safety_stop, "{stop:?}");
@@ -499,7 +531,7 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
         .map(|_| {
             let beliefs = Beliefs {
                 occupied: &[[3.0, 0.0]],
-                clear: None,
+                ..Beliefs::default()
             };
             controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, beliefs)
         })
@@ -520,7 +552,7 @@ fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
     let hold = [[0.0, 0.0]; 4];
     let beliefs = Beliefs {
         occupied: &[[3.0, 0.0]],
-        clear: None,
+        ..Beliefs::default()
     };
     let mut controller = EpisodeController::new(config.clone());
     // Stopped and held: the creeps before `yield_after_s` are braked, the first one after it

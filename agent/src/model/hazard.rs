@@ -118,6 +118,20 @@ impl HazardHead {
     }
 }
 
+/// The probability of each class (softmax) in each row of `logits` (`[B, 5]` values,
+/// row-major), in [`Hazard::ALL`] order.
+pub fn probabilities(logits: &[f32]) -> Vec<[f32; 5]> {
+    logits
+        .chunks(Hazard::ALL.len())
+        .map(|row| {
+            let max = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            let weights = Hazard::ALL.map(|class| (row[class.index()] - max).exp());
+            let total: f32 = weights.iter().sum();
+            weights.map(|w| w / total)
+        })
+        .collect()
+}
+
 /// The most likely class of each row of `logits` (`[B, 5]` values, row-major).
 pub fn predicted(logits: &[f32]) -> Vec<Hazard> {
     logits
@@ -176,6 +190,16 @@ mod tests {
         let logits = head.forward(tokens);
         assert_eq!(logits.dims(), [2, 5]);
         assert!(float_values(logits).iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn probabilities_are_the_softmax_of_each_row() {
+        let mut logits = vec![0.0; 10];
+        logits[Hazard::Sign.index()] = 10.0;
+        let rows = probabilities(&logits);
+        assert!(rows[0][Hazard::Sign.index()] > 0.99, "{rows:?}");
+        assert!(rows[1].iter().all(|p| (p - 0.2).abs() < 1e-6), "{rows:?}");
+        assert!(rows.iter().all(|row| (row.iter().sum::<f32>() - 1.0).abs() < 1e-6));
     }
 
     #[test]
