@@ -266,7 +266,7 @@ pub struct EpisodeController {
     follower: TrajectoryFollower,
     fusion: Fusion,
     unstick: UnstickState,
-    /// Consecutive ticks the safety stop has held the car stopped.
+    /// Ticks stopped since the safety stop first held the car in this standstill.
     held_ticks: u32,
     /// Whether the safety stop lets the current creep through (it held the car too long).
     yielding: bool,
@@ -333,7 +333,11 @@ impl EpisodeController {
         );
         let safety = &self.config.safety;
         let blocked = safety.blocked(waypoints, speed, beliefs.occupied);
-        self.held_ticks = if blocked && speed < unstick::STOPPED_SPEED {
+        // Counted from the first tick it blocks a stopped car until the car moves: an
+        // occupancy cell near the threshold comes and goes, and must not restart the count.
+        self.held_ticks = if speed >= unstick::STOPPED_SPEED {
+            0
+        } else if blocked || self.held_ticks > 0 {
             self.held_ticks + 1
         } else {
             0

@@ -587,6 +587,33 @@ fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
 }
 
 #[test]
+fn a_belief_that_flickers_does_not_restart_the_safety_stops_count() {
+    let config = ControlConfig {
+        safety: SafetyStop {
+            enabled: true,
+            ..SafetyStop::default()
+        },
+        ..ControlConfig::default()
+    };
+    let hold = [[0.0, 0.0]; 4];
+    let mut controller = EpisodeController::new(config.clone());
+    // The cell ahead drops out for one tick every 10 s; the creeps on the ticks it is there
+    // are braked until the stop has held the car `yield_after_s`, then let through.
+    let yield_ticks = (config.safety.yield_after_s * 20.0) as usize;
+    let through = (0..yield_ticks + 2 * (config.unstick.after_s * 20.0) as usize).find(|&tick| {
+        let occupied: &[[f32; 2]] = if tick % 200 == 100 { &[] } else { &[[3.0, 0.0]] };
+        let beliefs = Beliefs {
+            occupied,
+            ..Beliefs::default()
+        };
+        let d = controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, beliefs);
+        !occupied.is_empty() && d.unsticking && !d.safety_stop
+    });
+    let through = through.expect("a creep gets through");
+    assert!(through >= yield_ticks, "yielded at tick {through}");
+}
+
+#[test]
 fn settings_without_a_history_mode_are_served_as_they_were_validated() {
     assert_eq!(ControlConfig::default().history, History::Chain);
     let mut json = serde_json::to_value(ControlConfig::default()).unwrap();
