@@ -488,15 +488,20 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
     assert_eq!(rule.free_to_go(None, Some(0.65)), None, "no head, no early creep");
 }
 
-#[test]
-fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
-    let config = ControlConfig {
+/// The default settings with the safety stop on.
+fn safety_on() -> ControlConfig {
+    ControlConfig {
         safety: SafetyStop {
             enabled: true,
             ..SafetyStop::default()
         },
         ..ControlConfig::default()
-    };
+    }
+}
+
+#[test]
+fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
+    let config = safety_on();
     let ahead = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]];
     let mut controller = EpisodeController::new(config.clone());
     let free = controller.act(
@@ -542,13 +547,7 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
 
 #[test]
 fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
-    let config = ControlConfig {
-        safety: SafetyStop {
-            enabled: true,
-            ..SafetyStop::default()
-        },
-        ..ControlConfig::default()
-    };
+    let config = safety_on();
     let hold = [[0.0, 0.0]; 4];
     let beliefs = Beliefs {
         occupied: &[[3.0, 0.0]],
@@ -588,13 +587,7 @@ fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
 
 #[test]
 fn a_belief_that_flickers_does_not_restart_the_safety_stops_count() {
-    let config = ControlConfig {
-        safety: SafetyStop {
-            enabled: true,
-            ..SafetyStop::default()
-        },
-        ..ControlConfig::default()
-    };
+    let config = safety_on();
     let hold = [[0.0, 0.0]; 4];
     let mut controller = EpisodeController::new(config.clone());
     // The cell ahead drops out for one tick every 10 s; the creeps on the ticks it is there
