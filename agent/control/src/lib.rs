@@ -328,7 +328,9 @@ impl EpisodeController {
             fused,
             speed,
             trajectory.steer,
-            self.config.unstick.free_to_go(beliefs.clear, beliefs.stop_sign),
+            self.config
+                .unstick
+                .free_to_go(beliefs.clear, beliefs.stop_sign),
             &self.config.unstick,
         );
         let safety = &self.config.safety;

@@ -18,9 +18,10 @@
 //! The stop never turns a wait into a block: once it has held a stopped car for
 //! [`SafetyStop::yield_after_s`] (the controller counts from the first tick it held the car,
 //! until the car moves, so a cell that flickers about the threshold does not restart the
-//! count), it lets the unstick rule's creep through. The leaderboard ends a route after 180 s stopped ("agent blocked", the rest of the
-//! route lost), while a contact at a crawl costs a penalty and the route goes on; a bundled
-//! agent stood for good at a right turn of the home routes, held by cells beside its path.
+//! count), it lets the unstick rule's creep through. The leaderboard ends a route after 180 s
+//! stopped ("agent blocked", the rest of the route lost), while a contact at a crawl costs a
+//! penalty and the route goes on; a bundled agent stood for good at a right turn of the home
+//! routes, held by cells beside its path.
 
 use serde::{Deserialize, Serialize};
 

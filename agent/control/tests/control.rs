@@ -485,7 +485,11 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
     assert!(!creeps_early(false));
     let rule = Unstick::default();
     assert_eq!(rule.free_to_go(Some(0.3), None), Some(0.3));
-    assert_eq!(rule.free_to_go(None, Some(0.65)), None, "no head, no early creep");
+    assert_eq!(
+        rule.free_to_go(None, Some(0.65)),
+        None,
+        "no head, no early creep"
+    );
 }
 
 /// The default settings with the safety stop on.
@@ -594,7 +598,11 @@ fn a_belief_that_flickers_does_not_restart_the_safety_stops_count() {
     // are braked until the stop has held the car `yield_after_s`, then let through.
     let yield_ticks = (config.safety.yield_after_s * 20.0) as usize;
     let through = (0..yield_ticks + 2 * (config.unstick.after_s * 20.0) as usize).find(|&tick| {
-        let occupied: &[[f32; 2]] = if tick % 200 == 100 { &[] } else { &[[3.0, 0.0]] };
+        let occupied: &[[f32; 2]] = if tick % 200 == 100 {
+            &[]
+        } else {
+            &[[3.0, 0.0]]
+        };
         let beliefs = Beliefs {
             occupied,
             ..Beliefs::default()

@@ -7,7 +7,8 @@
 //! by the speed, the history and the junction ahead; LAV and TransFuser++ use such auxiliary
 //! labels for the same reason; labels and loss are the trainer's, [`crate::train::hazard`]).
 //! At serving it tells the controller when a stopped car has nothing to wait for: the unstick
-//! rule creeps early while the head says [`Hazard::Clear`] (`ssr_control::unstick`). It is in
+//! rule creeps early while the head says [`Hazard::Clear`] (or [`Hazard::Sign`], which a car
+//! that has stopped has served; `ssr_control::unstick`). It is in
 //! the network, and in its checkpoints, when [`super::config::SsrConfig::hazard_head`] says so.
 
 use burn::module::Module;
@@ -199,7 +200,10 @@ mod tests {
         let rows = probabilities(&logits);
         assert!(rows[0][Hazard::Sign.index()] > 0.99, "{rows:?}");
         assert!(rows[1].iter().all(|p| (p - 0.2).abs() < 1e-6), "{rows:?}");
-        assert!(rows.iter().all(|row| (row.iter().sum::<f32>() - 1.0).abs() < 1e-6));
+        assert!(
+            rows.iter()
+                .all(|row| (row.iter().sum::<f32>() - 1.0).abs() < 1e-6)
+        );
     }
 
     #[test]
