@@ -345,3 +345,66 @@ fn a_driver_drives_while_the_expert_labels_its_states() {
     assert_eq!(names.len(), 2, "{names:?}");
     assert!(names[1].ends_with("__round-2"), "{names:?}");
 }
+
+/// A driver whose server goes away after a few ticks.
+struct Crasher {
+    ticks: usize,
+}
+
+impl Agent for Crasher {
+    fn name(&self) -> String {
+        "wanderer".into()
+    }
+    fn start_route(&mut self, _: &RouteContext<'_>) -> Result<(), AgentError> {
+        Ok(())
+    }
+    fn sensors(&self) -> Option<Rig> {
+        Some(Rig::tcp_small())
+    }
+    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
+        self.ticks += 1;
+        if self.ticks > 40 {
+            return Err(AgentError("Step 41: Unavailable: tcp connect error".into()));
+        }
+        Wanderer.run_step(obs, world)
+    }
+}
+
+/// A run whose driver crashed is not kept (the collection says so), and the next collection
+/// redoes it, as it does an episode that older builds kept with the "crashed" status.
+#[test]
+fn a_run_whose_driver_crashed_is_not_kept_and_is_redone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("dagger");
+    let (map, set) = small_town();
+    let tasks = tasks(&map, set, 1);
+    let mut dagger = config(&out, 0.0);
+    dagger.driver = Some("wanderer".into());
+    let crashing = || Ok(Box::new(Crasher { ticks: 0 }) as Box<dyn Agent>);
+    let err = collect(&dagger, &tasks, Some(&crashing), |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("crashed") && err.contains("tcp connect error"),
+        "{err}"
+    );
+    let kept = std::fs::read_dir(out.join("episodes")).unwrap().count();
+    assert_eq!(kept, 0, "nothing of the crashed run is kept");
+
+    let working = || Ok(Box::new(Wanderer) as Box<dyn Agent>);
+    let summary = collect(&dagger, &tasks, Some(&working), |_| {}).unwrap();
+    assert_eq!((summary.recorded, summary.skipped), (1, 0));
+
+    let data = Dataset::open(&out).unwrap();
+    let info_path = data
+        .episode_dir(&data.manifest.episode_list[0].name)
+        .join("episode.json");
+    let text = std::fs::read_to_string(&info_path).unwrap();
+    let mut info: serde_json::Value = serde_json::from_str(&text).unwrap();
+    info["outcome"]["status"] = "Failed - Agent crashed".into();
+    std::fs::write(&info_path, info.to_string()).unwrap();
+    let summary = collect(&dagger, &tasks, Some(&working), |_| {}).unwrap();
+    assert_eq!((summary.recorded, summary.skipped), (1, 0), "redone");
+    let summary = collect(&dagger, &tasks, Some(&working), |_| {}).unwrap();
+    assert_eq!((summary.recorded, summary.skipped), (0, 1), "complete now");
+}

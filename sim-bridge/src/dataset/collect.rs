@@ -5,8 +5,10 @@
 //! on disk are skipped (after checking they were recorded with the same seed, rig, rate, noise
 //! and look); leftover `.partial` folders (episodes that were in flight when the last
 //! collection died) are deleted and their runs redone, which reproduces them exactly since a
-//! run depends only on its map, route and world config. A dataset collected with another rig
-//! or rate is refused rather than mixed.
+//! run depends only on its map, route and world config. A run whose driving agent (DAgger's
+//! learner, behind a server) crashed is not kept: the collection stops with an error naming it,
+//! and the next one redoes it. A dataset collected with another rig or rate is refused rather
+//! than mixed.
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -26,7 +28,7 @@ use crate::eval::run_route;
 use crate::map::Map;
 use crate::route::DenseRoute;
 use crate::route::xml::RouteSpec;
-use crate::scoring::ScoringConfig;
+use crate::scoring::{RouteEnd, ScoringConfig};
 use crate::world::{DT, WorldConfig};
 
 /// How to record.
@@ -229,10 +231,17 @@ fn collect_one(
                  collection asks for; collect into a new folder (or repeat the original command)",
             ));
         }
-        return Ok(EpisodeDone {
-            info,
-            skipped: true,
-        });
+        if info.outcome.status != RouteEnd::AgentCrashed.status() {
+            return Ok(EpisodeDone {
+                info,
+                skipped: true,
+            });
+        }
+        // Kept by builds that stored a run whose driver crashed: redo it.
+        std::fs::remove_dir_all(&dir).map_err(|source| DatasetError::Io {
+            path: dir.clone(),
+            source,
+        })?;
     }
     let partial = episodes.join(format!(".{name}.partial"));
     let io = |source| DatasetError::Io {
@@ -261,6 +270,18 @@ fn collect_one(
         |_| {},
     );
     let totals = recorder.finish().map_err(io)?;
+    if let Some(error) = run.agent_error {
+        // The states before the crash are real, but a resumed collection must redo the run,
+        // so nothing of it is kept.
+        std::fs::remove_dir_all(&partial).map_err(io)?;
+        return Err(DatasetError::invalid(
+            &dir,
+            format!(
+                "the driving agent crashed ({error}); the run was not kept: collect again to \
+                 redo it"
+            ),
+        ));
+    }
     let scores = run.record.scores;
     let info = EpisodeInfo {
         name: name.clone(),
