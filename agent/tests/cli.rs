@@ -37,7 +37,7 @@ fn inspect_reports_bad_files() {
 
 #[test]
 fn control_prints_and_changes_only_the_named_settings() {
-    use ssr_agent::control::ControlConfig;
+    use ssr_agent::control::{ControlConfig, TurnLead};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("model.safetensors");
     let config = common::tiny_config();
@@ -53,12 +53,14 @@ fn control_prints_and_changes_only_the_named_settings() {
     };
     assert_eq!(printed(path), ControlConfig::default());
 
-    let patch = r#"{"safety": {"enabled": true}, "vehicle": {"max_wheel_angle": 70}}"#;
+    let patch = r#"{"safety": {"enabled": true}, "vehicle": {"max_wheel_angle": 70},
+        "turn_lead": "plan"}"#;
     let (ok, _, stderr) = ssr_agent(&["control", path, "--set", patch, "--out", out]);
     assert!(ok, "{stderr}");
     let mut expected = ControlConfig::default();
     expected.safety.enabled = true;
     expected.vehicle.max_wheel_angle = 70.0;
+    expected.turn_lead = TurnLead::Plan;
     assert_eq!(printed(out), expected);
     // From a file, over the changed copy: the earlier changes stay.
     let file = dir.path().join("patch.json");
@@ -82,6 +84,7 @@ fn control_prints_and_changes_only_the_named_settings() {
     refused(r#"{"vehicle": 3}"#, "'vehicle' is a group of settings");
     refused(r#"{"alpha": 2}"#, "alpha = 2");
     refused(r#"{"alpha": "high"}"#, "changed controller settings");
+    refused(r#"{"turn_lead": "sideways"}"#, "unknown variant `sideways`");
     refused(r#"{"alpha": 0.5"#, "--set is not JSON");
     refused("/no/such/patch.json", "/no/such/patch.json");
     refused("not json", "neither a JSON object nor a readable file");

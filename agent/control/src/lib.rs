@@ -23,6 +23,7 @@ pub mod trajectory;
 pub mod unstick;
 
 use fusion::Fusion;
+pub use fusion::TurnLead;
 pub use safety::SafetyStop;
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
@@ -85,6 +86,9 @@ pub struct ControlConfig {
     pub max_throttle: f32,
     /// Weight of the weaker source in the fusion (TCP's alpha).
     pub alpha: f32,
+    /// What leads the fused control while the car turns ([`fusion`]; TCP's control branch by
+    /// default).
+    pub turn_lead: TurnLead,
     /// Fusion status window: how many of the last fused steers are counted, ticks.
     pub turn_window: usize,
     /// A fused |steer| above this counts as a turning tick.
@@ -159,6 +163,7 @@ impl Default for ControlConfig {
             clip_delta: 0.25,
             max_throttle: 0.75,
             alpha: 0.3,
+            turn_lead: TurnLead::default(),
             turn_window: 20,
             turn_steer: 0.1,
             turn_count: 10,

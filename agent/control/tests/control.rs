@@ -2,7 +2,7 @@
 //! cases and circle geometry.
 
 use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
-use ssr_control::fusion::Fusion;
+use ssr_control::fusion::{Fusion, TurnLead};
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
 use ssr_control::{
@@ -218,6 +218,11 @@ fn vehicle_settings_are_range_checked() {
 #[test]
 fn fusion_switches_weights_after_sustained_turning() {
     let config = ControlConfig::default();
+    assert_eq!(
+        config.turn_lead,
+        TurnLead::Branch,
+        "TCP's fusion by default"
+    );
     let trajectory = Control {
         steer: 0.2,
         throttle: 0.6,
@@ -237,11 +242,22 @@ fn fusion_switches_weights_after_sustained_turning() {
         );
     }
     assert!(fusion.turning(), "11 of 20 steers above 0.1");
-    let c = fusion.fuse(trajectory, branch, &config);
-    assert!(
-        near(c.steer, 0.48) && near(c.throttle, 0.32),
-        "branch-weighted: {c:?}"
-    );
+    // While turning: (turn_lead, fused steer, fused throttle).
+    for (lead, steer, throttle) in [
+        (TurnLead::Branch, 0.48, 0.32),
+        (TurnLead::PlanSteer, 0.32, 0.32),
+        (TurnLead::Plan, 0.32, 0.48),
+    ] {
+        let config = ControlConfig {
+            turn_lead: lead,
+            ..ControlConfig::default()
+        };
+        let c = fusion.clone().fuse(trajectory, branch, &config);
+        assert!(
+            near(c.steer, steer) && near(c.throttle, throttle),
+            "{lead:?} leads the turn: {c:?}"
+        );
+    }
 
     let braking = Control {
         steer: 0.0,
