@@ -10,8 +10,8 @@
 //! expert's steer and under-steered the tight corners of a town the network never saw: at a
 //! Town02 corner the branch asked -0.25 where pursuit on the plan asked -0.53, the fused -0.34
 //! took the car out of its lane into a prop. [`TurnLead`] chooses what leads while turning;
-//! the default stays TCP's, and a checkpoint carries its own choice (`ssr-agent control CKPT
-//! --set '{"turn_lead": "plan"}'`).
+//! the default stays TCP's (the bundled checkpoint drives worse with the plan leading), and a
+//! checkpoint carries its own choice (`ssr-agent control CKPT --set '{"turn_lead": "plan"}'`).
 
 use std::collections::VecDeque;
 
