@@ -259,8 +259,13 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     assert!(err.contains("version 99"), "{err}");
 }
 
-/// A driver that ignores the route: full throttle, steering a little left, never braking.
-struct Wanderer;
+/// A driver that ignores the route: full throttle, steering a little left, never braking; with
+/// `crash_after`, its server goes away after that many ticks.
+#[derive(Default)]
+struct Wanderer {
+    ticks: usize,
+    crash_after: Option<usize>,
+}
 
 impl Agent for Wanderer {
     fn name(&self) -> String {
@@ -274,6 +279,10 @@ impl Agent for Wanderer {
     }
     fn run_step(&mut self, obs: &Observation, _: &World<'_>) -> Result<Control, AgentError> {
         assert_eq!(obs.frames.len(), 1, "a driver sees every tick's frame");
+        self.ticks += 1;
+        if self.crash_after.is_some_and(|n| self.ticks > n) {
+            return Err(AgentError("Unavailable: tcp connect error".into()));
+        }
         Ok(Control {
             steer: -0.05,
             throttle: 0.6,
@@ -292,7 +301,7 @@ fn a_driver_drives_while_the_expert_labels_its_states() {
     let tasks = tasks(&map, set, 1);
     let mut dagger = config(&out, 0.0);
     dagger.driver = Some("wanderer".into());
-    let factory = || Ok(Box::new(Wanderer) as Box<dyn Agent>);
+    let factory = || Ok(Box::new(Wanderer::default()) as Box<dyn Agent>);
     collect(&dagger, &tasks, Some(&factory), |_| {}).unwrap();
     let data = Dataset::open(&out).unwrap();
     let entry = &data.manifest.episode_list[0];
@@ -346,30 +355,6 @@ fn a_driver_drives_while_the_expert_labels_its_states() {
     assert!(names[1].ends_with("__round-2"), "{names:?}");
 }
 
-/// A driver whose server goes away after a few ticks.
-struct Crasher {
-    ticks: usize,
-}
-
-impl Agent for Crasher {
-    fn name(&self) -> String {
-        "wanderer".into()
-    }
-    fn start_route(&mut self, _: &RouteContext<'_>) -> Result<(), AgentError> {
-        Ok(())
-    }
-    fn sensors(&self) -> Option<Rig> {
-        Some(Rig::tcp_small())
-    }
-    fn run_step(&mut self, obs: &Observation, world: &World<'_>) -> Result<Control, AgentError> {
-        self.ticks += 1;
-        if self.ticks > 40 {
-            return Err(AgentError("Step 41: Unavailable: tcp connect error".into()));
-        }
-        Wanderer.run_step(obs, world)
-    }
-}
-
 /// A run whose driver crashed is not kept (the collection says so), and the next collection
 /// redoes it, as it does an episode that older builds kept with the "crashed" status.
 #[test]
@@ -380,7 +365,13 @@ fn a_run_whose_driver_crashed_is_not_kept_and_is_redone() {
     let tasks = tasks(&map, set, 1);
     let mut dagger = config(&out, 0.0);
     dagger.driver = Some("wanderer".into());
-    let crashing = || Ok(Box::new(Crasher { ticks: 0 }) as Box<dyn Agent>);
+    let crashing = || {
+        let crashes = Wanderer {
+            crash_after: Some(40),
+            ..Wanderer::default()
+        };
+        Ok(Box::new(crashes) as Box<dyn Agent>)
+    };
     let err = collect(&dagger, &tasks, Some(&crashing), |_| {})
         .unwrap_err()
         .to_string();
@@ -391,7 +382,7 @@ fn a_run_whose_driver_crashed_is_not_kept_and_is_redone() {
     let kept = std::fs::read_dir(out.join("episodes")).unwrap().count();
     assert_eq!(kept, 0, "nothing of the crashed run is kept");
 
-    let working = || Ok(Box::new(Wanderer) as Box<dyn Agent>);
+    let working = || Ok(Box::new(Wanderer::default()) as Box<dyn Agent>);
     let summary = collect(&dagger, &tasks, Some(&working), |_| {}).unwrap();
     assert_eq!((summary.recorded, summary.skipped), (1, 0));
 
