@@ -291,6 +291,14 @@ impl Agent for Wanderer {
     }
 }
 
+/// A collection the [`Wanderer`] drives.
+fn wanderer_drives(out: &Path) -> CollectConfig {
+    CollectConfig {
+        driver: Some("wanderer".into()),
+        ..config(out, 0.0)
+    }
+}
+
 /// DAgger: with a driver, the driver's control is executed and the expert labels the states it
 /// reaches; the episode says who drove, and a collection with another driver is refused.
 #[test]
@@ -299,8 +307,7 @@ fn a_driver_drives_while_the_expert_labels_its_states() {
     let out = tmp.path().join("dagger");
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 1);
-    let mut dagger = config(&out, 0.0);
-    dagger.driver = Some("wanderer".into());
+    let dagger = wanderer_drives(&out);
     let factory = || Ok(Box::new(Wanderer::default()) as Box<dyn Agent>);
     collect(&dagger, &tasks, Some(&factory), |_| {}).unwrap();
     let data = Dataset::open(&out).unwrap();
@@ -363,8 +370,7 @@ fn a_run_whose_driver_crashed_is_not_kept_and_is_redone() {
     let out = tmp.path().join("dagger");
     let (map, set) = small_town();
     let tasks = tasks(&map, set, 1);
-    let mut dagger = config(&out, 0.0);
-    dagger.driver = Some("wanderer".into());
+    let dagger = wanderer_drives(&out);
     let crashing = || {
         let crashes = Wanderer {
             crash_after: Some(40),
