@@ -5,6 +5,7 @@ use ssr_control::beta::{beta_point, control_from_action, control_from_beta};
 use ssr_control::fusion::{Fusion, TurnLead};
 use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
+use ssr_control::unstick::TICKS_PER_SECOND;
 use ssr_control::{
     Beliefs, ControlConfig, EpisodeController, History, SafetyStop, Unstick, Vehicle,
 };
@@ -12,6 +13,11 @@ use ssrdrive_proto::control::Control;
 
 fn near(a: f32, b: f32) -> bool {
     (a - b).abs() < 1e-4
+}
+
+/// Control ticks in `seconds`.
+fn ticks(seconds: f32) -> usize {
+    (seconds * TICKS_PER_SECOND) as usize
 }
 
 #[test]
@@ -310,8 +316,8 @@ fn a_long_stop_ends_in_a_creep_along_the_plan_unless_the_rule_is_off() {
     let rule = config.unstick.clone();
     let hold = [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]];
     let left_target = [10.0, 5.0];
-    let wait_ticks = (rule.after_s * 20.0) as usize;
-    let creep_ticks = (rule.creep_s * 20.0) as usize;
+    let wait_ticks = ticks(rule.after_s);
+    let creep_ticks = ticks(rule.creep_s);
 
     let mut controller = EpisodeController::new(config.clone());
     let mut decisions = Vec::new();
@@ -437,8 +443,8 @@ fn the_safety_stop_brakes_for_what_lies_on_the_path_within_the_stopping_distance
 fn a_stop_the_hazard_head_calls_clear_ends_in_an_early_creep() {
     let config = ControlConfig::default();
     let rule = config.unstick.clone();
-    let clear_ticks = (rule.clear_after_s * 20.0) as usize;
-    assert!(clear_ticks * 5 < (rule.after_s * 20.0) as usize);
+    let clear_ticks = ticks(rule.clear_after_s);
+    assert!(clear_ticks * 5 < ticks(rule.after_s));
     let confident = Some(rule.clear_probability + 0.05);
     let unsure = Some(rule.clear_probability - 0.05);
     // The first tick that creeps, over `ticks` ticks at `speed` with the head's `clear` given
@@ -488,7 +494,7 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
             },
             ..ControlConfig::default()
         };
-        let ticks = (config.unstick.clear_after_s * 20.0) as usize + 1;
+        let ticks = ticks(config.unstick.clear_after_s) + 1;
         let mut controller = EpisodeController::new(config);
         let hold = [[0.0, 0.0]; 4];
         (0..ticks).any(|_| {
@@ -550,7 +556,7 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
 
     // After the long wait the unstick rule would creep; not into an occupied cell.
     let hold = [[0.0, 0.0]; 4];
-    let wait_ticks = (config.unstick.after_s * 20.0) as usize;
+    let wait_ticks = ticks(config.unstick.after_s);
     let mut controller = EpisodeController::new(config);
     let decisions: Vec<_> = (0..wait_ticks + 5)
         .map(|_| {
@@ -576,10 +582,10 @@ fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
     let mut controller = EpisodeController::new(config.clone());
     // Stopped and held: the creeps before `yield_after_s` are braked, the first one after it
     // goes through, all of it, while the car gathers speed.
-    let yield_ticks = (config.safety.yield_after_s * 20.0) as usize;
+    let yield_ticks = ticks(config.safety.yield_after_s);
     let mut speed = 0.0;
     let mut through = Vec::new();
-    for tick in 0..yield_ticks + 3 * (config.unstick.after_s * 20.0) as usize {
+    for tick in 0..yield_ticks + 3 * ticks(config.unstick.after_s) {
         let d = controller.act_with_branch(&hold, [10.0, 0.0], speed, None, beliefs);
         if d.unsticking && !d.safety_stop {
             assert!(d.control.throttle > 0.0 && d.control.brake == 0.0, "{d:?}");
@@ -590,7 +596,7 @@ fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
             speed = 0.0;
         }
     }
-    let creep_ticks = (config.unstick.creep_s * 20.0) as usize;
+    let creep_ticks = ticks(config.unstick.creep_s);
     assert!(through[0] >= yield_ticks, "yielded at tick {}", through[0]);
     assert_eq!(
         through[..creep_ticks],
@@ -612,9 +618,9 @@ fn a_belief_that_flickers_does_not_restart_the_safety_stops_count() {
     let mut controller = EpisodeController::new(config.clone());
     // The cell ahead drops out for one tick every 10 s; the creeps on the ticks it is there
     // are braked until the stop has held the car `yield_after_s`, then let through.
-    let yield_ticks = (config.safety.yield_after_s * 20.0) as usize;
-    let through = (0..yield_ticks + 2 * (config.unstick.after_s * 20.0) as usize).find(|&tick| {
-        let occupied: &[[f32; 2]] = if tick % 200 == 100 {
+    let yield_ticks = ticks(config.safety.yield_after_s);
+    let through = (0..yield_ticks + 2 * ticks(config.unstick.after_s)).find(|&tick| {
+        let occupied: &[[f32; 2]] = if tick % ticks(10.0) == ticks(5.0) {
             &[]
         } else {
             &[[3.0, 0.0]]
