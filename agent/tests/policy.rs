@@ -155,6 +155,42 @@ fn episodes_of_every_history_mode_step_in_one_batch_as_alone() {
 }
 
 #[test]
+fn a_step_is_the_same_bits_on_any_number_of_threads() {
+    // The server runs each model thread's passes on a pool of its own size, so a run must not
+    // depend on how many cores it got. The full-size network, so the kernels' parallel paths run.
+    let policy = policy_of(SsrConfig::cpu_default());
+    let rig = rig(1, 900, 256);
+    let drive = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut episode = policy.new_episode();
+            (0..3)
+                .map(|tick| {
+                    let out = policy
+                        .step(&mut episode, &step_input(&rig, tick, 5))
+                        .unwrap();
+                    let control = out.decision.control;
+                    let mut bits: Vec<u32> = out
+                        .waypoints
+                        .iter()
+                        .flatten()
+                        .map(|v| v.to_bits())
+                        .collect();
+                    bits.extend([control.steer, control.throttle, control.brake].map(f32::to_bits));
+                    bits
+                })
+                .collect::<Vec<_>>()
+        })
+    };
+    let alone = drive(1);
+    assert_eq!(drive(2), alone);
+    assert_eq!(drive(3), alone);
+}
+
+#[test]
 fn a_batch_equals_single_steps_even_with_mixed_rigs() {
     let policy = policy();
     let rigs = [rig(1, 900, 256), rig(3, 400, 300), rig(1, 900, 256)];

@@ -155,6 +155,7 @@ fn config_files_override_defaults_and_bad_values_are_named() {
             "max_pixels_per_step = 0",
         ),
         (with(|c| c.max_decoded_mib = 0), "max_decoded_mib = 0"),
+        (with(|c| c.compute_threads = 5000), "compute_threads = 5000"),
         (with(|c| c.idle_timeout_s = 1e308), "idle_timeout_s = 1e308"),
         (
             with(|c| c.request_timeout_s = 1e308),
@@ -172,6 +173,19 @@ fn config_files_override_defaults_and_bad_values_are_named() {
             "{error}"
         );
     }
+    // Each model thread's pool: as set, or by default the cores shared out (at least one each).
+    let pools = |model_threads, compute_threads| {
+        let config = ServeConfig {
+            model_threads,
+            compute_threads,
+            ..ServeConfig::default()
+        };
+        config.compute_threads_per_model()
+    };
+    let cores = std::thread::available_parallelism().unwrap().get();
+    assert_eq!(pools(2, 3), 3);
+    assert_eq!(pools(1, 0), cores);
+    assert_eq!(pools(64, 0), (cores / 64).max(1));
     let missing = ServeConfig::from_file(std::path::Path::new("/no/such/serve.toml"));
     assert!(
         missing

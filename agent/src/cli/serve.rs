@@ -49,6 +49,10 @@ pub struct ServeArgs {
     /// Model threads, each forming and running its own batches [default: 2].
     #[arg(long, env = "SSR_AGENT_MODEL_THREADS")]
     model_threads: Option<usize>,
+    /// CPU threads of each model thread's own pool; 0 shares the cores out among the model
+    /// threads [default: 0].
+    #[arg(long, env = "SSR_AGENT_COMPUTE_THREADS")]
+    compute_threads: Option<usize>,
     /// Longest a request may take, seconds; a shorter client deadline wins [default: 30].
     #[arg(long, env = "SSR_AGENT_REQUEST_TIMEOUT_S")]
     request_timeout_s: Option<f64>,
@@ -149,6 +153,7 @@ impl ServeArgs {
         set(&mut config.max_queue_delay_ms, &self.max_queue_delay_ms);
         set(&mut config.max_queue, &self.max_queue);
         set(&mut config.model_threads, &self.model_threads);
+        set(&mut config.compute_threads, &self.compute_threads);
         set(&mut config.request_timeout_s, &self.request_timeout_s);
         set(&mut config.max_message_mib, &self.max_message_mib);
         set(&mut config.max_pixels_per_step, &self.max_pixels_per_step);

@@ -144,6 +144,7 @@ impl Engine {
                 max_queue_delay: config.max_queue_delay(),
                 max_queue: config.max_queue,
                 model_threads: config.model_threads,
+                compute_threads: config.compute_threads_per_model(),
             },
             Arc::clone(&metrics),
             Arc::new(move || open.len()),

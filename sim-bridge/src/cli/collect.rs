@@ -136,7 +136,12 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     }
     let (target, _local_server) = match &args.driver {
         Some(driver) => {
-            let (target, server) = server_target(driver, LocalRole::Driving)?;
+            let (target, server) = server_target(
+                driver,
+                LocalRole::Driving {
+                    runs: args.jobs as usize,
+                },
+            )?;
             (Some(target), server)
         }
         None => (None, None),

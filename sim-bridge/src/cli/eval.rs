@@ -228,7 +228,7 @@ fn agent_target(args: &EvalArgs) -> anyhow::Result<(Option<String>, Option<Local
     ) {
         return Ok((None, None));
     }
-    let (target, server) = server_target(&args.agent, LocalRole::Driving)?;
+    let (target, server) = server_target(&args.agent, LocalRole::Driving { runs: args.jobs })?;
     Ok((Some(target), server))
 }
 

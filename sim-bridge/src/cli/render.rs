@@ -86,7 +86,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             None,
         ),
         agent => {
-            let (target, server) = server_target(agent, LocalRole::Driving)?;
+            let (target, server) = server_target(agent, LocalRole::Driving { runs: 1 })?;
             let options = GrpcOptions {
                 rig,
                 ready_timeout: args.ready_timeout,

@@ -89,7 +89,7 @@ fn print(report: &ReplayReport, path: &std::path::Path) {
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let files = log_files(&args.logs)?;
-    let (target, _local) = server_target(&args.agent, LocalRole::Driving)?;
+    let (target, _local) = server_target(&args.agent, LocalRole::Driving { runs: 1 })?;
     let mut reports = Vec::new();
     for path in &files {
         let log = read_log(path)?;

@@ -21,8 +21,14 @@ pub enum LocalRole {
     /// pass (`SSR_AGENT_MAX_BATCH=1` unless the environment sets it). Batched kernels round
     /// differently from single ones, and closed loop amplifies the difference, so a run would
     /// otherwise depend on which other runs' steps happened to share its batch; this way
-    /// `--jobs N` gives the results of one run at a time. No metrics port.
-    Driving,
+    /// `--jobs N` gives the results of one run at a time. It gets one model thread per run
+    /// driven at once (`SSR_AGENT_MODEL_THREADS`, unless the environment sets it), so the runs'
+    /// steps go through the network side by side, each on its share of the cores. No metrics
+    /// port.
+    Driving {
+        /// Runs driven at once.
+        runs: usize,
+    },
     /// `load`: the server batches as configured, and opens a metrics port.
     LoadTest,
 }
@@ -92,8 +98,13 @@ impl LocalServer {
         if std::env::var_os("RUST_LOG").is_none() {
             command.env("RUST_LOG", "warn");
         }
-        if role == LocalRole::Driving && std::env::var_os("SSR_AGENT_MAX_BATCH").is_none() {
-            command.env("SSR_AGENT_MAX_BATCH", "1");
+        if let LocalRole::Driving { runs } = role {
+            if std::env::var_os("SSR_AGENT_MAX_BATCH").is_none() {
+                command.env("SSR_AGENT_MAX_BATCH", "1");
+            }
+            if std::env::var_os("SSR_AGENT_MODEL_THREADS").is_none() {
+                command.env("SSR_AGENT_MODEL_THREADS", runs.clamp(1, 64).to_string());
+            }
         }
         let mut child = command
             .spawn()
