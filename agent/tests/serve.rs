@@ -173,19 +173,6 @@ fn config_files_override_defaults_and_bad_values_are_named() {
             "{error}"
         );
     }
-    // Each model thread's pool: as set, or by default the cores shared out (at least one each).
-    let pools = |model_threads, compute_threads| {
-        let config = ServeConfig {
-            model_threads,
-            compute_threads,
-            ..ServeConfig::default()
-        };
-        config.compute_threads_per_model()
-    };
-    let cores = std::thread::available_parallelism().unwrap().get();
-    assert_eq!(pools(2, 3), 3);
-    assert_eq!(pools(1, 0), cores);
-    assert_eq!(pools(64, 0), (cores / 64).max(1));
     let missing = ServeConfig::from_file(std::path::Path::new("/no/such/serve.toml"));
     assert!(
         missing

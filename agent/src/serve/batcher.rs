@@ -8,8 +8,9 @@
 //! untouched: a step whose batch already started completes), runs
 //! [`SsrPolicy::step_batch`] and answers each caller. `max_batch = 1` serves steps one by one.
 //!
-//! Each model thread is the first worker of a rayon pool of its own (`compute_threads` threads),
-//! so the forward passes of different model threads never queue for the same threads.
+//! With `compute_threads` set, each model thread is the first worker of a rayon pool of its own
+//! of that many threads, so the forward passes of different model threads never queue for the
+//! same threads; with 0 they share rayon's global pool.
 
 use std::panic::AssertUnwindSafe;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
@@ -35,7 +36,7 @@ pub struct BatchSettings {
     /// (Triton's instance count): parts of the network that do not spread over all cores then
     /// run side by side.
     pub model_threads: usize,
-    /// Threads of each model thread's own pool.
+    /// Threads of each model thread's own pool; 0: rayon's global pool.
     pub compute_threads: usize,
 }
 
@@ -104,16 +105,20 @@ impl Batcher {
             std::thread::Builder::new()
                 .name(format!("ssr-model-{index}"))
                 .spawn(move || {
-                    // This thread is the pool's first worker: with one compute thread the
+                    // This thread is its pool's first worker: with one compute thread the
                     // forward pass runs right here.
-                    let _pool = rayon::ThreadPoolBuilder::new()
-                        .num_threads(settings.compute_threads.max(1))
-                        .use_current_thread()
-                        .thread_name(move |thread| format!("ssr-model-{index}-{thread}"))
-                        .build()
-                        .inspect_err(|e| {
-                            tracing::warn!("model thread {index} shares rayon's global pool: {e}");
-                        });
+                    let _pool = (settings.compute_threads > 0).then(|| {
+                        rayon::ThreadPoolBuilder::new()
+                            .num_threads(settings.compute_threads)
+                            .use_current_thread()
+                            .thread_name(move |thread| format!("ssr-model-{index}-{thread}"))
+                            .build()
+                            .inspect_err(|e| {
+                                tracing::warn!(
+                                    "model thread {index} uses rayon's global pool: {e}"
+                                );
+                            })
+                    });
                     model_loop(&policy, settings, &metrics, &jobs, &*open);
                 })
                 .expect("spawning a model thread");

@@ -53,10 +53,11 @@ pub struct ServeConfig {
     /// Model threads, each forming and running its own batches. Two forward passes side by
     /// side fill a 2-core CPU better than one spread over both (see README, Serving figures).
     pub model_threads: usize,
-    /// CPU threads each model thread's forward passes spread over, in a pool of its own (0: the
-    /// machine's cores shared out among the model threads). Own pools keep one model thread's
-    /// work off another's threads: sharing rayon's global pool, a 16-core machine driving 8 runs
-    /// kept 2.5 cores busy with 8 model threads on a 1-thread pool, 7.7 with 2 on 16 threads.
+    /// CPU threads of a pool of each model thread's own, or 0: every model thread uses rayon's
+    /// global pool (one thread per core). Own pools keep one model thread's work off another's
+    /// threads when several episodes run at once (`sim-bridge eval --jobs N` gives its local
+    /// server N model threads with the cores shared out); the global pool gives a lone episode
+    /// every core (one episode on 2 cores: 11 ms a step, 14-15 ms on a 1-thread pool).
     pub compute_threads: usize,
     /// Longest a request may take, seconds (a client deadline that is shorter wins).
     pub request_timeout_s: f64,
@@ -227,7 +228,7 @@ impl ServeConfig {
             return invalid(
                 "compute_threads",
                 self.compute_threads,
-                "must be in 0..=1024 (0: the cores shared out among the model threads)",
+                "must be in 0..=1024 (0: rayon's global pool)",
             );
         }
         if !(1..=100_000).contains(&self.max_queue) {
@@ -304,16 +305,6 @@ impl ServeConfig {
     /// [`ServeConfig::max_message_mib`] in bytes.
     pub fn max_message_bytes(&self) -> usize {
         self.max_message_mib << 20
-    }
-
-    /// Threads of each model thread's pool: [`ServeConfig::compute_threads`], or for 0 the
-    /// machine's cores divided among the model threads (at least one).
-    pub fn compute_threads_per_model(&self) -> usize {
-        if self.compute_threads > 0 {
-            return self.compute_threads;
-        }
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        (cores / self.model_threads.max(1)).max(1)
     }
 
     /// [`ServeConfig::max_decoded_mib`] in bytes.

@@ -144,7 +144,7 @@ impl Engine {
                 max_queue_delay: config.max_queue_delay(),
                 max_queue: config.max_queue,
                 model_threads: config.model_threads,
-                compute_threads: config.compute_threads_per_model(),
+                compute_threads: config.compute_threads,
             },
             Arc::clone(&metrics),
             Arc::new(move || open.len()),

@@ -22,9 +22,9 @@ pub enum LocalRole {
     /// differently from single ones, and closed loop amplifies the difference, so a run would
     /// otherwise depend on which other runs' steps happened to share its batch; this way
     /// `--jobs N` gives the results of one run at a time. It gets one model thread per run
-    /// driven at once (`SSR_AGENT_MODEL_THREADS`, unless the environment sets it), so the runs'
-    /// steps go through the network side by side, each on its share of the cores. No metrics
-    /// port.
+    /// driven at once, each with a pool of its share of the cores (`SSR_AGENT_MODEL_THREADS`
+    /// and `SSR_AGENT_COMPUTE_THREADS`, unless the environment sets them), so the runs' steps
+    /// go through the network side by side. No metrics port.
     Driving {
         /// Runs driven at once.
         runs: usize,
@@ -102,8 +102,16 @@ impl LocalServer {
             if std::env::var_os("SSR_AGENT_MAX_BATCH").is_none() {
                 command.env("SSR_AGENT_MAX_BATCH", "1");
             }
+            let runs = runs.clamp(1, 64);
             if std::env::var_os("SSR_AGENT_MODEL_THREADS").is_none() {
-                command.env("SSR_AGENT_MODEL_THREADS", runs.clamp(1, 64).to_string());
+                command.env("SSR_AGENT_MODEL_THREADS", runs.to_string());
+            }
+            if std::env::var_os("SSR_AGENT_COMPUTE_THREADS").is_none() {
+                let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+                command.env(
+                    "SSR_AGENT_COMPUTE_THREADS",
+                    (cores / runs).max(1).to_string(),
+                );
             }
         }
         let mut child = command
