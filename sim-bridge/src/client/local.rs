@@ -99,19 +99,18 @@ impl LocalServer {
             command.env("RUST_LOG", "warn");
         }
         if let LocalRole::Driving { runs } = role {
-            if std::env::var_os("SSR_AGENT_MAX_BATCH").is_none() {
-                command.env("SSR_AGENT_MAX_BATCH", "1");
-            }
+            // At most the server's 64 model threads.
             let runs = runs.clamp(1, 64);
-            if std::env::var_os("SSR_AGENT_MODEL_THREADS").is_none() {
-                command.env("SSR_AGENT_MODEL_THREADS", runs.to_string());
-            }
-            if std::env::var_os("SSR_AGENT_COMPUTE_THREADS").is_none() {
-                let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-                command.env(
-                    "SSR_AGENT_COMPUTE_THREADS",
-                    (cores / runs).max(1).to_string(),
-                );
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let settings = [
+                ("SSR_AGENT_MAX_BATCH", 1),
+                ("SSR_AGENT_MODEL_THREADS", runs),
+                ("SSR_AGENT_COMPUTE_THREADS", (cores / runs).max(1)),
+            ];
+            for (name, value) in settings {
+                if std::env::var_os(name).is_none() {
+                    command.env(name, value.to_string());
+                }
             }
         }
         let mut child = command
