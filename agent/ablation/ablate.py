@@ -14,8 +14,8 @@ training and evaluation continue from where they stopped (`--resume`), and a `do
 run whose evaluations all finished (only those enter the table). A killed run therefore
 continues when the same command is run again. Standard library only.
 
-    python3 agent/ablation/ablate.py --data data/train-v3 --out runs/ablation
-    python3 agent/ablation/ablate.py --data data/train-v3 --out runs/ablation \\
+    python3 agent/ablation/ablate.py --data data/train-v5 --out runs/ablation
+    python3 agent/ablation/ablate.py --data data/train-v5 --out runs/ablation \\
         --variants full,no-ffp --seeds 1          # a second seed for two of them
     python3 agent/ablation/ablate.py --out runs/ablation --table-only
 """
@@ -42,15 +42,15 @@ VARIANTS = {
 
 # The bundled recipe from scratch (README, "Training"): the flags every variant shares.
 RECIPE = [
-    "--lr", "5e-4", "--warmup-steps", "1000", "--history-dropout", "0.1",
+    "--lr", "5e-4", "--warmup-steps", "1000", "--history-dropout", "0.1", "--history", "link",
     "--hazard-weight", "0.5", "--occupancy-weight", "1.0",
     "--checkpoint-every", "1000", "--validate-every", "5000",
 ]
-# The bundled checkpoint's sample passes: 68,000 steps of 8.
-DEFAULT_STEPS = 68000
+# The bundled checkpoint's sample passes: 118,000 steps of 8 (v9 step 30,000's lineage).
+DEFAULT_STEPS = 118000
 ROUTE_SETS = ["town05-long-style", "town05-short-style"]
 # Controller settings of the bundled agent, given to every variant's checkpoint.
-BUNDLED_CONTROL = '{"safety": {"enabled": true}}'
+BUNDLED_CONTROL = '{"safety": {"enabled": true}, "turn_lead": "plan"}'
 
 
 # The workspace's release binaries, wherever the script is run from.
