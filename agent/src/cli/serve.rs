@@ -49,8 +49,8 @@ pub struct ServeArgs {
     /// Model threads, each forming and running its own batches [default: 2].
     #[arg(long, env = "SSR_AGENT_MODEL_THREADS")]
     model_threads: Option<usize>,
-    /// CPU threads of a pool of each model thread's own; 0: all model threads use rayon's
-    /// global pool [default: 0].
+    /// Size of the rayon pool each model thread gets to itself; 0: all model threads share
+    /// rayon's global pool [default: 0].
     #[arg(long, env = "SSR_AGENT_COMPUTE_THREADS")]
     compute_threads: Option<usize>,
     /// Longest a request may take, seconds; a shorter client deadline wins [default: 30].

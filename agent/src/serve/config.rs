@@ -53,8 +53,8 @@ pub struct ServeConfig {
     /// Model threads, each forming and running its own batches. Two forward passes side by
     /// side fill a 2-core CPU better than one spread over both (see README, Serving figures).
     pub model_threads: usize,
-    /// CPU threads of a pool of each model thread's own, or 0: every model thread uses rayon's
-    /// global pool (one thread per core). Own pools keep one model thread's work off another's
+    /// Size of the rayon pool each model thread gets to itself, or 0: every model thread uses
+    /// rayon's global pool (one thread per core). Own pools keep one model thread's work off another's
     /// threads when several episodes run at once (`sim-bridge eval --jobs N` gives its local
     /// server N model threads with the cores shared out); the global pool gives a lone episode
     /// every core (one episode on 2 cores: 11 ms a step, 14-15 ms on a 1-thread pool).
