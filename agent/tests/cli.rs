@@ -236,8 +236,9 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
     assert!(ok, "{stderr}");
     assert!(stdout.contains("3 steps done (0 in this run"), "{stdout}");
 
-    // The command-only gate, in a run of its own.
+    // The command-only gate, in a run of its own from the first run's perception.
     let gated = dir.join("gated");
+    let first = out.join("final.safetensors");
     let (ok, _, stderr) = ssr_agent(&[
         "train",
         "--data",
@@ -252,12 +253,32 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
         "--batch-size",
         "2",
         "--gate-command-only",
+        "--init-perception",
+        first.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
     let info = ssr_agent::checkpoint::inspect(&gated.join("final.safetensors")).unwrap();
     assert_eq!(info.config.name, "tiny-gate-command");
     assert!(!info.config.tokens.gate_target_point);
 
+    let training = &info.metadata["training"];
+    assert!(training.contains("\"init_perception\""), "{training}");
+
+    let (ok, _, stderr) = train(&["--stop-at", "0"]);
+    assert!(!ok && stderr.contains("--stop-at"), "{stderr}");
+    let (ok, _, stderr) = ssr_agent(&[
+        "train",
+        "--data",
+        data,
+        "--init",
+        "a.safetensors",
+        "--init-perception",
+        "b.safetensors",
+    ]);
+    assert!(
+        !ok && stderr.contains("--init-perception") && stderr.contains("cannot be used with"),
+        "{stderr}"
+    );
     let (ok, _, stderr) = train(&["--tokens", "0"]);
     assert!(!ok && stderr.contains("num_tokens"), "{stderr}");
     let (ok, _, stderr) = ssr_agent(&["train", "--data", "/no/such/dataset", "--out", out_arg]);

@@ -344,6 +344,71 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
 }
 
 #[test]
+fn an_ablation_starts_from_a_checkpoints_perception() {
+    let _rng = device_rng();
+    let tmp = Scratch::new();
+    let data = tmp.fixture("perception");
+    let config = config(8);
+    let trained = train(
+        config.clone(),
+        options(&data, &tmp.dir("perception-first")),
+        open(&data, &config),
+    )
+    .unwrap()
+    .checkpoint;
+
+    // Another token count, no FFP, a learning rate too small to move a weight: the checkpoint
+    // of its first step holds the start, whose BEV encoder is the trained network's (the
+    // backbone's batch statistics move in a step, so the encoders get the same features).
+    let mut variant = config.clone();
+    variant.model.tokens.num_tokens += 1;
+    variant.future_bev = false;
+    variant.lr = 1e-20;
+    let device = Device::flex();
+    let start_of = |init_perception: Option<PathBuf>, name: &str| {
+        let run = TrainConfig {
+            init_perception,
+            ..variant.clone()
+        };
+        let stop = TrainOptions {
+            stop_at: Some(1),
+            ..options(&data, &tmp.dir(name))
+        };
+        let summary = train(run, stop, open(&data, &variant)).unwrap();
+        checkpoint::load(&summary.checkpoint, &device).unwrap().0
+    };
+    let (reference, _) = checkpoint::load(&trained, &device).unwrap();
+    let input = common::model_input(&variant.model, 2, 1, true, &device);
+    let features = reference.image_features(input.images.clone());
+    let bev = |model: &ssr_agent::model::SsrModel| {
+        float_values(model.encode_bev(features.clone(), &input))
+    };
+    let shared = start_of(Some(trained.clone()), "perception-shared");
+    let fresh = start_of(None, "perception-fresh");
+    assert_eq!(common::max_abs_diff(bev(&shared), bev(&reference)), 0.0);
+    assert!(common::max_abs_diff(bev(&fresh), bev(&reference)) > 1e-3);
+    let tokens = shared.forward(&input).scene.tokens.dims()[1];
+    assert_eq!(tokens, variant.model.tokens.num_tokens);
+
+    // The perception itself must match; a run starts from one checkpoint.
+    let mut other = variant.clone();
+    other.model.channels += 8;
+    other.init_perception = Some(trained.clone());
+    let error = train_error(other, &data, &tmp.dir("perception-other"));
+    assert!(
+        matches!(error, TrainError::Config(_)) && error.to_string().contains("channels"),
+        "{error}"
+    );
+    let both = TrainConfig {
+        init: Some(trained.clone()),
+        init_perception: Some(trained),
+        ..config.clone()
+    };
+    let error = train_error(both, &data, &tmp.dir("perception-both"));
+    assert!(error.to_string().contains("exclusive"), "{error}");
+}
+
+#[test]
 fn a_dropped_history_trains_the_first_frame_path() {
     let _rng = device_rng();
     let tmp = Scratch::new();

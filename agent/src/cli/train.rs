@@ -33,7 +33,7 @@ pub struct TrainArgs {
     resume: bool,
     /// Stop after this step with a checkpoint, keeping the schedule of --steps (split a run
     /// over several sittings, then --resume).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     stop_at: Option<u64>,
     /// Model preset (cpu-default, paper) or a JSON config file.
     #[arg(long, default_value = "cpu-default")]
@@ -42,6 +42,11 @@ pub struct TrainArgs {
     /// weights; for example agent/models/ssr-cpu-default.safetensors, the bundled one.
     #[arg(long, conflicts_with_all = ["model", "no_stl", "tokens"])]
     init: Option<PathBuf>,
+    /// Start a fresh network of --model and the ablation flags from this checkpoint's
+    /// perception (backbone, BEV encoder, occupancy head), drawing the scene tokens, heads and
+    /// FFP from --seed: the ablations' shared start (agent/ablation/ablate.py).
+    #[arg(long, conflicts_with = "init")]
+    init_perception: Option<PathBuf>,
     /// Optimiser steps of the whole run.
     #[arg(long, default_value_t = 4000)]
     steps: u64,
@@ -186,6 +191,7 @@ impl TrainArgs {
         config.labels = self.labels;
         config.balanced = !self.uniform_sampling;
         config.init = self.init.clone();
+        config.init_perception = self.init_perception.clone();
         config.loss.bev = self.bev_weight;
         config.loss.hazard = self.hazard_weight;
         config.loss.occupancy = self.occupancy_weight;

@@ -71,6 +71,11 @@ pub struct TrainConfig {
     /// The checkpoint the weights start from (fine-tuning); `None` = fresh weights from `seed`.
     #[serde(default)]
     pub init: Option<std::path::PathBuf>,
+    /// The checkpoint whose perception (backbone, BEV encoder and occupancy head) the fresh
+    /// network starts from, the rest drawn from `seed`: the ablations' shared start, for
+    /// networks whose tokens, gate or head differ from the checkpoint's. Exclusive with `init`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_perception: Option<std::path::PathBuf>,
     /// Fraction of routes held out for validation.
     pub validation_fraction: f64,
     /// Validate every this many steps (and at the end); 0 = only at the end.
@@ -105,6 +110,7 @@ impl TrainConfig {
             labels: Labels::Plan,
             balanced: true,
             init: None,
+            init_perception: None,
             validation_fraction: 0.05,
             validate_every: 1000,
             validation_samples: 1024,
@@ -150,6 +156,11 @@ impl TrainConfig {
                 "history_dropout must be in [0, 1], got {}",
                 self.history_dropout
             ));
+        }
+        if self.init.is_some() && self.init_perception.is_some() {
+            return Err(
+                "init and init_perception are exclusive: a run starts from one checkpoint".into(),
+            );
         }
         if self.history == History::Recursive {
             return Err("history must be chain or link: training gives no recursion".into());

@@ -238,6 +238,47 @@ fn initial_weights(
     Ok(weights)
 }
 
+/// The config fields that shape the perception [`with_perception_of`] copies.
+const PERCEPTION_FIELDS: [&str; 5] = ["image_width", "image_height", "backbone", "channels", "bev"];
+
+/// A fresh network for `model` whose backbone, BEV encoder and occupancy head (where both
+/// have one) are the checkpoint's at `path`; its tokens, gate, heads and FFP may differ from
+/// the checkpoint's, its perception may not.
+fn with_perception_of(
+    path: &Path,
+    model: &SsrConfig,
+    device: &Device,
+) -> Result<SsrModel, TrainError> {
+    let (saved, info) = checkpoint::load(path, device)?;
+    let differences: Vec<String> = info
+        .config
+        .differences(model)
+        .into_iter()
+        .filter(|d| {
+            let field = d.split(['.', ':']).next().unwrap_or_default();
+            PERCEPTION_FIELDS.contains(&field)
+        })
+        .collect();
+    if !differences.is_empty() {
+        return Err(TrainError::Config(format!(
+            "the perception checkpoint {} has another perception than this run's network: {}",
+            path.display(),
+            differences.join("; ")
+        )));
+    }
+    let fresh = model.init(device);
+    let occupancy = match (fresh.occupancy, saved.occupancy) {
+        (Some(_), Some(saved)) => Some(saved),
+        (fresh, _) => fresh,
+    };
+    Ok(SsrModel {
+        backbone: saved.backbone,
+        bev: saved.bev,
+        occupancy,
+        ..fresh
+    })
+}
+
 fn optimizer_for(config: &TrainConfig) -> ModuleOptimizer {
     let mut adamw = AdamWConfig::new().with_weight_decay(config.weight_decay);
     if config.clip_norm > 0.0 {
@@ -276,9 +317,10 @@ impl Trainer {
         } else {
             config.validate().map_err(TrainError::Config)?;
             device.seed(config.seed);
-            let model = match &config.init {
-                Some(path) => initial_weights(path, &config.model, &device)?,
-                None => config.model.init(&device),
+            let model = match (&config.init, &config.init_perception) {
+                (Some(path), _) => initial_weights(path, &config.model, &device)?,
+                (None, Some(path)) => with_perception_of(path, &config.model, &device)?,
+                (None, None) => config.model.init(&device),
             };
             std::fs::write(
                 out.join("train_config.json"),
