@@ -5,9 +5,10 @@ navigation gate reads.
 For each variant and training seed this trains the network with the bundled recipe on the same
 data and step budget (`ssr-agent train`), gives the checkpoint the bundled controller settings
 (`ssr-agent control`: safety stop on), drives it on the Town05-style long and short routes
-(`sim-bridge eval --agent local`), times it at batch 1 and 8 (`ssr-agent bench`) and reads its
-open-loop validation from the checkpoint (`ssr-agent inspect`). One table covers every run found
-under --out: ablation.md and ablation.json.
+(`sim-bridge eval --agent local`), times it at batch 1 and 8 (`ssr-agent bench`), and reads
+its training throughput from the run's metrics and its open-loop validation from the
+checkpoint (`ssr-agent inspect`). One table covers every run found under --out: ablation.md
+and ablation.json.
 
 Every variant starts from the same perception, the bundled checkpoint's backbone, BEV encoder
 and occupancy head (`--init-perception`), and draws its scene tokens, navigation gate, heads
@@ -256,11 +257,20 @@ def collect(run):
         "params": int(bench[1]["params"]),
         "ms_batch_1": bench[1]["forward_ms"],
         "ms_batch_8": bench[8]["forward_ms"],
+        "train_samples_per_s": training_rate(run / "train" / "metrics.jsonl"),
         "l2_m": l2 if l2 and None not in l2 else None,
     }
     for routes in ROUTE_SETS:
         row[routes] = closed_loop(json.loads((run / f"eval-{routes}.json").read_text()))
     return row
+
+
+def training_rate(metrics):
+    """Training samples a second: the median of the rates `ssr-agent train` logs with each
+    step (each the mean of its sitting so far)."""
+    rates = [line["samples_per_s"] for line in map(json.loads, metrics.read_text().splitlines())
+             if line["kind"] == "step"]
+    return statistics.median(rates)
 
 
 def closed_loop(results):
@@ -304,7 +314,8 @@ def write_table(out, rows):
     by_variant = {}
     for row in rows:
         by_variant.setdefault(row["variant"], []).append(row)
-    header = ["variant", "seeds", "params", "ms b1", "ms b8", "L2 1/2/3 s (m)"]
+    header = ["variant", "seeds", "params", "ms b1", "ms b8", "train samples/s",
+              "L2 1/2/3 s (m)"]
     for routes in ROUTE_SETS:
         short = routes.removeprefix("town05-").removesuffix("-style")
         header += [f"{short} DS", f"{short} RC", f"{short} IS",
@@ -314,6 +325,7 @@ def write_table(out, rows):
         l2 = [r["l2_m"] for r in runs if r["l2_m"]]
         cells = [variant, ",".join(str(r["seed"]) for r in runs), f"{runs[0]['params']:,}",
                  spread([r["ms_batch_1"] for r in runs]), spread([r["ms_batch_8"] for r in runs]),
+                 spread([r["train_samples_per_s"] for r in runs]),
                  " / ".join(f"{statistics.mean(v[h] for v in l2):.2f}" for h in range(3))
                  if l2 else "-"]
         for routes in ROUTE_SETS:

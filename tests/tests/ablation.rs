@@ -90,6 +90,7 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     for row in rows {
         assert_eq!(row["l2_m"].as_array().unwrap().len(), 3, "{row}");
         assert!(row["ms_batch_1"].as_f64().unwrap() > 0.0, "{row}");
+        assert!(row["train_samples_per_s"].as_f64().unwrap() > 0.0, "{row}");
         for routes in ["town05-long-style", "town05-short-style"] {
             assert_eq!(row[routes]["runs"], 1, "{row}");
         }
