@@ -5,10 +5,12 @@ navigation gate reads.
 For each variant and training seed this trains the network with the bundled recipe on the same
 data and step budget (`ssr-agent train`), gives the checkpoint the bundled controller settings
 (`ssr-agent control`: safety stop on), drives it on the Town05-style long and short routes
-(`sim-bridge eval --agent local`), times it at batch 1 and 8 (`ssr-agent bench`), and reads
-its training throughput from the run's metrics and its open-loop validation from the
-checkpoint (`ssr-agent inspect`). One table covers every run found under --out: ablation.md
-and ablation.json.
+(`sim-bridge eval --agent local`) and reads its open-loop validation from the checkpoint
+(`ssr-agent inspect`). Then every variant's network is timed in one sitting (`ssr-agent bench`:
+forward pass at batch 1 and 8, a training step at batch 8), in interleaved rounds so that the
+machine's drift falls on all of them alike: timing.json, redone whenever a variant joins (delete
+it to time again on a quiet machine). One table covers every run found under --out:
+ablation.md and ablation.json.
 
 Every variant starts from the same perception, the bundled checkpoint's backbone, BEV encoder
 and occupancy head (`--init-perception`), and draws its scene tokens, navigation gate, heads
@@ -75,9 +77,13 @@ def main():
         for variant in args.variants:
             for seed in args.seeds:
                 run_variant(args, variant, seed)
-    rows = [collect(run) for run in sorted(runs_under(args.out))]
-    if not rows:
+    runs = sorted(runs_under(args.out))
+    if not runs:
         sys.exit(f"ablate.py: no finished runs under {args.out}")
+    if not args.table_only:
+        time_variants(args, runs)
+    timing = read_timing(args.out)
+    rows = [collect(run, timing.get(run.parent.name)) for run in runs]
     write_table(args.out, rows)
 
 
@@ -106,6 +112,8 @@ def parse_args():
     parser.add_argument("--timeout", type=float, help="end every route after S simulated seconds (smoke runs)")
     parser.add_argument("--bench-iterations", type=positive, default=20,
                         help="timed runs per bench measurement (default: %(default)s)")
+    parser.add_argument("--bench-rounds", type=positive, default=3,
+                        help="interleaved timing rounds over every variant (default: %(default)s)")
     parser.add_argument("--bin", type=Path, default=DEFAULT_BIN,
                         help="folder of the ssr-agent and sim-bridge binaries (default: %(default)s)")
     parser.add_argument("--table-only", action="store_true",
@@ -181,17 +189,9 @@ def run_variant(args, variant, seed):
     if not info.is_file():
         step(label, "inspect", info, [tool("ssr-agent"), "inspect", str(agent)], stdout_only=True)
 
-    bench = run / "bench.jsonl"
-    if not bench.is_file():
-        model = run / "model.json"
+    model = run / "model.json"
+    if not model.is_file():
         model.write_text(json.dumps(checkpoint_field(info, "config")))
-        partial = run / "bench.partial"
-        for batch in (1, 8):
-            step(label, f"bench batch {batch}", partial,
-                 [tool("ssr-agent"), "bench", "--config", str(model), "--batch", str(batch),
-                  "--iterations", str(args.bench_iterations), "--json"],
-                 append=batch > 1, stdout_only=True)
-        partial.rename(bench)
 
     done = run / "done"
     if done.is_file():
@@ -242,35 +242,66 @@ def runs_under(out):
                 yield run
 
 
-def collect(run):
-    """One run's figures: open loop, timing and size, and closed loop per route set."""
+def time_variants(args, runs):
+    """Times every variant with a finished run, all in one sitting: `--bench-rounds` rounds,
+    each benching every variant in turn (its network with fresh weights: timing does not depend
+    on them). Skipped when timing.json already covers exactly these variants."""
+    models = {}
+    for run in runs:
+        models.setdefault(run.parent.name, run / "model.json")
+    path = args.out / "timing.json"
+    if path.is_file() and sorted(json.loads(path.read_text())) == sorted(models):
+        return
+    rounds = {variant: [] for variant in models}
+    scratch = args.out / "timing.partial"
+    for k in range(args.bench_rounds):
+        for variant, model in models.items():
+            reports = {}
+            for batch, extra in ((1, []), (8, ["--train", "--train-batch", "8"])):
+                step(f"[timing round {k + 1} of {args.bench_rounds}]",
+                     f"{variant} batch {batch}", scratch,
+                     [str(args.bin / "ssr-agent"), "bench", "--config", str(model),
+                      "--batch", str(batch), "--iterations", str(args.bench_iterations),
+                      "--json", *extra], stdout_only=True)
+                for line in scratch.read_text().splitlines():
+                    if line.startswith("{"):
+                        report = json.loads(line)
+                        reports.setdefault(report["batch"], {}).update(report["results"])
+            rounds[variant].append({
+                "params": int(reports[1]["params"]),
+                "ms_batch_1": reports[1]["forward_ms"],
+                "ms_batch_8": reports[8]["forward_ms"],
+                "train_step_ms_batch_8": reports[8]["train_step_ms"],
+            })
+    scratch.unlink()
+    path.write_text(json.dumps(rounds, indent=1) + "\n")
+
+
+def read_timing(out):
+    """Variant -> params and the median over rounds of each timing ({} without timing.json)."""
+    path = out / "timing.json"
+    if not path.is_file():
+        return {}
+    return {
+        variant: {key: statistics.median(r[key] for r in rounds) for key in rounds[0]}
+        for variant, rounds in json.loads(path.read_text()).items()
+    }
+
+
+def collect(run, timing):
+    """One run's figures: open loop, closed loop per route set, and its variant's timing and
+    size (None until timed)."""
     validation = checkpoint_field(run / "inspect.txt", "training").get("validation") or {}
     l2 = validation.get("l2_m")  # nulls where the data had no validation routes
-    bench = {}
-    for line in (run / "bench.jsonl").read_text().splitlines():
-        if line.startswith("{"):
-            report = json.loads(line)
-            bench[report["batch"]] = report["results"]
     row = {
         "variant": run.parent.name,
         "seed": int(run.name.removeprefix("seed-")),
-        "params": int(bench[1]["params"]),
-        "ms_batch_1": bench[1]["forward_ms"],
-        "ms_batch_8": bench[8]["forward_ms"],
-        "train_samples_per_s": training_rate(run / "train" / "metrics.jsonl"),
+        "timing": timing,
         "l2_m": l2 if l2 and None not in l2 else None,
     }
     for routes in ROUTE_SETS:
         row[routes] = closed_loop(json.loads((run / f"eval-{routes}.json").read_text()))
     return row
-
-
-def training_rate(metrics):
-    """Training samples a second: the median of the rates `ssr-agent train` logs with each
-    step (each the mean of its sitting so far)."""
-    rates = [line["samples_per_s"] for line in map(json.loads, metrics.read_text().splitlines())
-             if line["kind"] == "step"]
-    return statistics.median(rates)
 
 
 def closed_loop(results):
@@ -314,7 +345,7 @@ def write_table(out, rows):
     by_variant = {}
     for row in rows:
         by_variant.setdefault(row["variant"], []).append(row)
-    header = ["variant", "seeds", "params", "ms b1", "ms b8", "train samples/s",
+    header = ["variant", "seeds", "params", "ms b1", "ms b8", "train step ms b8",
               "L2 1/2/3 s (m)"]
     for routes in ROUTE_SETS:
         short = routes.removeprefix("town05-").removesuffix("-style")
@@ -323,11 +354,15 @@ def write_table(out, rows):
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for variant, runs in by_variant.items():
         l2 = [r["l2_m"] for r in runs if r["l2_m"]]
-        cells = [variant, ",".join(str(r["seed"]) for r in runs), f"{runs[0]['params']:,}",
-                 spread([r["ms_batch_1"] for r in runs]), spread([r["ms_batch_8"] for r in runs]),
-                 spread([r["train_samples_per_s"] for r in runs]),
-                 " / ".join(f"{statistics.mean(v[h] for v in l2):.2f}" for h in range(3))
-                 if l2 else "-"]
+        cells = [variant, ",".join(str(r["seed"]) for r in runs)]
+        timing = runs[0]["timing"]
+        if timing:
+            cells += [f"{timing['params']:,}", f"{timing['ms_batch_1']:.2f}",
+                      f"{timing['ms_batch_8']:.2f}", f"{timing['train_step_ms_batch_8']:.0f}"]
+        else:
+            cells += ["-"] * 4
+        cells.append(" / ".join(f"{statistics.mean(v[h] for v in l2):.2f}" for h in range(3))
+                     if l2 else "-")
         for routes in ROUTE_SETS:
             loops = [r[routes] for r in runs]
             cells += [spread([l["ds"] for l in loops]), spread([l["rc"] for l in loops]),

@@ -1,7 +1,7 @@
 //! The ablation harness (`agent/ablation/ablate.py`) end to end on a tiny budget: it collects
 //! nothing itself, so a small expert dataset comes first; then two variants are trained for two
-//! steps, driven on one route of each Town05-style set for a second and timed, and the table
-//! is written. Run again, every finished stage is skipped; an unfinished run stays out of the
+//! steps, driven on one route of each Town05-style set for a second, timed in one sitting, and
+//! the table is written. Run again, every finished stage is skipped; an unfinished run stays out of the
 //! table.
 
 use std::path::Path;
@@ -62,6 +62,8 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         "1",
         "--bench-iterations",
         "1",
+        "--bench-rounds",
+        "1",
         "--jobs",
         "1",
     ];
@@ -73,6 +75,10 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         String::from_utf8_lossy(&run.stderr)
     );
     assert!(stdout.contains("[tokens-4 seed 0] train"), "{stdout}");
+    assert!(
+        stdout.contains("[timing round 1 of 1] tokens-4 batch 8"),
+        "{stdout}"
+    );
 
     let table: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
@@ -82,15 +88,16 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         .map(|r| r["variant"].as_str().unwrap())
         .collect();
     assert_eq!(variants, ["full", "tokens-4"]);
-    // Fewer tokens, fewer TokenLearner outputs; both ran through training, bench and eval.
+    // Fewer tokens, fewer TokenLearner outputs; both ran through training, eval and timing.
     assert!(
-        rows[1]["params"].as_u64() < rows[0]["params"].as_u64(),
+        rows[1]["timing"]["params"].as_f64() < rows[0]["timing"]["params"].as_f64(),
         "{rows:?}"
     );
     for row in rows {
         assert_eq!(row["l2_m"].as_array().unwrap().len(), 3, "{row}");
-        assert!(row["ms_batch_1"].as_f64().unwrap() > 0.0, "{row}");
-        assert!(row["train_samples_per_s"].as_f64().unwrap() > 0.0, "{row}");
+        for timed in ["ms_batch_1", "ms_batch_8", "train_step_ms_batch_8"] {
+            assert!(row["timing"][timed].as_f64().unwrap() > 0.0, "{row}");
+        }
         for routes in ["town05-long-style", "town05-short-style"] {
             assert_eq!(row[routes]["runs"], 1, "{row}");
         }
