@@ -77,7 +77,7 @@ def main():
         for variant in args.variants:
             for seed in args.seeds:
                 run_variant(args, variant, seed)
-    runs = sorted(runs_under(args.out))
+    runs = list(runs_under(args.out))
     if not runs:
         sys.exit(f"ablate.py: no finished runs under {args.out}")
     if not args.table_only:
