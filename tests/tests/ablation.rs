@@ -1,8 +1,8 @@
 //! The ablation harness (`agent/ablation/ablate.py`) end to end on a tiny budget: it collects
 //! nothing itself, so a small expert dataset comes first; then two variants are trained for two
 //! steps, driven on one route of each Town05-style set for a second, timed in one sitting, and
-//! the table is written. Run again, every finished stage is skipped; an unfinished run stays out of the
-//! table.
+//! the table is written. Run again, every finished stage is skipped; an unfinished run stays
+//! out of the table.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -90,7 +90,8 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     assert_eq!(variants, ["full", "tokens-4"]);
     // Fewer tokens, fewer TokenLearner outputs; both ran through training, eval and timing.
     assert!(
-        rows[1]["timing"]["params"].as_f64() < rows[0]["timing"]["params"].as_f64(),
+        rows[1]["timing"]["params"].as_f64().unwrap()
+            < rows[0]["timing"]["params"].as_f64().unwrap(),
         "{rows:?}"
     );
     for row in rows {
