@@ -10,7 +10,8 @@ data and step budget (`ssr-agent train`), gives the checkpoint the bundled contr
 forward pass at batch 1 and 8, a training step at batch 8), in interleaved rounds so that the
 machine's drift falls on all of them alike: timing.json, redone whenever a variant joins (delete
 it to time again on a quiet machine). One table covers every run found under --out:
-ablation.md and ablation.json.
+ablation.md and ablation.json, with a second that sets each variant against full SSR drive by
+drive (same seed, route and repetition), its DS difference and a 95 % interval.
 
 Every variant starts from the same perception, the bundled checkpoint's backbone, BEV encoder
 and occupancy head (`--init-perception`), and draws its scene tokens, navigation gate, heads
@@ -34,6 +35,7 @@ continues when the same command is run again. Standard library only.
 import argparse
 import json
 import os
+import random
 import statistics
 import subprocess
 import sys
@@ -320,6 +322,8 @@ def closed_loop(results):
         "is": mean("score_penalty"),
         "km": km,
         "per_km": {kind: n / km for kind, n in counts.items()} if km > 0 else None,
+        "ds_by_run": [[r["route_id"], r["meta"]["repetition"], r["scores"]["score_composed"]]
+                      for r in records],
     }
 
 
@@ -339,6 +343,34 @@ def infraction_rates(loops):
     rate = lambda kinds: statistics.mean(sum(p.get(k, 0.0) for k in kinds) for p in driven)
     collisions = rate(["collisions_vehicle", "collisions_pedestrian", "collisions_layout"])
     return f"{collisions:.2f} / {rate(['red_light']):.2f} / {rate(['outside_route_lanes']):.2f}"
+
+
+def paired_difference(runs, baseline, routes, resamples=2000):
+    """DS of `runs` minus DS of `baseline` over the drives they share (same seed, route and
+    repetition, hence the same traffic at the start), with a 95 % interval from resampling
+    whole routes (a route's drives are alike, so they are not independent draws). None when
+    they share no drive."""
+    base = {(r["seed"], route, rep): ds for r in baseline for route, rep, ds in r[routes]["ds_by_run"]}
+    by_route = {}
+    for r in runs:
+        for route, rep, ds in r[routes]["ds_by_run"]:
+            if (r["seed"], route, rep) in base:
+                by_route.setdefault(route, []).append(ds - base[(r["seed"], route, rep)])
+    if not by_route:
+        return None
+    names = sorted(by_route)
+    rng = random.Random(0)  # the same interval on every rebuild of the table
+    means = []
+    for _ in range(resamples):
+        drawn = [d for name in (rng.choice(names) for _ in names) for d in by_route[name]]
+        means.append(statistics.mean(drawn))
+    means.sort()
+    return {
+        "drives": sum(len(d) for d in by_route.values()),
+        "mean": statistics.mean(d for name in names for d in by_route[name]),
+        "low": means[int(0.025 * resamples)],
+        "high": means[int(0.975 * resamples) - 1],
+    }
 
 
 def write_table(out, rows):
@@ -369,8 +401,24 @@ def write_table(out, rows):
                       spread([l["is"] for l in loops]), infraction_rates(loops)]
         lines.append("| " + " | ".join(cells) + " |")
     table = "\n".join(lines) + "\n"
+    differences = {}
+    if "full" in by_variant:
+        header = ["variant"] + [f"{r.removeprefix('town05-').removesuffix('-style')} DS − full "
+                                f"(95 % interval, drives)" for r in ROUTE_SETS]
+        lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        for variant, runs in by_variant.items():
+            if variant == "full":
+                continue
+            differences[variant] = {r: paired_difference(runs, by_variant["full"], r)
+                                    for r in ROUTE_SETS}
+            cells = [variant] + [
+                f"{d['mean']:+.2f} ({d['low']:+.2f} to {d['high']:+.2f}, {d['drives']})" if d else "-"
+                for d in differences[variant].values()]
+            lines.append("| " + " | ".join(cells) + " |")
+        table += "\nAgainst full SSR, drive by drive:\n\n" + "\n".join(lines) + "\n"
     (out / "ablation.md").write_text(table)
-    (out / "ablation.json").write_text(json.dumps(rows, indent=1) + "\n")
+    (out / "ablation.json").write_text(
+        json.dumps({"runs": rows, "against_full": differences}, indent=1) + "\n")
     print(table, end="")
     print(f"written to {out / 'ablation.md'} and {out / 'ablation.json'}")
 

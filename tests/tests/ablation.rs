@@ -82,7 +82,7 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
 
     let table: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
-    let rows = table.as_array().unwrap();
+    let rows = table["runs"].as_array().unwrap();
     let variants: Vec<&str> = rows
         .iter()
         .map(|r| r["variant"].as_str().unwrap())
@@ -103,8 +103,21 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
             assert_eq!(row[routes]["runs"], 1, "{row}");
         }
     }
+    // tokens-4 against full over the drives both made: one route of each set, its interval
+    // around its difference.
+    for routes in ["town05-long-style", "town05-short-style"] {
+        let paired = &table["against_full"]["tokens-4"][routes];
+        assert_eq!(paired["drives"], 1, "{paired}");
+        let (low, mean, high) = (
+            paired["low"].as_f64().unwrap(),
+            paired["mean"].as_f64().unwrap(),
+            paired["high"].as_f64().unwrap(),
+        );
+        assert!(low <= mean && mean <= high, "{paired}");
+    }
     let markdown = std::fs::read_to_string(out.join("ablation.md")).unwrap();
     assert!(markdown.contains("| tokens-4 | 0 |"), "{markdown}");
+    assert!(markdown.contains("Against full SSR"), "{markdown}");
 
     // Again: nothing is trained or driven twice, and the table is the same.
     let again = ablate(&args, &bin);
