@@ -377,13 +377,28 @@ def write_table(out, rows):
     by_variant = {}
     for row in rows:
         by_variant.setdefault(row["variant"], []).append(row)
+    table = results_table(by_variant)
+    differences = {}
+    if "full" in by_variant:
+        differences = {variant: {routes: paired_difference(runs, by_variant["full"], routes)
+                                 for routes in ROUTE_SETS}
+                       for variant, runs in by_variant.items() if variant != "full"}
+        table += "\nAgainst full SSR, drive by drive:\n\n" + against_full_table(differences)
+    (out / "ablation.md").write_text(table)
+    (out / "ablation.json").write_text(
+        json.dumps({"runs": rows, "against_full": differences}, indent=1) + "\n")
+    print(table, end="")
+    print(f"written to {out / 'ablation.md'} and {out / 'ablation.json'}")
+
+
+def results_table(by_variant):
+    """One row a variant: size, timing, open loop, and closed loop per route set."""
     header = ["variant", "seeds", "params", "ms b1", "ms b8", "train step ms b8",
               "L2 1/2/3 s (m)"]
     for routes in ROUTE_SETS:
-        short = routes.removeprefix("town05-").removesuffix("-style")
-        header += [f"{short} DS", f"{short} RC", f"{short} IS",
-                   f"{short} collisions / red / off-lane per km"]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        header += [f"{set_name(routes)} {column}" for column in
+                   ["DS", "RC", "IS", "collisions / red / off-lane per km"]]
+    rows = []
     for variant, runs in by_variant.items():
         l2 = [r["l2_m"] for r in runs if r["l2_m"]]
         cells = [variant, ",".join(str(r["seed"]) for r in runs)]
@@ -399,28 +414,28 @@ def write_table(out, rows):
             loops = [r[routes] for r in runs]
             cells += [spread([l["ds"] for l in loops]), spread([l["rc"] for l in loops]),
                       spread([l["is"] for l in loops]), infraction_rates(loops)]
-        lines.append("| " + " | ".join(cells) + " |")
-    table = "\n".join(lines) + "\n"
-    differences = {}
-    if "full" in by_variant:
-        header = ["variant"] + [f"{r.removeprefix('town05-').removesuffix('-style')} DS − full "
-                                f"(95 % interval, drives)" for r in ROUTE_SETS]
-        lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        for variant, runs in by_variant.items():
-            if variant == "full":
-                continue
-            differences[variant] = {r: paired_difference(runs, by_variant["full"], r)
-                                    for r in ROUTE_SETS}
-            cells = [variant] + [
-                f"{d['mean']:+.2f} ({d['low']:+.2f} to {d['high']:+.2f}, {d['drives']})" if d else "-"
-                for d in differences[variant].values()]
-            lines.append("| " + " | ".join(cells) + " |")
-        table += "\nAgainst full SSR, drive by drive:\n\n" + "\n".join(lines) + "\n"
-    (out / "ablation.md").write_text(table)
-    (out / "ablation.json").write_text(
-        json.dumps({"runs": rows, "against_full": differences}, indent=1) + "\n")
-    print(table, end="")
-    print(f"written to {out / 'ablation.md'} and {out / 'ablation.json'}")
+        rows.append(cells)
+    return markdown(header, rows)
+
+
+def against_full_table(differences):
+    """One row a variant: its paired DS difference to full SSR per route set."""
+    header = ["variant"] + [f"{set_name(routes)} DS − full (95 % interval, drives)"
+                            for routes in ROUTE_SETS]
+    rows = [[variant] + [f"{d['mean']:+.2f} ({d['low']:+.2f} to {d['high']:+.2f}, {d['drives']})"
+                         if d else "-" for d in per_set.values()]
+            for variant, per_set in differences.items()]
+    return markdown(header, rows)
+
+
+def set_name(routes):
+    """'long' for town05-long-style."""
+    return routes.removeprefix("town05-").removesuffix("-style")
+
+
+def markdown(header, rows):
+    lines = [header, ["---"] * len(header), *rows]
+    return "".join("| " + " | ".join(cells) + " |\n" for cells in lines)
 
 
 if __name__ == "__main__":
