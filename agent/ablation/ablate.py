@@ -24,18 +24,23 @@ the BEV during these steps).
 Every stage writes into --out/<variant>/seed-<k>/ and is skipped once its output is complete;
 training and evaluation continue from where they stopped (`--resume`), and a `done` file marks a
 run whose evaluations all finished (only those enter the table). A killed run therefore
-continues when the same command is run again. Standard library only.
+continues when the same command is run again. `--keep DIR` copies each finished run's figures
+(not its checkpoints: a few hundred kilobytes in all) and timing.json into DIR, from which
+`--table-only --out DIR` rebuilds the same table; agent/ablation/results is this project's.
+Standard library only.
 
     python3 agent/ablation/ablate.py --data data/train-v5 --out runs/ablation
     python3 agent/ablation/ablate.py --data data/train-v5 --out runs/ablation \\
         --variants full,no-ffp --seeds 1          # a second seed for two of them
     python3 agent/ablation/ablate.py --out runs/ablation --table-only
+    python3 agent/ablation/ablate.py --out agent/ablation/results --table-only
 """
 
 import argparse
 import json
 import os
 import random
+import shutil
 import statistics
 import subprocess
 import sys
@@ -64,6 +69,8 @@ DEFAULT_STEPS = 10000
 ROUTE_SETS = ["town05-long-style", "town05-short-style"]
 # Controller settings of the bundled agent, given to every variant's checkpoint.
 BUNDLED_CONTROL = '{"safety": {"enabled": true}, "turn_lead": "plan"}'
+# What the table is built from: a finished run's files apart from its checkpoints and logs.
+FIGURES = ["inspect.txt", "model.json", *(f"eval-{routes}.json" for routes in ROUTE_SETS), "done"]
 
 
 # The workspace's release binaries and bundled checkpoint, wherever the script is run from.
@@ -79,11 +86,13 @@ def main():
         for variant in args.variants:
             for seed in args.seeds:
                 run_variant(args, variant, seed)
+                keep(args, Path(variant) / f"seed-{seed}", FIGURES)
     runs = list(runs_under(args.out))
     if not runs:
         sys.exit(f"ablate.py: no finished runs under {args.out}")
     if not args.table_only:
         time_variants(args, runs)
+        keep(args, Path("."), ["timing.json"])
     timing = read_timing(args.out)
     rows = [collect(run, timing.get(run.parent.name)) for run in runs]
     write_table(args.out, rows)
@@ -118,6 +127,9 @@ def parse_args():
                         help="interleaved timing rounds over every variant (default: %(default)s)")
     parser.add_argument("--bin", type=Path, default=DEFAULT_BIN,
                         help="folder of the ssr-agent and sim-bridge binaries (default: %(default)s)")
+    parser.add_argument("--keep", type=Path,
+                        help="also copy every finished run's figures and timing.json here "
+                             "(small enough to commit; --table-only --out KEEP rebuilds the table)")
     parser.add_argument("--table-only", action="store_true",
                         help="only rebuild the table from the runs under --out")
     args = parser.parse_args()
@@ -210,6 +222,16 @@ def run_variant(args, variant, seed):
              append=True)
     # Every evaluation exited 0, so every run is scored (a killed one leaves a partial JSON).
     done.touch()
+
+
+def keep(args, folder, names):
+    """Copies `names` from --out/`folder` to --keep/`folder` once the last of them exists."""
+    source = args.out / folder
+    if args.keep is None or not (source / names[-1]).is_file():
+        return
+    (args.keep / folder).mkdir(parents=True, exist_ok=True)
+    for name in names:
+        shutil.copyfile(source / name, args.keep / folder / name)
 
 
 def step(label, what, log, command, env=None, append=False, stdout_only=False):

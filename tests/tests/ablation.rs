@@ -23,7 +23,11 @@ fn ablate(args: &[&str], bin: &Path) -> Output {
 #[test]
 fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     let tmp = tempfile::tempdir().unwrap();
-    let (data, out) = (tmp.path().join("data"), tmp.path().join("out"));
+    let (data, out, kept) = (
+        tmp.path().join("data"),
+        tmp.path().join("out"),
+        tmp.path().join("kept"),
+    );
     let collect = Command::new(binary("sim-bridge"))
         .args([
             "collect",
@@ -44,7 +48,11 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         String::from_utf8_lossy(&collect.stderr)
     );
     let bin = binary("sim-bridge").parent().unwrap().to_path_buf();
-    let (data, out_arg) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let (data, out_arg, kept_arg) = (
+        data.to_str().unwrap(),
+        out.to_str().unwrap(),
+        kept.to_str().unwrap(),
+    );
     let args = [
         "--data",
         data,
@@ -66,6 +74,8 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         "1",
         "--jobs",
         "1",
+        "--keep",
+        kept_arg,
     ];
     let run = ablate(&args, &bin);
     let stdout = String::from_utf8_lossy(&run.stdout);
@@ -128,6 +138,20 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         std::fs::read_to_string(out.join("ablation.md")).unwrap(),
         markdown
     );
+    // The kept figures, without the checkpoints, rebuild the same table.
+    let rebuilt = ablate(&["--out", kept_arg, "--table-only"], &bin);
+    assert!(
+        rebuilt.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rebuilt.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(kept.join("ablation.md")).unwrap(),
+        markdown
+    );
+    assert!(kept.join("timing.json").is_file());
+    assert!(!kept.join("full/seed-0/agent.safetensors").exists());
+    assert!(!kept.join("full/seed-0/train").exists());
     // A run whose evaluations did not all finish stays out of the table.
     std::fs::remove_file(out.join("tokens-4/seed-0/done")).unwrap();
     let table = ablate(&["--out", out_arg, "--table-only"], &bin);
