@@ -25,7 +25,7 @@ Every stage writes into --out/<variant>/seed-<k>/ and is skipped once its output
 training and evaluation continue from where they stopped (`--resume`), and a `done` file marks a
 run whose evaluations all finished (only those enter the table). A killed run therefore
 continues when the same command is run again. `--keep DIR` copies each finished run's figures
-(not its checkpoints: a few hundred kilobytes in all) and timing.json into DIR, from which
+(not its checkpoints: about 110 kB a run) and timing.json into DIR, from which
 `--table-only --out DIR` rebuilds the same table; agent/ablation/results is this project's.
 Standard library only.
 
