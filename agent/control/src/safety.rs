@@ -96,12 +96,16 @@ impl SafetyStop {
         let path = corridor_path(waypoints, reach);
         occupied.iter().any(|&point| {
             let mut start = 0.0;
-            path.windows(2).any(|segment| {
-                let (along, across) = project(point, segment[0], segment[1]);
+            path.windows(2).enumerate().any(|(i, segment)| {
                 let length = distance(segment[0], segment[1]);
-                let hit = (0.0..=length).contains(&along)
-                    && start + along <= reach
-                    && across <= self.half_width;
+                let along = along(point, segment[0], segment[1]);
+                // Behind the origin is behind the car; elsewhere the nearest point of the
+                // segment counts, its end included, so the outside of a bend is covered.
+                let nearest = along.clamp(0.0, length);
+                let hit = (i > 0 || along >= 0.0)
+                    && start + nearest <= reach
+                    && distance(point, lerp(segment[0], segment[1], nearest / length))
+                        <= self.half_width;
                 start += length;
                 hit
             })
@@ -141,11 +145,14 @@ fn distance(a: [f32; 2], b: [f32; 2]) -> f32 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
-/// Where `point` lies relative to the segment `a`-`b` (apart by more than 0.1 m): its distance
-/// along from `a`, and its distance from the segment's line.
-fn project(point: [f32; 2], a: [f32; 2], b: [f32; 2]) -> (f32, f32) {
+/// How far along the segment `a`-`b` (apart by more than 0.1 m) from `a` the foot of `point`
+/// lies (negative before `a`, beyond its length after `b`).
+fn along(point: [f32; 2], a: [f32; 2], b: [f32; 2]) -> f32 {
     let length = distance(a, b);
-    let (ux, uy) = ((b[0] - a[0]) / length, (b[1] - a[1]) / length);
-    let (dx, dy) = (point[0] - a[0], point[1] - a[1]);
-    (dx * ux + dy * uy, (dx * uy - dy * ux).abs())
+    ((point[0] - a[0]) * (b[0] - a[0]) + (point[1] - a[1]) * (b[1] - a[1])) / length
+}
+
+/// The point a fraction `t` of the way from `a` to `b`.
+fn lerp(a: [f32; 2], b: [f32; 2], t: f32) -> [f32; 2] {
+    [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]
 }
