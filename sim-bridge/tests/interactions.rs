@@ -515,7 +515,7 @@ fn lanes_a_few_centimetres_long_do_not_hide_the_ego_from_traffic() {
 #[test]
 fn the_ego_takes_its_turn_at_a_junction_without_lights() {
     let map = load("small", towngen::bundled(TownStyle::SmallTJunctions));
-    let conflicts = sim_bridge::world::traffic::conflicts(&map);
+    let conflicts = sim_bridge::world::junctions::conflicts(&map);
     // A connector `a` entered from a lane without a light, and one `b` from another approach
     // that conflicts with it.
     let entered_from = |lane: LaneIdx| map.lane(lane).predecessors.first().copied();
@@ -637,7 +637,7 @@ fn connectors_conflict_by_their_whole_path_through_the_junction() {
             .idx
     };
     let (east, north_first, north_second) = (piece("10", 0), piece("11", 0), piece("11", 1));
-    let conflicts = sim_bridge::world::traffic::conflicts(&map);
+    let conflicts = sim_bridge::world::junctions::conflicts(&map);
     let of = |lane| conflicts.get(&lane).cloned().unwrap_or_default();
     // Only road 11's second piece crosses road 10, but a car asking for its first piece must
     // wait for whoever is on road 10, and the ego there for a car on either piece.

@@ -284,7 +284,7 @@ fn connectors_that_merge_through_a_split_piece_conflict() {
             .idx
     };
     let (first_piece, second_piece, turn) = (lane_of("10"), lane_of("11"), lane_of("12"));
-    let conflicts = sim_bridge::world::traffic::conflicts(&map);
+    let conflicts = sim_bridge::world::junctions::conflicts(&map);
     let of = |lane| conflicts.get(&lane).cloned().unwrap_or_default();
     assert!(of(first_piece).contains(&turn), "{:?}", of(first_piece));
     assert!(of(second_piece).contains(&turn), "{:?}", of(second_piece));

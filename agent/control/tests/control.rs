@@ -429,7 +429,10 @@ fn the_safety_stop_brakes_for_what_lies_on_the_path_within_the_stopping_distance
     // segment's end and before the second's start, 0.63 m from the corner between them.
     let bend = [[1.0, 1.0], [2.0, 1.0], [3.0, 1.0]];
     assert!(rule.blocked(&bend, 0.0, &[[0.8, 1.6]]));
-    assert!(!rule.blocked(&bend, 0.0, &[[0.5, 2.7]]), "1.77 m from the corner");
+    assert!(
+        !rule.blocked(&bend, 0.0, &[[0.5, 2.7]]),
+        "1.77 m from the corner"
+    );
     // A plan to stand still checks straight ahead, as far as the margin at standstill.
     let hold = [[0.0, 0.0]; 4];
     assert!(rule.blocked(&hold, 0.0, &[[3.5, 0.0]]));

@@ -8,6 +8,7 @@
 
 pub mod ego;
 pub mod idm;
+pub mod junctions;
 pub mod lights;
 pub mod scenarios;
 pub mod state;

@@ -319,7 +319,7 @@ pub fn place_route_scenarios(
 /// connectors conflict with `ego_connector`.
 fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(LaneIdx, f64)> {
     let junction = map.lane(ego_connector).junction?;
-    let conflicts = super::traffic::conflicts(map);
+    let conflicts = super::junctions::conflicts(map);
     let theirs = conflicts.get(&ego_connector)?;
     for light in map
         .lights

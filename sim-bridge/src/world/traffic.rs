@@ -1,37 +1,35 @@
-//! Background traffic: vehicles that follow lanes with the Intelligent Driver Model, pick a
-//! random successor at each junction, stop for red (and, when they can, yellow) lights and at
-//! stop signs, give way inside junctions, and now and then change lanes.
+//! Background traffic: vehicles that follow lanes with the Intelligent Driver Model, pick a random
+//! successor at each junction, stop for red (and, when they can, yellow) lights and at stop signs,
+//! give way inside junctions, and now and then change lanes.
 //!
-//! Junction rule: a connector lane conflicts with another if their centre lines cross or they
-//! end in the same lane (through any further pieces of the junction). A vehicle within
-//! [`REQUEST_DISTANCE`] of a junction may enter when no conflicting connector is occupied (by a
-//! vehicle or the ego) and no conflicting vehicle that arrived earlier is waiting to enter;
+//! Junction rule: a connector lane conflicts with another if their centre lines cross or they end
+//! in the same lane (through any further pieces of the junction; [`super::junctions`]). A vehicle
+//! within [`REQUEST_DISTANCE`] of a junction may enter when no conflicting connector is occupied
+//! (by a vehicle or the ego) and no conflicting vehicle that arrived earlier is waiting to enter;
 //! otherwise it holds at the stop line. It also needs room to leave the junction, CARLA's
-//! traffic-manager junction exit check ([`EXIT_GAP`] beyond its own length past the junction's
-//! end, behind the last vehicle there and those ahead of it inside; see [`has_exit_room`]):
-//! without it, it holds at the stop line without a request, so it keeps no one waiting, and
-//! takes another way through the junction that has room, if there is one. A vehicle that
-//! entered without room stopped inside the junction, holding every connector that conflicts
-//! with its own, and queues spilling back from junction to junction closed into cycles that
-//! never cleared (gridlock around Town02's T-junctions). The ego waiting to enter a junction
-//! from an approach without a light takes its turn among those requests
-//! ([`EgoPresence::junction_request`]),
-//! and the expert asks [`Traffic::ego_may_enter`] before it goes: out of turn, both would end
-//! up inside the junction, each waiting for the other. A vehicle whose path runs into a lane that ends (a lane
-//! drop, as on CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic
-//! manager does. A vehicle near the ego also checks the corridor its path sweeps
-//! ([`EGO_WATCH`] m ahead) for the ego's box, whatever lane the ego is on, and stops short of
-//! it; once the ego has stood [`SQUEEZE_AFTER_S`], a vehicle it holds creeps past with a
-//! narrower margin, as drivers do past a car that waits (see [`SQUEEZE_MARGIN`]). Courtesy:
-//! while the ego stands waiting to change into a lane (its route changes lanes within
-//! [`MERGE_WAIT_AHEAD`] m), vehicles coming up that lane behind it hold back
-//! [`COURTESY_GAP`] m short of its rear, within [`COURTESY_RANGE`], so a queue lets it in, as
-//! drivers do for a car that signals (without it a lane change planned inside a standing or
-//! crawling queue never happens). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the ego's sight (more than
-//! [`RESPAWN_CLEARANCE`] away), or at such a lane end anywhere, are moved to a free place
-//! elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
+//! traffic-manager junction exit check ([`EXIT_GAP`] beyond its own length past the junction's end,
+//! behind the last vehicle there and those ahead of it inside; see [`has_exit_room`]): without it,
+//! it holds at the stop line without a request, so it keeps no one waiting, and takes another way
+//! through the junction that has room, if there is one. A vehicle that entered without room stopped
+//! inside the junction, holding every connector that conflicts with its own, and queues spilling
+//! back from junction to junction closed into cycles that never cleared (gridlock around Town02's
+//! T-junctions). The ego waiting to enter a junction from an approach without a light takes its
+//! turn among those requests ([`EgoPresence::junction_request`]), and the expert asks
+//! [`Traffic::ego_may_enter`] before it goes: out of turn, both would end up inside the junction,
+//! each waiting for the other. A vehicle whose path runs into a lane that ends (a lane drop, as on
+//! CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic manager does.
+//! A vehicle near the ego also checks the corridor its path sweeps ([`EGO_WATCH`] m ahead) for the
+//! ego's box, whatever lane the ego is on, and stops short of it; once the ego has stood
+//! [`SQUEEZE_AFTER_S`], a vehicle it holds creeps past with a narrower margin, as drivers do past a
+//! car that waits (see [`SQUEEZE_MARGIN`]). Courtesy: while the ego stands waiting to change into a
+//! lane (its route changes lanes within [`MERGE_WAIT_AHEAD`] m), vehicles coming up that lane
+//! behind it hold back [`COURTESY_GAP`] m short of its rear, within [`COURTESY_RANGE`], so a queue
+//! lets it in, as drivers do for a car that signals (without it a lane change planned inside a
+//! standing or crawling queue never happens). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the
+//! ego's sight (more than [`RESPAWN_CLEARANCE`] away), or at such a lane end anywhere, are moved to
+//! a free place elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
@@ -75,8 +73,6 @@ const LANE_CHANGE_RATE: f64 = 0.01;
 const DIVERGE_LENGTH: f64 = 12.0;
 /// Speed at which a lane change moves across, m/s.
 const LATERAL_SPEED: f64 = 1.0;
-/// Most pieces a junction connector is followed through when looking for where it leads.
-const MAX_CONNECTOR_PIECES: usize = 4;
 /// The id the ego goes by in junction requests (vehicles have ids from 1000).
 const EGO_ID: u32 = 0;
 /// Gap a vehicle entering a junction wants past it, behind the last vehicle on its exit and
@@ -227,7 +223,7 @@ impl Traffic {
         }
         let mut traffic = Traffic {
             vehicles: Vec::new(),
-            conflicts: conflicts(map),
+            conflicts: super::junctions::conflicts(map),
             light_at_end,
             stop_at_end,
         };
@@ -905,91 +901,4 @@ fn curve_limited_speed(map: &Map, v: &Vehicle) -> f64 {
         }
     }
     limit
-}
-
-/// Connector lanes that conflict: their paths through the junction (the lane and the further
-/// pieces of the same junction it leads into) cross or end in the same lane. Comparing whole
-/// paths matters where CARLA cuts connectors into pieces: a vehicle asking for the first
-/// piece of its path must see the ego on a later piece of another that its path crosses.
-pub fn conflicts(map: &Map) -> HashMap<LaneIdx, Vec<LaneIdx>> {
-    let mut out: BTreeMap<LaneIdx, Vec<LaneIdx>> = BTreeMap::new();
-    for j in &map.junctions {
-        let exits: HashMap<LaneIdx, Vec<LaneIdx>> =
-            j.lanes.iter().map(|&l| (l, exits(map, l))).collect();
-        let path = |lane: LaneIdx| {
-            std::iter::once(lane).chain(
-                exits[&lane]
-                    .iter()
-                    .copied()
-                    .filter(|&e| map.lane(e).junction == Some(j.idx)),
-            )
-        };
-        let paths_cross = |a: LaneIdx, b: LaneIdx| {
-            path(a).any(|pa| {
-                path(b).any(|pb| polylines_cross(&map.lane(pa).points, &map.lane(pb).points))
-            })
-        };
-        for (a_i, &a) in j.lanes.iter().enumerate() {
-            for &b in &j.lanes[a_i + 1..] {
-                let (la, lb) = (map.lane(a), map.lane(b));
-                let (ea, eb) = (&exits[&a], &exits[&b]);
-                // One path cut into pieces (a connector whose lane id changes at a section
-                // seam) does not conflict with itself.
-                let chained = ea.contains(&b) || eb.contains(&a);
-                let same_start = la.predecessors.iter().any(|p| lb.predecessors.contains(p));
-                let merge = !chained && ea.iter().any(|e| eb.contains(e));
-                if merge || (!chained && !same_start && paths_cross(a, b)) {
-                    out.entry(a).or_default().push(b);
-                    out.entry(b).or_default().push(a);
-                }
-            }
-        }
-    }
-    out.into_iter().collect()
-}
-
-/// The lanes a junction lane leads into, through any further pieces of the same junction
-/// (CARLA's files cut some connectors at section seams, down to pieces of half a metre): those
-/// pieces themselves, then the first lanes beyond the junction. Two connectors whose paths end
-/// in the same lane merge there even when one reaches it through such a piece.
-fn exits(map: &Map, lane: LaneIdx) -> Vec<LaneIdx> {
-    let junction = map.lane(lane).junction;
-    let mut out = Vec::new();
-    let mut frontier = map.lane(lane).successors.clone();
-    for _ in 0..MAX_CONNECTOR_PIECES {
-        let mut next = Vec::new();
-        for l in frontier {
-            if out.contains(&l) {
-                continue;
-            }
-            out.push(l);
-            if map.lane(l).junction == junction && junction.is_some() {
-                next.extend(map.lane(l).successors.iter().copied());
-            }
-        }
-        frontier = next;
-    }
-    out
-}
-
-fn polylines_cross(a: &[DVec3], b: &[DVec3]) -> bool {
-    a.windows(2).any(|sa| {
-        b.windows(2).any(|sb| {
-            segments_cross(
-                sa[0].truncate(),
-                sa[1].truncate(),
-                sb[0].truncate(),
-                sb[1].truncate(),
-            )
-        })
-    })
-}
-
-/// Proper intersection of two plan segments.
-pub fn segments_cross(p1: DVec2, p2: DVec2, q1: DVec2, q2: DVec2) -> bool {
-    let d1 = (p2 - p1).perp_dot(q1 - p1);
-    let d2 = (p2 - p1).perp_dot(q2 - p1);
-    let d3 = (q2 - q1).perp_dot(p1 - q1);
-    let d4 = (q2 - q1).perp_dot(p2 - q1);
-    d1 * d2 < 0.0 && d3 * d4 < 0.0
 }
