@@ -98,7 +98,7 @@ impl SafetyStop {
             let mut start = 0.0;
             path.windows(2).enumerate().any(|(i, segment)| {
                 let length = distance(segment[0], segment[1]);
-                let along = along(point, segment[0], segment[1]);
+                let along = along(point, segment[0], segment[1], length);
                 // Behind the origin is behind the car; elsewhere the nearest point of the
                 // segment counts, its end included, so the outside of a bend is covered.
                 let nearest = along.clamp(0.0, length);
@@ -145,10 +145,9 @@ fn distance(a: [f32; 2], b: [f32; 2]) -> f32 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
-/// How far along the segment `a`-`b` (apart by more than 0.1 m) from `a` the foot of `point`
-/// lies (negative before `a`, beyond its length after `b`).
-fn along(point: [f32; 2], a: [f32; 2], b: [f32; 2]) -> f32 {
-    let length = distance(a, b);
+/// How far along the segment `a`-`b` (`length` apart, more than 0.1 m) from `a` the foot of
+/// `point` lies (negative before `a`, beyond `length` after `b`).
+fn along(point: [f32; 2], a: [f32; 2], b: [f32; 2], length: f32) -> f32 {
     ((point[0] - a[0]) * (b[0] - a[0]) + (point[1] - a[1]) * (b[1] - a[1])) / length
 }
 
