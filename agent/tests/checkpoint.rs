@@ -132,6 +132,20 @@ fn bad_checkpoints_are_clear_errors() {
         CheckpointError::Truncated { .. }
     ));
 
+    // A header whose tensor claims to end at the last byte a u64 can name.
+    let header = format!(
+        r#"{{"w":{{"dtype":"F32","shape":[1],"data_offsets":[0,{}]}}}}"#,
+        u64::MAX
+    );
+    let mut huge = (header.len() as u64).to_le_bytes().to_vec();
+    huge.extend_from_slice(header.as_bytes());
+    let claims_too_much = scratch("claims-too-much.safetensors");
+    std::fs::write(&claims_too_much, &huge).unwrap();
+    assert!(matches!(
+        load(&claims_too_much, &device).unwrap_err(),
+        CheckpointError::Truncated { .. }
+    ));
+
     let garbage = scratch("garbage.safetensors");
     std::fs::write(&garbage, b"this is not a checkpoint at all").unwrap();
     assert!(matches!(

@@ -92,6 +92,28 @@ fn configs_validate_and_bad_ones_name_the_field() {
             .to_string()
             .contains("spatial_points")
     );
+    // A checkpoint's config is untrusted: sizes that would allocate without bound are refused
+    // before `init`, each naming its field.
+    type Edit = fn(&mut SsrConfig);
+    let cases: [(Edit, &str); 5] = [
+        (|c| c.tokens.num_tokens = 1 << 30, "tokens.num_tokens"),
+        (|c| c.head.hidden_dim = 0, "head.hidden_dim"),
+        (|c| c.backbone.blocks[2] = 10_000, "backbone.blocks"),
+        (|c| c.bev.grid.x_max = f32::INFINITY, "bev ranges"),
+        (
+            |c| {
+                c.channels = 8192;
+                c.bev.layers = 64;
+            },
+            "weights",
+        ),
+    ];
+    for (edit, field) in cases {
+        let mut bad = SsrConfig::cpu_default();
+        edit(&mut bad);
+        let error = bad.validate().unwrap_err().to_string();
+        assert!(error.contains(field), "{field}: {error}");
+    }
     assert!(
         SsrConfig::from_name_or_file("no-such-preset")
             .unwrap_err()

@@ -71,6 +71,14 @@ fn logs_round_trip_and_cut_logs_keep_their_whole_ticks() {
     LogWriter::create(&path, foreign).unwrap().finish().unwrap();
     let error = read_log(&path).unwrap_err().to_string();
     assert!(error.contains("version 99"), "{error}");
+    let mut instant_ticks = header();
+    instant_ticks.tick_s = 1e-300;
+    LogWriter::create(&path, instant_ticks)
+        .unwrap()
+        .finish()
+        .unwrap();
+    let error = read_log(&path).unwrap_err().to_string();
+    assert!(error.contains("tick_s = 1e-300 s"), "{error}");
     std::fs::write(&path, b"").unwrap();
     assert!(
         read_log(&path)

@@ -766,17 +766,23 @@ fn image_memory_limits_refuse_big_rigs_and_steps() {
             "{}",
             status.message()
         );
-        // ...and one of 800x500 (1.6 MB decoded) fits it but not the 1 MiB image budget.
-        let big = sized(800, 500);
-        let id = start(&mut client, &big).await;
-        let status = client.step(step(&id, 0, &big)).await.unwrap_err();
+        // ...and one of 800x500 (1.6 MB decoded) fits it, but its steps could never fit the
+        // 1 MiB image budget: refused at the start too, not at every step.
+        let status = client
+            .start_episode(v1::StartEpisodeRequest {
+                rig: Some(sized(800, 500)),
+                ..Default::default()
+            })
+            .await
+            .unwrap_err();
         assert_eq!(status.code(), Code::ResourceExhausted);
         assert!(
-            status.message().contains("max_decoded_mib"),
+            status.message().contains("2 MiB decoded per step")
+                && status.message().contains("max_decoded_mib of 1 MiB"),
             "{}",
             status.message()
         );
-        // The budget is given back: a small rig steps.
+        // A rig within both budgets steps.
         let id = start(&mut client, &rig).await;
         client.step(step(&id, 0, &rig)).await.unwrap();
     });

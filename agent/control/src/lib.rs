@@ -175,50 +175,56 @@ impl Default for ControlConfig {
 }
 
 impl ControlConfig {
-    /// Checks ranges; the message names the field.
+    /// Checks every field's range; the message names the first field outside it.
     pub fn validate(&self) -> Result<(), String> {
-        if !(0.0..=1.0).contains(&self.alpha) {
-            return Err(format!("alpha = {} is outside 0..1", self.alpha));
+        let windows = [
+            ("pid_window", self.pid_window, 2),
+            ("turn_window", self.turn_window, 1),
+        ];
+        for (name, value, low) in windows {
+            if !(low..=MAX_WINDOW).contains(&value) {
+                return Err(format!(
+                    "{name} = {value} is outside {low}..{MAX_WINDOW} ticks"
+                ));
+            }
         }
-        if self.pid_window < 2 || self.turn_window == 0 {
-            return Err("pid_window must be >= 2 and turn_window >= 1".into());
-        }
-        if !(0.0..=1.0).contains(&self.max_throttle) {
+        if self.turn_count > self.turn_window {
             return Err(format!(
-                "max_throttle = {} is outside 0..1",
-                self.max_throttle
+                "turn_count = {} is above turn_window = {}",
+                self.turn_count, self.turn_window
             ));
         }
-        self.unstick.validate()?;
-        self.safety.validate()?;
         let v = &self.vehicle;
-        if !(v.wheelbase > 0.5 && v.wheelbase < 20.0) {
-            return Err(format!(
-                "vehicle.wheelbase = {} m is outside 0.5..20",
-                v.wheelbase
-            ));
-        }
-        if v.rear_axle.is_nan() || v.rear_axle.abs() >= 10.0 {
-            return Err(format!(
-                "vehicle.rear_axle = {} m is outside -10..10",
-                v.rear_axle
-            ));
-        }
-        if !(v.max_wheel_angle > 1.0 && v.max_wheel_angle < 89.0) {
-            return Err(format!(
-                "vehicle.max_wheel_angle = {} degrees is outside 1..89",
-                v.max_wheel_angle
-            ));
-        }
-        let lookahead_ok = self.lookahead_base > 0.0
-            && self.lookahead_max >= self.lookahead_base
-            && self.lookahead_gain >= 0.0;
-        if !lookahead_ok {
-            return Err("lookahead_base must be > 0, lookahead_gain >= 0 and lookahead_max >= lookahead_base".into());
-        }
-        Ok(())
+        check_ranges(&[
+            ("alpha", self.alpha, 0.0, 1.0),
+            ("max_throttle", self.max_throttle, 0.0, 1.0),
+            ("speed_kp", self.speed_kp, 0.0, 100.0),
+            ("speed_ki", self.speed_ki, 0.0, 100.0),
+            ("speed_kd", self.speed_kd, 0.0, 100.0),
+            ("brake_speed", self.brake_speed, 0.0, 50.0),
+            ("brake_ratio", self.brake_ratio, 0.0, 10.0),
+            ("clip_delta", self.clip_delta, 0.001, 50.0),
+            ("turn_steer", self.turn_steer, 0.0, 1.0),
+            ("lookahead_base", self.lookahead_base, 0.01, 100.0),
+            ("lookahead_gain", self.lookahead_gain, 0.0, 10.0),
+            (
+                "lookahead_max",
+                self.lookahead_max,
+                self.lookahead_base,
+                100.0,
+            ),
+            ("vehicle.wheelbase", v.wheelbase, 0.5, 20.0),
+            ("vehicle.rear_axle", v.rear_axle, -10.0, 10.0),
+            ("vehicle.max_wheel_angle", v.max_wheel_angle, 1.0, 89.0),
+        ])?;
+        self.unstick.validate()?;
+        self.safety.validate()
     }
 }
+
+/// The longest PID or fusion window a config may ask for, ticks (500 s at 20 Hz): each episode
+/// allocates its windows up front.
+const MAX_WINDOW: usize = 10_000;
 
 /// Checks that each `(name, value, low, high)` has `value` in `low..=high`; the message names
 /// the first field outside its range.

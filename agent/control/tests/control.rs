@@ -222,6 +222,58 @@ fn vehicle_settings_are_range_checked() {
 }
 
 #[test]
+fn controller_settings_that_would_panic_or_exhaust_memory_are_refused() {
+    let cases = [
+        (
+            ControlConfig {
+                clip_delta: -1.0,
+                ..ControlConfig::default()
+            },
+            "clip_delta",
+        ),
+        (
+            ControlConfig {
+                speed_ki: f32::NAN,
+                ..ControlConfig::default()
+            },
+            "speed_ki",
+        ),
+        (
+            ControlConfig {
+                pid_window: usize::MAX,
+                ..ControlConfig::default()
+            },
+            "pid_window",
+        ),
+        (
+            ControlConfig {
+                turn_window: 1 << 40,
+                ..ControlConfig::default()
+            },
+            "turn_window",
+        ),
+        (
+            ControlConfig {
+                turn_count: 21,
+                ..ControlConfig::default()
+            },
+            "turn_count",
+        ),
+        (
+            ControlConfig {
+                lookahead_max: f32::INFINITY,
+                ..ControlConfig::default()
+            },
+            "lookahead_max",
+        ),
+    ];
+    for (config, field) in cases {
+        let error = config.validate().unwrap_err();
+        assert!(error.starts_with(field), "{field}: {error}");
+    }
+}
+
+#[test]
 fn fusion_switches_weights_after_sustained_turning() {
     let config = ControlConfig::default();
     assert_eq!(

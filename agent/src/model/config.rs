@@ -137,6 +137,18 @@ pub struct FfpConfig {
     pub fuser_slots: usize,
 }
 
+/// The widest layer a config may ask for (channels, hidden widths).
+const MAX_WIDTH: usize = 8192;
+/// The most layers of one kind.
+const MAX_LAYERS: usize = 64;
+/// The most sampling points per head.
+const MAX_POINTS: usize = 256;
+/// The most scene tokens (and TokenFuser slots).
+const MAX_TOKENS: usize = 1024;
+/// The most weights a config may ask for, counting the largest groups (4 GB of f32; the
+/// paper preset's come to 27 million).
+const MAX_WEIGHTS: usize = 1_000_000_000;
+
 /// A configuration that cannot build a network.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("model config '{name}': {problem}")]
@@ -368,8 +380,53 @@ impl SsrConfig {
                 "backbone.blocks, widths and strides must be non-empty and equally long".into(),
             );
         }
-        if b.blocks.contains(&0) || b.widths.contains(&0) || b.stem_width == 0 {
-            return fail("backbone blocks and widths must be positive".into());
+        // A checkpoint's config is untrusted, and `init` allocates what it asks for before a
+        // weight is compared: every size stays within what a real network of this kind uses.
+        let v = &self.bev;
+        let t = &self.tokens;
+        let h = &self.head;
+        let sizes = [
+            ("backbone stages", b.blocks.len(), 1, 8),
+            ("backbone.stem_width", b.stem_width, 1, MAX_WIDTH),
+            ("channels", self.channels, 2, MAX_WIDTH),
+            ("bev.pillar_heights (count)", v.pillar_heights.len(), 1, 64),
+            ("bev.layers", v.layers, 1, MAX_LAYERS),
+            ("bev.spatial_points", v.spatial_points, 1, MAX_POINTS),
+            ("bev.temporal_points", v.temporal_points, 1, MAX_POINTS),
+            ("bev.ffn_dim", v.ffn_dim, 1, MAX_WIDTH),
+            ("tokens.num_tokens", t.num_tokens, 1, MAX_TOKENS),
+            ("tokens.bottleneck", t.bottleneck, 1, MAX_WIDTH),
+            ("tokens.layers", t.layers, 0, MAX_LAYERS),
+            ("tokens.ffn_dim", t.ffn_dim, 1, MAX_WIDTH),
+            ("head.measurement_dim", h.measurement_dim, 1, MAX_WIDTH),
+            ("head.hidden_dim", h.hidden_dim, 1, MAX_WIDTH),
+            ("head.state_dim", h.state_dim, 1, MAX_WIDTH),
+            ("ffp.layers", self.ffp.layers, 0, MAX_LAYERS),
+            ("ffp.fuser_slots", self.ffp.fuser_slots, 1, MAX_TOKENS),
+        ];
+        let stages = b.blocks.iter().map(|&n| ("backbone.blocks", n, 1, 64));
+        let widths = b
+            .widths
+            .iter()
+            .map(|&n| ("backbone.widths", n, 1, MAX_WIDTH));
+        for (name, value, low, high) in sizes.into_iter().chain(stages).chain(widths) {
+            if !(low..=high).contains(&value) {
+                return fail(format!("{name} = {value} is outside {low}..={high}"));
+            }
+        }
+        // Each size may be sane and their product not: bound the largest weight groups (the
+        // backbone's 3x3 convolutions, the attention layers' projections and FFNs).
+        let backbone: usize = (b.blocks.iter().zip(&b.widths))
+            .map(|(&n, &w)| n * 18 * w * w)
+            .sum();
+        let c = self.channels;
+        let attention_layers = v.layers + t.layers + self.ffp.layers;
+        let layer = 4 * c * c + 2 * c * v.ffn_dim.max(t.ffn_dim);
+        let weights = backbone + attention_layers * layer;
+        if weights > MAX_WEIGHTS {
+            return fail(format!(
+                "about {weights} weights, over the {MAX_WEIGHTS} a config may ask for"
+            ));
         }
         if b.strides.iter().any(|s| !(1..=2).contains(s)) {
             return fail("backbone strides must be 1 or 2".into());
@@ -384,7 +441,6 @@ impl SsrConfig {
                 self.image_width, self.image_height
             ));
         }
-        let v = &self.bev;
         let g = &v.grid;
         if g.rows == 0 || g.cols == 0 || g.cells() > 40_000 {
             return fail(format!(
@@ -392,13 +448,16 @@ impl SsrConfig {
                 g.rows, g.cols
             ));
         }
-        if !(g.x_min < g.x_max && g.y_min < g.y_max) {
-            return fail("bev ranges must satisfy x_min < x_max and y_min < y_max".into());
+        let ranges = [g.x_min, g.x_max, g.y_min, g.y_max];
+        if !(ranges.iter().all(|r| r.is_finite()) && g.x_min < g.x_max && g.y_min < g.y_max) {
+            return fail("bev ranges must be finite with x_min < x_max and y_min < y_max".into());
         }
-        if v.pillar_heights.is_empty() || !v.spatial_points.is_multiple_of(v.pillar_heights.len()) {
+        if !v.pillar_heights.iter().all(|z| z.is_finite()) {
+            return fail("bev.pillar_heights must be finite".into());
+        }
+        if !v.spatial_points.is_multiple_of(v.pillar_heights.len()) {
             return fail(
-                "bev.spatial_points must be a positive multiple of the number of pillar heights"
-                    .into(),
+                "bev.spatial_points must be a multiple of the number of pillar heights".into(),
             );
         }
         for (what, heads, dim) in [
@@ -413,11 +472,6 @@ impl SsrConfig {
             return fail(
                 "channels must be even (half for rows, half for columns in the BEV position)"
                     .into(),
-            );
-        }
-        if v.layers == 0 || v.temporal_points == 0 || self.tokens.num_tokens == 0 {
-            return fail(
-                "bev.layers, bev.temporal_points and tokens.num_tokens must be positive".into(),
             );
         }
         if self.head.pred_len < 2 || self.head.pred_len > 12 {

@@ -25,7 +25,8 @@ use crate::policy::{SsrPolicy, StepOutput};
 pub struct ModelInfo {
     /// The network's model config.
     pub config: SsrConfig,
-    /// Checkpoint file name, or "untrained (random weights)".
+    /// The checkpoint file's path, [`crate::checkpoint::bundled::NAME`], or "untrained (random
+    /// weights)".
     pub checkpoint: String,
     /// The rig the network was trained with.
     pub expected_rig: Rig,
@@ -196,8 +197,8 @@ impl Engine {
         }
     }
 
-    /// Opens an episode for the request's rig (checked against the pixel budget), with its
-    /// fusion-alpha override if any, driven by `driver`.
+    /// Opens an episode for the request's rig (checked against the pixel and decoded-image
+    /// budgets), with its fusion-alpha override if any, driven by `driver`.
     pub fn start_episode(
         &self,
         request: &v1::StartEpisodeRequest,
@@ -211,6 +212,17 @@ impl Engine {
                 "the rig's cameras hold {pixels} pixels per step, over this server's \
                  max_pixels_per_step of {}",
                 self.config.max_pixels_per_step
+            )));
+        }
+        // A step this rig's images could never fit beside nothing else would be refused
+        // forever; say so now.
+        let decoded = pixels as usize * DECODED_BYTES_PER_PIXEL;
+        if decoded > self.config.max_decoded_bytes() {
+            return Err(ServeError::OverBudget(format!(
+                "the rig's images take {} MiB decoded per step, over this server's \
+                 max_decoded_mib of {} MiB",
+                decoded.div_ceil(1 << 20),
+                self.config.max_decoded_mib
             )));
         }
         let mut control = self.policy.control().clone();

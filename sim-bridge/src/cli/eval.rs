@@ -20,6 +20,7 @@ use sim_bridge::replay::recorder::LoggingAgent;
 use sim_bridge::route::xml::RouteSpec;
 use sim_bridge::scoring::{ScoringConfig, summary_table};
 use ssrdrive_proto::camera::Rig;
+use ssrdrive_proto::dataset::safe_name;
 
 use sim_bridge::client::local::LocalRole;
 
@@ -189,7 +190,7 @@ impl CampaignObserver for EvalDisplay<'_> {
             return Ok(());
         };
         if let Some(dir) = self.pictures {
-            let path = dir.join(format!("route_{id}_rep{repetition}.png"));
+            let path = dir.join(safe_name(&format!("route_{id}_rep{repetition}")) + ".png");
             write_run_png(
                 self.map,
                 dense,

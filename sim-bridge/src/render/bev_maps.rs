@@ -109,13 +109,25 @@ pub fn occupancy_panel(maps: &[TokenMap], side: u32) -> Result<RgbImage, String>
     })
 }
 
-/// Every map fills its rows x cols and there is one; else which does not, named by `what`.
+/// The most rows or columns a map may have: the agent's BEV grid is far smaller, and the cap
+/// keeps the pixel arithmetic on a server's sizes within `u32`.
+const MAX_CELLS_PER_SIDE: u32 = 4096;
+
+/// Every map fills its rows x cols (each 1..=[`MAX_CELLS_PER_SIDE`]) and there is one; else
+/// which does not, named by `what`.
 fn check(what: &str, maps: &[TokenMap]) -> Result<(), String> {
     if maps.is_empty() {
         return Err(format!("the debug block has no {what} maps"));
     }
     for (k, map) in maps.iter().enumerate() {
-        if map.rows == 0 || map.cols == 0 || map.weights.len() != (map.rows * map.cols) as usize {
+        let sides = 1..=MAX_CELLS_PER_SIDE;
+        if !sides.contains(&map.rows) || !sides.contains(&map.cols) {
+            return Err(format!(
+                "{what} map {k} is {} x {} cells, outside 1..{MAX_CELLS_PER_SIDE} a side",
+                map.rows, map.cols
+            ));
+        }
+        if map.weights.len() != (map.rows * map.cols) as usize {
             return Err(format!(
                 "{what} map {k} has {} weights for {} x {} cells",
                 map.weights.len(),
@@ -197,6 +209,15 @@ mod tests {
                 .unwrap_err()
                 .contains("too small")
         );
+        // 65536 x 65536 cells wrap to 0 in u32: without the cap, no weights would pass.
+        let huge = TokenMap {
+            rows: 65536,
+            cols: 65536,
+            weights: Vec::new(),
+        };
+        let error = token_panel(std::slice::from_ref(&huge), 100).unwrap_err();
+        assert!(error.contains("65536 x 65536 cells"), "{error}");
+        assert!(occupancy_panel(&[huge.clone(), huge], 100).is_err());
     }
 
     #[test]

@@ -18,6 +18,10 @@ pub const LOG_VERSION: u32 = 1;
 /// Largest record read, bytes (a tick of six 1600x900 PNG frames fits).
 const MAX_RECORD_BYTES: u64 = 128 << 20;
 
+/// The shortest and longest tick a header may name, seconds.
+const MIN_TICK_S: f64 = 0.001;
+const MAX_TICK_S: f64 = 1.0;
+
 /// Why a log cannot be read or written.
 pub type LogError = ssrdrive_proto::files::FileError;
 
@@ -145,6 +149,17 @@ pub fn read_log(path: &Path) -> Result<StepLog, LogError> {
                         format!(
                             "format '{}' version {}; this build reads '{LOG_FORMAT}' version {LOG_VERSION}",
                             h.format, h.version
+                        ),
+                    ));
+                }
+                // 0 is a header without it (the simulator's tick is assumed); anything else
+                // divides horizons into ticks, so it must be a real tick length.
+                if h.tick_s != 0.0 && !(MIN_TICK_S..=MAX_TICK_S).contains(&h.tick_s) {
+                    return Err(LogError::invalid(
+                        path,
+                        format!(
+                            "header tick_s = {:?} s is outside {MIN_TICK_S}..{MAX_TICK_S} s",
+                            h.tick_s
                         ),
                     ));
                 }
