@@ -125,6 +125,19 @@ fn config_files_override_defaults_and_bad_values_are_named() {
     assert_eq!(config.max_episodes, ServeConfig::default().max_episodes);
     config.validate().unwrap();
 
+    // TOML has no null: no metrics is "off", as on the command line.
+    let path = write_temp("no-metrics.toml", "metrics_listen = \"off\"\n");
+    assert_eq!(ServeConfig::from_file(&path).unwrap().metrics_listen, None);
+    let path = write_temp("metrics.toml", "metrics_listen = \"127.0.0.1:9999\"\n");
+    let config = ServeConfig::from_file(&path).unwrap();
+    assert_eq!(
+        config.metrics_listen,
+        Some("127.0.0.1:9999".parse().unwrap())
+    );
+    let path = write_temp("bad-metrics.toml", "metrics_listen = \"nowhere\"\n");
+    let error = ServeConfig::from_file(&path).unwrap_err();
+    assert!(error.to_string().contains("HOST:PORT or `off`"), "{error}");
+
     let path = write_temp("typo.toml", "max_bach = 4\n");
     let error = ServeConfig::from_file(&path).unwrap_err();
     assert!(matches!(error, ServeConfigError::Parse { .. }));

@@ -255,6 +255,19 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
         "{error}"
     );
 
+    // A metrics history that cannot be read stops the resume and is left as it was.
+    let unreadable = tmp.dir("metrics-unreadable");
+    train(config.clone(), stop_at(&unreadable), open(&data, &config)).unwrap();
+    let metrics = unreadable.join("metrics.jsonl");
+    let mut history = std::fs::read(&metrics).unwrap();
+    history.extend_from_slice(b"\xff\n");
+    std::fs::write(&metrics, &history).unwrap();
+    let error = train(config.clone(), resume(&unreadable), open(&data, &config))
+        .err()
+        .unwrap();
+    assert!(error.to_string().contains("metrics.jsonl"), "{error}");
+    assert_eq!(std::fs::read(&metrics).unwrap(), history);
+
     // Each head trains exactly when its loss has a weight.
     let mut untrained = config.clone();
     untrained.loss.occupancy = 0.0;

@@ -89,14 +89,6 @@ impl RoadOption {
             RoadOption::ChangeLaneLeft | RoadOption::ChangeLaneRight
         )
     }
-
-    /// Whether it is a junction manoeuvre (left, right or straight).
-    pub fn is_junction(self) -> bool {
-        matches!(
-            self,
-            RoadOption::Left | RoadOption::Right | RoadOption::Straight
-        )
-    }
 }
 
 #[cfg(test)]

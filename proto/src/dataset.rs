@@ -379,6 +379,15 @@ pub fn parse_frames(bytes: &[u8], path: &Path) -> Result<Vec<FrameRecord>, Datas
     Ok(out)
 }
 
+/// A stable 64-bit FNV-1a hash of `bytes`: collection derives each run's world seed from it and
+/// training its train/validation split, so it must not change between runs or Rust versions
+/// (std's hashers may).
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
+        (hash ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 /// `raw` with every character other than ASCII letters, digits, `_` and `-` replaced by `-`,
 /// so it can name a file or folder and never leave its parent.
 pub fn safe_name(raw: &str) -> String {

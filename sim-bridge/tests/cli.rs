@@ -740,3 +740,39 @@ fn a_full_disk_stops_eval_with_the_results_so_far_intact() {
         3
     );
 }
+
+#[test]
+fn collect_selects_route_ids_across_every_route_set() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("data");
+    let collect = |ids: &str| {
+        sim_bridge(&[
+            "collect",
+            "--routes",
+            "town05-long-style,town05-short-style",
+            "--route-ids",
+            ids,
+            "--vehicles",
+            "0",
+            "--no-scenarios",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    // Route 0 is only in the short set: the long set holding none of the ids is no error.
+    let run = collect("0");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let episodes: Vec<String> = std::fs::read_dir(out.join("episodes"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(episodes.len(), 1, "{episodes:?}");
+    assert!(episodes[0].contains("short"), "{episodes:?}");
+    // An id in no set is.
+    let run = collect("no-such-id");
+    assert!(!run.status.success());
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.contains("none of --route-ids"), "{stderr}");
+}

@@ -8,7 +8,7 @@ use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::planner::plan_route;
 use sim_bridge::route::sets::RouteSet;
 use sim_bridge::route::xml;
-use sim_bridge::scoring::ScoringConfig;
+use sim_bridge::scoring::{InfractionKind, ScoringConfig};
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::control::Control;
 
@@ -21,6 +21,25 @@ fn short_routes() -> (Map, Vec<xml::RouteSpec>) {
     )
     .unwrap();
     (map, xml::parse(set.name, set.bundled_xml()).unwrap())
+}
+
+/// A scripted agent that drives straight on at half throttle, whatever the road does.
+struct StraightOn;
+
+impl Agent for StraightOn {
+    fn name(&self) -> String {
+        "straight on".into()
+    }
+    fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
+        Ok(())
+    }
+    fn run_step(&mut self, _obs: &Observation, _world: &World<'_>) -> Result<Control, AgentError> {
+        Ok(Control {
+            steer: 0.0,
+            throttle: 0.5,
+            brake: 0.0,
+        })
+    }
 }
 
 /// A scripted agent that never moves.
@@ -128,4 +147,41 @@ fn an_agent_that_never_moves_is_blocked_after_180_s() {
         run.record.meta.duration_game
     );
     assert_eq!(run.record.scores.score_route, 0.0);
+}
+
+#[test]
+fn a_runs_infraction_list_holds_every_infraction_of_its_record() {
+    // Driving straight on leaves the route's lanes, an event the scorer adds only when the run
+    // ends; the pictures `eval --pictures` draws from the list must still show it.
+    let (map, specs) = short_routes();
+    let config = WorldConfig {
+        vehicles: 0,
+        walkers: 0,
+        scenarios: false,
+        ..WorldConfig::default()
+    };
+    let mut off_lane = 0;
+    for spec in specs.iter().take(3) {
+        let dense = plan_route(&map, spec).unwrap();
+        let run = run_route(
+            &map,
+            spec,
+            &dense,
+            &mut StraightOn,
+            config,
+            ScoringConfig::default(),
+            0,
+            0,
+            |_| {},
+        );
+        for kind in InfractionKind::ALL {
+            let listed = run.infractions.iter().filter(|i| i.kind == kind).count();
+            assert_eq!(listed, run.record.infractions.count(kind), "{kind:?}");
+        }
+        off_lane += run
+            .record
+            .infractions
+            .count(InfractionKind::OutsideRouteLanes);
+    }
+    assert!(off_lane > 0, "no run left its lanes");
 }

@@ -105,20 +105,12 @@ pub struct ServeArgs {
     exit_with_stdin: bool,
 }
 
+/// `--metrics-listen`: an address, or none (`off`).
 #[derive(Debug, Clone, Copy)]
-enum MetricsListen {
-    Off,
-    At(SocketAddr),
-}
+struct MetricsListen(Option<SocketAddr>);
 
 fn parse_metrics_listen(value: &str) -> Result<MetricsListen, String> {
-    if value == "off" {
-        return Ok(MetricsListen::Off);
-    }
-    value
-        .parse()
-        .map(MetricsListen::At)
-        .map_err(|e| format!("{e}: expected HOST:PORT or `off`"))
+    serve::config::parse_metrics_listen(value).map(MetricsListen)
 }
 
 impl ServeArgs {
@@ -134,10 +126,8 @@ impl ServeArgs {
             }
         }
         set(&mut config.listen, &self.listen);
-        match self.metrics_listen {
-            Some(MetricsListen::Off) => config.metrics_listen = None,
-            Some(MetricsListen::At(address)) => config.metrics_listen = Some(address),
-            None => {}
+        if let Some(MetricsListen(address)) = self.metrics_listen {
+            config.metrics_listen = address;
         }
         if self.checkpoint.is_some() {
             config.checkpoint = self.checkpoint.clone();

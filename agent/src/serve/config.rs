@@ -33,7 +33,8 @@ pub enum LogFormat {
 pub struct ServeConfig {
     /// gRPC address; port 0 picks a free port (printed on stdout as `listening on ADDR`).
     pub listen: SocketAddr,
-    /// Prometheus `/metrics` address; `None` serves no metrics.
+    /// Prometheus `/metrics` address; `None` (`"off"` in a file) serves no metrics.
+    #[serde(with = "metrics_listen_text")]
     pub metrics_listen: Option<SocketAddr>,
     /// A checkpoint file written by `ssr-agent train`.
     pub checkpoint: Option<PathBuf>,
@@ -310,5 +311,36 @@ impl ServeConfig {
     /// [`ServeConfig::max_decoded_mib`] in bytes.
     pub fn max_decoded_bytes(&self) -> usize {
         self.max_decoded_mib << 20
+    }
+}
+
+/// A metrics address as the flag, its variable and config files write it: `HOST:PORT`, or
+/// `off` for none.
+pub fn parse_metrics_listen(text: &str) -> Result<Option<SocketAddr>, String> {
+    if text == "off" {
+        return Ok(None);
+    }
+    text.parse()
+        .map(Some)
+        .map_err(|e| format!("{e}: expected HOST:PORT or `off`"))
+}
+
+/// [`ServeConfig::metrics_listen`] as text in files (TOML has no null for "none").
+mod metrics_listen_text {
+    use serde::de::Error;
+    use serde::{Deserialize, Deserializer, Serializer};
+    use std::net::SocketAddr;
+
+    pub fn serialize<S: Serializer>(value: &Option<SocketAddr>, out: S) -> Result<S::Ok, S::Error> {
+        match value {
+            Some(address) => out.collect_str(address),
+            None => out.serialize_str("off"),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        input: D,
+    ) -> Result<Option<SocketAddr>, D::Error> {
+        super::parse_metrics_listen(&String::deserialize(input)?).map_err(D::Error::custom)
     }
 }

@@ -24,7 +24,7 @@ use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{
-    ActorRecord, BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord,
+    ActorRecord, BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord, fnv1a,
 };
 
 use super::augment::Photometric;
@@ -104,13 +104,6 @@ pub struct TrainingData {
     pub train_routes: usize,
     /// Routes (town/set/id) on the validation side.
     pub validation_routes: usize,
-}
-
-/// A stable 64-bit FNV-1a hash (the split must not change between runs or Rust versions).
-pub(crate) fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
-        (hash ^ b as u64).wrapping_mul(0x0100_0000_01b3)
-    })
 }
 
 /// Whether a route belongs to the validation side for the given fraction.
@@ -195,7 +188,8 @@ impl TrainingData {
                 return Err(DatasetError::invalid(
                     &dataset.episode_dir(&entry.name).join("measurements.jsonl"),
                     format!(
-                        "frames without the expert's {pred_len}-step plan (recorded before plans                          were stored?): collect the data again, or train with --labels driven"
+                        "frames without the expert's {pred_len}-step plan (recorded before plans were \
+                         stored?): collect the data again, or train with --labels driven"
                     ),
                 ));
             }
@@ -419,9 +413,9 @@ pub fn sampling_weight(frame: &FrameRecord, learner_drove: bool) -> f32 {
     } else {
         1.0
     };
-    weight *= match frame.command {
-        1 | 2 => 2.0,
-        5 | 6 => 4.0,
+    weight *= match RoadOption::from_value(frame.command) {
+        Some(RoadOption::Left | RoadOption::Right) => 2.0,
+        Some(option) if option.is_lane_change() => 4.0,
         _ => 1.0,
     };
     if frame.noise {

@@ -10,11 +10,11 @@ use std::thread::JoinHandle;
 use rand::seq::SliceRandom;
 use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use ssrdrive_proto::dataset::DatasetError;
+use ssrdrive_proto::dataset::{DatasetError, fnv1a};
 
 use super::augment::Photometric;
 use super::config::TrainConfig;
-use super::data::{Batch, SampleDraw, SampleRef, TrainingData, fnv1a};
+use super::data::{Batch, SampleDraw, SampleRef, TrainingData};
 
 /// Batches prepared ahead of the optimiser.
 const PREFETCH: usize = 3;

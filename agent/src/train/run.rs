@@ -644,7 +644,12 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
 
 /// Keeps the metrics lines of steps up to `step` (a resumed run redraws the rest).
 fn keep_metrics_until(path: &Path, step: u64) -> Result<(), TrainError> {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+        // Unreadable history is an error, never a reason to overwrite it with nothing.
+        Err(e) => return Err(io_error(path)(e)),
+    };
     let kept: String = text
         .lines()
         .filter(|line| match serde_json::from_str::<MetricsLine>(line) {

@@ -48,25 +48,26 @@ impl RouteArgs {
     /// and left out; none at all is an error.
     pub fn load(&self) -> anyhow::Result<(Map, Vec<PlannedRoute>)> {
         let (map, plans) = self.load_each()?;
-        let mut planned = Vec::with_capacity(plans.len());
-        for (spec, dense) in plans {
-            match dense {
-                Ok(dense) => planned.push(PlannedRoute { spec, dense }),
-                Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
-            }
-        }
-        if planned.is_empty() {
-            bail!(
-                "no route of {} could be planned on map {}",
-                self.routes,
-                map.name
-            );
-        }
-        Ok((map, planned))
+        Self::keep_planned(&self.routes, map, plans)
     }
 
-    /// The map and every selected route with its plan or the reason it has none.
+    /// The map and every selected route with its plan or the reason it has none; an error when
+    /// --route-ids names none of the routes.
     pub fn load_each(&self) -> anyhow::Result<(Map, Vec<RoutePlan>)> {
+        let (map, plans) = self.load_selected()?;
+        if plans.is_empty() && !self.route_ids.is_empty() {
+            bail!(
+                "none of --route-ids {:?} is in {}",
+                self.route_ids,
+                self.routes
+            );
+        }
+        Ok((map, plans))
+    }
+
+    /// [`RouteArgs::load_each`], where a selection of no route is empty, not an error (one
+    /// route set among several may hold none of --route-ids).
+    pub fn load_selected(&self) -> anyhow::Result<(Map, Vec<RoutePlan>)> {
         let options = MapOptions {
             place_missing_lights: !self.no_placed_lights,
         };
@@ -74,13 +75,6 @@ impl RouteArgs {
             super::load_routes(&self.routes, self.map.as_ref(), self.maps.as_ref(), options)?;
         if !self.route_ids.is_empty() {
             specs.retain(|s| self.route_ids.contains(&s.id));
-            if specs.is_empty() {
-                bail!(
-                    "none of --route-ids {:?} is in {}",
-                    self.route_ids,
-                    self.routes
-                );
-            }
         }
         if let Some(limit) = self.limit {
             specs.truncate(limit);
@@ -93,6 +87,26 @@ impl RouteArgs {
             })
             .collect();
         Ok((map, plans))
+    }
+
+    /// The routes of `plans` that could be planned (each other one is reported); none is an
+    /// error naming `routes`.
+    pub fn keep_planned(
+        routes: &str,
+        map: Map,
+        plans: Vec<RoutePlan>,
+    ) -> anyhow::Result<(Map, Vec<PlannedRoute>)> {
+        let mut planned = Vec::with_capacity(plans.len());
+        for (spec, dense) in plans {
+            match dense {
+                Ok(dense) => planned.push(PlannedRoute { spec, dense }),
+                Err(e) => eprintln!("warning: skipping route {}: {e}", spec.id),
+            }
+        }
+        if planned.is_empty() {
+            bail!("no route of {routes} could be planned on map {}", map.name);
+        }
+        Ok((map, planned))
     }
 }
 

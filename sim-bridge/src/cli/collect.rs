@@ -12,7 +12,7 @@ use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
 use sim_bridge::map::Map;
 use ssrdrive_proto::camera::Rig;
-use ssrdrive_proto::dataset::NoiseConfig;
+use ssrdrive_proto::dataset::{NoiseConfig, fnv1a};
 
 use sim_bridge::client::local::LocalRole;
 
@@ -77,10 +77,7 @@ fn default_jobs() -> u64 {
 /// The world seed of one run: FNV-1a of (set, route id, repetition), offset by `base`.
 fn run_seed(base: u64, set: &str, route: &str, repetition: usize) -> u64 {
     let key = format!("{set}\u{1f}{route}\u{1f}{repetition}");
-    let hash = key.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
-    });
-    base.wrapping_add(hash)
+    base.wrapping_add(fnv1a(key.as_bytes()))
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<()> {
@@ -115,8 +112,19 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             routes: name.to_string(),
             ..args.route.clone()
         };
-        let (map, planned) = one.load()?;
-        sets.push((name.to_string(), map, planned));
+        // --route-ids selects across the sets: one set may hold none of them.
+        let (map, plans) = one.load_selected()?;
+        if !plans.is_empty() || args.route.route_ids.is_empty() {
+            let (map, planned) = RouteArgs::keep_planned(name, map, plans)?;
+            sets.push((name.to_string(), map, planned));
+        }
+    }
+    if sets.is_empty() {
+        bail!(
+            "none of --route-ids {:?} is in {}",
+            args.route.route_ids,
+            args.route.routes
+        );
     }
     let mut tasks = Vec::new();
     for repetition in 0..args.repetitions {

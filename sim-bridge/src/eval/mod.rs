@@ -132,10 +132,10 @@ pub fn run_route(
     };
     agent.end_route();
     let wall_seconds = started.elapsed().as_secs_f64();
-    let mut infractions = scorer.infractions().to_vec();
-    infractions.sort_by(|a, b| a.time.total_cmp(&b.time));
     let final_actors = world.actors();
-    let mut record = scorer.finish(Some(end), &spec.id, index, world.time, wall_seconds);
+    let (mut record, mut infractions) =
+        scorer.finish_with_infractions(Some(end), &spec.id, index, world.time, wall_seconds);
+    infractions.sort_by(|a, b| a.time.total_cmp(&b.time));
     record.meta.repetition = Some(repetition);
     record.meta.seed = Some(world_config.seed);
     RouteRun {

@@ -237,6 +237,11 @@ pub fn angle_diff(a: f64, b: f64) -> f64 {
     d
 }
 
+/// `angle` wrapped into `(-π, π]`.
+pub fn wrap_angle(angle: f64) -> f64 {
+    angle_diff(angle, 0.0)
+}
+
 /// Bake xodr lanes into travel-ordered [`Lane`]s; returns them and the OpenDRIVE junction id of
 /// each junction index handed out (in order of first appearance).
 fn bake_lanes(net: &xodr::RoadNetwork) -> (Vec<Lane>, Vec<String>) {

@@ -13,6 +13,7 @@ use glam::DVec2;
 use ssrdrive_proto::v1;
 
 use super::log::StepLog;
+use crate::route::plan::to_ego_frame;
 use crate::world::state::Obb;
 
 /// Horizons reported, seconds.
@@ -38,12 +39,6 @@ fn pose(p: &Option<v1::Pose>) -> Option<(DVec2, f64)> {
     let p = p.as_ref()?;
     let pose = (DVec2::new(p.x, p.y), p.yaw);
     (pose.0.is_finite() && pose.1.is_finite()).then_some(pose)
-}
-
-fn to_ego(point: DVec2, origin: DVec2, yaw: f64) -> DVec2 {
-    let d = point - origin;
-    let (s, c) = yaw.sin_cos();
-    DVec2::new(c * d.x + s * d.y, -s * d.x + c * d.y)
 }
 
 fn to_world(point: DVec2, origin: DVec2, yaw: f64) -> DVec2 {
@@ -77,7 +72,8 @@ pub fn open_loop(log: &StepLog, predictions: &[Vec<DVec2>]) -> Vec<HorizonMetric
                 else {
                     continue;
                 };
-                l2_sum += plan[steps - 1].distance(to_ego(truth, origin, yaw));
+                l2_sum += plan[steps - 1]
+                    .distance(to_ego_frame(truth.extend(0.0), origin.extend(0.0), yaw).truncate());
                 samples += 1;
                 let collided = (0..steps).any(|k| {
                     let at = to_world(plan[k], origin, yaw);

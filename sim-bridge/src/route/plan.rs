@@ -1,5 +1,5 @@
 //! What an agent is told about its route: the leaderboard's downsampled global plan (LB1.0's
-//! `downsample_route`, 50 m) with GPS coordinates, and the TCP-style [`RouteFollower`]
+//! `downsample_route`, 50 m) and the TCP-style [`RouteFollower`]
 //! (`RoutePlanner(4, 50)`) that turns the ego position into the target point and command each
 //! tick.
 
@@ -57,21 +57,6 @@ pub fn global_plan(route: &DenseRoute) -> Vec<PlanNode> {
             option: route.points[i].option,
         })
         .collect()
-}
-
-/// Geodetic coordinates of a map position, as the leaderboard computes them (spherical
-/// Mercator around the map's reference latitude/longitude). Returns (lat, lon) in degrees.
-pub fn to_gps(position: DVec3, lat_ref: f64, lon_ref: f64) -> (f64, f64) {
-    const EARTH_RADIUS: f64 = 6_378_137.0;
-    let scale = (lat_ref.to_radians()).cos();
-    let mut mx = scale * lon_ref.to_radians() * EARTH_RADIUS;
-    let mut my = scale * EARTH_RADIUS * ((90.0 + lat_ref).to_radians() / 2.0).tan().ln();
-    mx += position.x;
-    // CARLA subtracts its y, which is minus ours.
-    my += position.y;
-    let lon = (mx / (EARTH_RADIUS * scale)).to_degrees();
-    let lat = 2.0 * (my / (EARTH_RADIUS * scale)).exp().atan().to_degrees() - 90.0;
-    (lat, lon)
 }
 
 /// TCP's `RoutePlanner`: a queue of plan nodes, popped as the ego passes them.

@@ -448,11 +448,6 @@ impl<'a> RouteScorer<'a> {
         self.infractions.iter().map(|i| i.factor).product()
     }
 
-    /// The share of the driven route spent outside the route lanes so far, percent.
-    pub fn outside_lanes_percentage(&self) -> f64 {
-        self.lanes.percentage()
-    }
-
     /// Every event so far, in the order they happened.
     pub fn infractions(&self) -> &[Infraction] {
         &self.infractions

@@ -3,10 +3,11 @@
 //! junctions.
 
 use super::elevation::Cubic;
-use super::geometry::{Shape, wrap};
+use super::geometry::Shape;
 use super::model::{Controller, Junction, Link, Road, Signal, SignalKind, Town};
 use super::profile::{Mark, Side};
 use super::xml::{Xml, ang, attr, coef, curve, len};
+use crate::map::wrap_angle;
 
 /// The PROJ string of the towns' local transverse Mercator frame.
 const GEO_REFERENCE: &str =
@@ -130,7 +131,7 @@ fn plan_view(xml: &mut Xml, road: &Road) {
                 ("s", len(s)),
                 ("x", len(pose.pos.x)),
                 ("y", len(pose.pos.y)),
-                ("hdg", ang(wrap(pose.hdg))),
+                ("hdg", ang(wrap_angle(pose.hdg))),
                 ("length", len(segment.length)),
             ],
         );

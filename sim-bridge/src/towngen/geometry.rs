@@ -4,16 +4,12 @@
 //! or a cubic Hermite curve).
 
 use glam::DVec2;
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::PI;
+
+use crate::map::wrap_angle;
 
 /// Below this, a length or an angle counts as zero.
 const EPS: f64 = 1e-9;
-
-/// `angle` wrapped into `(-π, π]`.
-pub fn wrap(angle: f64) -> f64 {
-    let a = angle.rem_euclid(TAU);
-    if a > PI { a - TAU } else { a }
-}
 
 /// A point in the plane and a heading, counter-clockwise from +x in radians.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -227,7 +223,7 @@ impl Path {
         for w in points.windows(3) {
             let (a, b, c) = (w[0], w[1], w[2]);
             let (ab, bc) = (b - a, c - b);
-            let turn = wrap(bc.y.atan2(bc.x) - ab.y.atan2(ab.x));
+            let turn = wrap_angle(bc.y.atan2(bc.x) - ab.y.atan2(ab.x));
             let tangent = radius * (turn.abs() / 2.0).tan();
             let straight = ab.length() - used - tangent;
             assert!(
@@ -323,7 +319,7 @@ impl Path {
     /// ahead of both, else a cubic Hermite `paramPoly3`.
     pub fn connect(a: Pose, b: Pose) -> Self {
         let delta = b.pos - a.pos;
-        let turn = wrap(b.hdg - a.hdg);
+        let turn = wrap_angle(b.hdg - a.hdg);
         let fa = a.forward();
         let across = fa.perp_dot(delta);
         if turn.abs() < 1e-7 && across.abs() < 1e-7 && fa.dot(delta) > 0.0 {
@@ -362,7 +358,7 @@ impl Path {
         let delta = b.pos - a.pos;
         let (fa, la) = (a.forward(), a.left());
         let (dx, dy) = (fa.dot(delta), la.dot(delta));
-        let turn = wrap(b.hdg - a.hdg);
+        let turn = wrap_angle(b.hdg - a.hdg);
         let m = delta.length();
         let (m1u, m1v) = (m * turn.cos(), m * turn.sin());
         let u = [0.0, m, 3.0 * dx - 2.0 * m - m1u, -2.0 * dx + m + m1u];
@@ -394,7 +390,7 @@ mod tests {
     use super::*;
 
     fn close(a: Pose, b: Pose) -> bool {
-        a.pos.distance(b.pos) < 1e-9 && wrap(a.hdg - b.hdg).abs() < 1e-9
+        a.pos.distance(b.pos) < 1e-9 && wrap_angle(a.hdg - b.hdg).abs() < 1e-9
     }
 
     #[test]

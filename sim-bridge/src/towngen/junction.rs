@@ -4,9 +4,10 @@
 
 use std::f64::consts::PI;
 
-use super::geometry::{Pose, wrap};
+use super::geometry::Pose;
 use super::model::Contact;
 use super::profile::{Profile, Side};
+use crate::map::wrap_angle;
 
 /// One road end in a junction.
 #[derive(Debug, Clone, Copy)]
@@ -101,7 +102,7 @@ enum Turn {
 }
 
 fn turn(from: &Leg, to: &Leg) -> Turn {
-    let angle = wrap(to.in_heading() + PI - from.in_heading());
+    let angle = wrap_angle(to.in_heading() + PI - from.in_heading());
     let quarter = PI / 4.0;
     if angle.abs() < quarter {
         Turn::Straight

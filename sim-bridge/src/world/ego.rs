@@ -11,6 +11,7 @@ use glam::{DVec2, DVec3};
 use ssrdrive_proto::control::Control;
 
 use super::state::EgoState;
+use crate::map::wrap_angle;
 
 /// Physical parameters of the ego.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -110,7 +111,7 @@ impl Ego {
         let heading = self.yaw + beta;
         self.position.x += v * heading.cos() * dt;
         self.position.y += v * heading.sin() * dt;
-        self.yaw = wrap(self.yaw + v / lr * beta.sin() * dt);
+        self.yaw = wrap_angle(self.yaw + v / lr * beta.sin() * dt);
         self.speed = v1;
     }
 
@@ -123,9 +124,4 @@ impl Ego {
             half_extent: self.params.half_extent,
         }
     }
-}
-
-/// Wrap an angle to (-pi, pi].
-pub fn wrap(a: f64) -> f64 {
-    crate::map::angle_diff(a, 0.0)
 }
