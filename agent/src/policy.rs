@@ -33,6 +33,10 @@ use crate::pose::{EgoMotion, Pose2};
 const MAX_TARGET_DISTANCE: f32 = 1000.0;
 /// Largest speed accepted, m/s.
 const MAX_SPEED: f32 = 100.0;
+/// Largest world coordinate accepted, metres (a town is a few km across).
+const MAX_POSITION: f32 = 1e7;
+/// Largest |yaw| accepted, radians (any angle is wrapped; this only refuses nonsense).
+const MAX_YAW: f32 = 1e3;
 
 /// Everything the network needs at one tick of one episode.
 #[derive(Debug, Clone)]
@@ -96,12 +100,16 @@ pub enum InputError {
         got: usize,
     },
     /// Speed, target point or pose is not finite or out of its range.
-    #[error("{field} = {value} is not a finite number in range")]
+    #[error("{field} = {value} is not a finite number in {low}..{high}")]
     BadNumber {
         /// The field, e.g. `speed` or `target_point.x`.
         field: &'static str,
         /// Its value.
         value: f32,
+        /// The smallest value accepted.
+        low: f32,
+        /// The largest value accepted.
+        high: f32,
     },
 }
 
@@ -245,16 +253,32 @@ fn check_input(input: &StepInput) -> Result<(), InputError> {
         }
     }
     let numbers = [
-        ("speed", input.speed, MAX_SPEED),
-        ("target_point.x", input.target_point[0], MAX_TARGET_DISTANCE),
-        ("target_point.y", input.target_point[1], MAX_TARGET_DISTANCE),
-        ("pose.x", input.pose.x, 1e7),
-        ("pose.y", input.pose.y, 1e7),
-        ("pose.yaw", input.pose.yaw, 1e3),
+        // The forward speed: TCP's speed input was never negative.
+        ("speed", input.speed, 0.0, MAX_SPEED),
+        (
+            "target_point.x",
+            input.target_point[0],
+            -MAX_TARGET_DISTANCE,
+            MAX_TARGET_DISTANCE,
+        ),
+        (
+            "target_point.y",
+            input.target_point[1],
+            -MAX_TARGET_DISTANCE,
+            MAX_TARGET_DISTANCE,
+        ),
+        ("pose.x", input.pose.x, -MAX_POSITION, MAX_POSITION),
+        ("pose.y", input.pose.y, -MAX_POSITION, MAX_POSITION),
+        ("pose.yaw", input.pose.yaw, -MAX_YAW, MAX_YAW),
     ];
-    for (field, value, limit) in numbers {
-        if !value.is_finite() || value.abs() > limit {
-            return Err(InputError::BadNumber { field, value });
+    for (field, value, low, high) in numbers {
+        if !(low..=high).contains(&value) {
+            return Err(InputError::BadNumber {
+                field,
+                value,
+                low,
+                high,
+            });
         }
     }
     Ok(())

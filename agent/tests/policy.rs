@@ -234,6 +234,14 @@ fn bad_inputs_are_named_and_change_nothing() {
             ..
         })
     ));
+    // Negative speed is refused here as on the wire: the network only knew forward speeds.
+    let mut input = step_input(&rig, 1, 1);
+    input.speed = -1.0;
+    let error = policy.step(&mut episode, &input).unwrap_err().to_string();
+    assert!(
+        error.contains("speed = -1 is not a finite number in 0..100"),
+        "{error}"
+    );
     let mut input = step_input(&rig, 1, 1);
     input.frames.clear();
     assert!(matches!(

@@ -1,5 +1,6 @@
 //! Files in and out, the one way every part does it: [`read_capped`] (how every untrusted file is
-//! read: maps, routes, rigs, configs, datasets, step logs), [`write_atomic`] (how every result
+//! read whole: maps, routes, rigs, configs, datasets, results to resume; step logs are read
+//! record by record, each capped), [`write_atomic`] (how every result
 //! file is written), and [`FileError`], a file that cannot be read or written, naming the path
 //! and the problem (the dataset and step-log readers return it as `DatasetError` and `LogError`).
 

@@ -5,7 +5,7 @@
 //! and a key the settings do not have is refused with its path, so a typo never passes
 //! silently.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -13,6 +13,10 @@ use serde_json::Value;
 use ssr_agent::checkpoint;
 use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
+use ssrdrive_proto::files::read_capped_text;
+
+/// The largest settings file `--set` reads.
+const MAX_PATCH_BYTES: u64 = 1 << 20;
 
 #[derive(Args)]
 pub struct ControlArgs {
@@ -58,7 +62,7 @@ fn read_patch(set: &str) -> anyhow::Result<Value> {
     let (text, source) = if set.trim_start().starts_with('{') {
         (set.to_string(), "--set".to_string())
     } else {
-        let text = std::fs::read_to_string(set)
+        let text = read_capped_text(Path::new(set), MAX_PATCH_BYTES)
             .with_context(|| format!("--set {set} is neither a JSON object nor a readable file"))?;
         (text, set.to_string())
     };

@@ -5,7 +5,10 @@
 //! waypoints at 0.5 s) and [`SsrConfig::cpu_default`] (the same architecture, narrower and on a
 //! smaller image and BEV, sized by `ssr-agent bench` to step in real time on two CPU cores).
 
+use std::path::Path;
+
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::files::read_capped_text;
 
 use super::bev::BevGrid;
 
@@ -137,6 +140,8 @@ pub struct FfpConfig {
     pub fuser_slots: usize,
 }
 
+/// The largest model config file read, bytes.
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
 /// The widest layer a config may ask for (channels, hidden widths).
 const MAX_WIDTH: usize = 8192;
 /// The most layers of one kind.
@@ -186,7 +191,7 @@ impl SsrConfig {
                     name: spec.to_string(),
                     problem,
                 };
-                let text = std::fs::read_to_string(spec).map_err(|e| {
+                let text = read_capped_text(Path::new(spec), MAX_CONFIG_BYTES).map_err(|e| {
                     fail(format!(
                         "neither a preset ({}) nor a readable file: {e}",
                         Self::PRESETS.join(", ")

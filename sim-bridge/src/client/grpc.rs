@@ -123,14 +123,19 @@ impl GrpcAgent {
     }
 }
 
+/// How long [`connect_when_serving`] waits before it says that it is waiting.
+const WAIT_QUIETLY: Duration = Duration::from_secs(5);
+
 /// Connects to `target` and polls `grpc.health.v1.Health/Check` until the whole server reports
 /// SERVING, all within `timeout` (each attempt is bounded too, so a stalled server cannot hold
-/// it up).
+/// it up); after [`WAIT_QUIETLY`] it warns, once, that it is still waiting and why.
 pub async fn connect_when_serving(target: &str, timeout: Duration) -> Result<Channel, AgentError> {
     let endpoint = Endpoint::from_shared(endpoint_uri(target))
         .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?
         .connect_timeout(Duration::from_secs(5));
-    let deadline = tokio::time::Instant::now() + timeout;
+    let started = tokio::time::Instant::now();
+    let deadline = started + timeout;
+    let mut said_waiting = false;
     loop {
         let attempt = async {
             let channel = endpoint.connect().await.map_err(|e| {
@@ -157,6 +162,14 @@ pub async fn connect_when_serving(target: &str, timeout: Duration) -> Result<Cha
                 "{target} was not SERVING within {:.0} s ({last})",
                 timeout.as_secs_f64()
             )));
+        }
+        if !said_waiting && started.elapsed() >= WAIT_QUIETLY {
+            // A server warming up is expected; a wrong address should not look like a hang.
+            tracing::warn!(
+                "{target} is not serving yet ({last}); retrying for up to {:.0} s",
+                timeout.as_secs_f64()
+            );
+            said_waiting = true;
         }
         tokio::time::sleep(Duration::from_millis(200)).await;
     }

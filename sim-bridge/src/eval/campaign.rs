@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use ssrdrive_proto::files::write_atomic;
+use ssrdrive_proto::files::{CappedReadError, read_capped_text, write_atomic};
 use thiserror::Error;
 
 use super::{RouteRun, run_route};
@@ -24,6 +24,9 @@ use crate::route::xml::RouteSpec;
 use crate::route::{DenseRoute, RoutePlan};
 use crate::scoring::{Results, ResultsError, RouteEnd, RouteRecord, ScoringConfig};
 use crate::world::WorldConfig;
+
+/// The largest results file a resume reads (a record is about 1 kB: room for 100,000 runs).
+const MAX_RESULTS_BYTES: u64 = 128 << 20;
 
 /// What to evaluate and where the results go.
 pub struct Campaign<'a> {
@@ -103,7 +106,7 @@ pub enum CampaignError {
         /// The results file.
         path: PathBuf,
         /// The failure.
-        source: std::io::Error,
+        source: CappedReadError,
     },
     /// The earlier results file is not a results file.
     #[error("resuming from {}: {source}", path.display())]
@@ -314,9 +317,11 @@ fn earlier_records(
 ) -> Result<Vec<Option<RouteRecord>>, CampaignError> {
     let path = &campaign.out;
     let mut records = vec![None; total];
-    let text = match std::fs::read_to_string(path) {
+    let text = match read_capped_text(path, MAX_RESULTS_BYTES) {
         Ok(text) => text,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(records),
+        Err(CappedReadError::Io(e)) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(records);
+        }
         Err(source) => {
             return Err(CampaignError::Read {
                 path: path.clone(),

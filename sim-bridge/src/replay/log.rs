@@ -110,7 +110,11 @@ fn read_varint(reader: &mut impl Read) -> std::io::Result<Option<u64>> {
 /// Reads a whole log (see the module doc for what is kept of a cut-off one).
 pub fn read_log(path: &Path) -> Result<StepLog, LogError> {
     let file = File::open(path).map_err(|e| LogError::io(path, e))?;
-    let mut reader = BufReader::new(file);
+    parse_log(BufReader::new(file), path)
+}
+
+/// [`read_log`] of the bytes `reader` gives; `path` names them in errors.
+pub fn parse_log(mut reader: impl Read, path: &Path) -> Result<StepLog, LogError> {
     let mut header = None;
     let mut ticks = Vec::new();
     let mut truncated = false;

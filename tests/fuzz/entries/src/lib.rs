@@ -13,7 +13,7 @@ use ssrdrive_proto::v1;
 pub type Entry = fn(&[u8]);
 
 /// The fuzz targets, by name: the folders of `tests/fuzz/seeds` and `tests/fuzz/regressions`.
-pub const TARGETS: [(&str, Entry); 7] = [
+pub const TARGETS: [(&str, Entry); 9] = [
     ("image_decode", image_decode),
     ("rig_json", rig_json),
     ("route_xml", route_xml),
@@ -21,6 +21,8 @@ pub const TARGETS: [(&str, Entry); 7] = [
     ("checkpoint", checkpoint),
     ("dataset_frames", dataset_frames),
     ("serve_toml", serve_toml),
+    ("step_log", step_log),
+    ("eval_results", eval_results),
 ];
 
 /// A `Step` image for a camera of the input's choosing: byte 0 picks the encoding (RGB8,
@@ -67,10 +69,14 @@ pub fn map_xodr(data: &[u8]) {
     }
 }
 
-/// A checkpoint file (safetensors with the network's config in its metadata).
+/// A checkpoint file (safetensors with the network's config in its metadata), and the
+/// controller settings and rig its metadata carries.
 pub fn checkpoint(data: &[u8]) {
     let device = Default::default();
-    let _ = ssr_agent::checkpoint::load_bytes(data, Path::new("fuzz"), &device);
+    if let Ok((_, info)) = ssr_agent::checkpoint::load_bytes(data, Path::new("fuzz"), &device) {
+        let _ = ssr_agent::checkpoint::control_config(&info);
+        let _ = ssr_agent::checkpoint::rig(&info);
+    }
 }
 
 /// A dataset episode's `measurements.jsonl`.
@@ -84,5 +90,17 @@ pub fn serve_toml(data: &[u8]) {
         && let Ok(config) = ssr_agent::serve::ServeConfig::from_toml(text, Path::new("fuzz"))
     {
         let _ = config.validate();
+    }
+}
+
+/// A step log (`sim-bridge eval --record`), as `sim-bridge replay` reads it.
+pub fn step_log(data: &[u8]) {
+    let _ = sim_bridge::replay::log::parse_log(data, Path::new("fuzz"));
+}
+
+/// A results file, as `sim-bridge eval --resume` reads it.
+pub fn eval_results(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = sim_bridge::scoring::Results::from_json(text);
     }
 }
