@@ -7,7 +7,7 @@ use common::{policy_of, rig, step_input, tiny_config};
 use ssr_agent::control::{ControlConfig, History, SafetyStop, Unstick};
 use ssr_agent::model::bev::HISTORY_TICKS;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::policy::{InputError, SsrPolicy, StepError, StepInput};
+use ssr_agent::policy::{InputError, SsrPolicy, StepError, StepInput, StepOutput};
 
 fn policy() -> SsrPolicy {
     policy_of(tiny_config())
@@ -143,14 +143,32 @@ fn episodes_of_every_history_mode_step_in_one_batch_as_alone() {
             .collect();
         let mut refs: Vec<_> = together.iter_mut().collect();
         let got = policy.step_batch(&mut refs, &inputs).unwrap();
-        for ((a, b), mode) in expected.iter().zip(&got).zip(modes) {
-            for (wa, wb) in a.waypoints.iter().zip(&b.waypoints) {
-                assert!(
-                    (wa[0] - wb[0]).abs() < 1e-4 && (wa[1] - wb[1]).abs() < 1e-4,
-                    "{mode:?} at tick {tick}: {wa:?} vs {wb:?}"
-                );
-            }
+        assert_same_outputs(&expected, &got, &format!("tick {tick}, {modes:?}"));
+    }
+}
+
+/// Batched outputs `got` equal the single steps' `expected`, one for one: as many, each with
+/// its full plan, the waypoints and the control to 1e-4.
+fn assert_same_outputs(expected: &[StepOutput], got: &[StepOutput], what: &str) {
+    assert_eq!(expected.len(), got.len(), "{what}: outputs");
+    for (k, (a, b)) in expected.iter().zip(got).enumerate() {
+        assert!(!a.waypoints.is_empty(), "{what}: no plan");
+        assert_eq!(a.waypoints.len(), b.waypoints.len(), "{what}: plan lengths");
+        for (wa, wb) in a.waypoints.iter().zip(&b.waypoints) {
+            assert!(
+                (wa[0] - wb[0]).abs() < 1e-4 && (wa[1] - wb[1]).abs() < 1e-4,
+                "{what}, episode {k}: {wa:?} vs {wb:?}"
+            );
         }
+        let (ca, cb) = (a.decision.control, b.decision.control);
+        let close = [
+            (ca.steer, cb.steer),
+            (ca.throttle, cb.throttle),
+            (ca.brake, cb.brake),
+        ]
+        .iter()
+        .all(|(x, y)| (x - y).abs() < 1e-4);
+        assert!(close, "{what}, episode {k}: {ca:?} vs {cb:?}");
     }
 }
 
@@ -208,14 +226,7 @@ fn a_batch_equals_single_steps_even_with_mixed_rigs() {
     let mut batched: Vec<_> = (0..3).map(|_| policy.new_episode()).collect();
     let mut refs: Vec<_> = batched.iter_mut().collect();
     let got = policy.step_batch(&mut refs, &inputs).unwrap();
-    for (a, b) in expected.iter().zip(&got) {
-        for (wa, wb) in a.waypoints.iter().zip(&b.waypoints) {
-            assert!(
-                (wa[0] - wb[0]).abs() < 1e-4 && (wa[1] - wb[1]).abs() < 1e-4,
-                "{wa:?} vs {wb:?}"
-            );
-        }
-    }
+    assert_same_outputs(&expected, &got, "mixed rigs");
 }
 
 #[test]

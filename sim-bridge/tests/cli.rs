@@ -647,11 +647,20 @@ fn a_collection_killed_mid_episode_resumes_to_the_same_bytes() {
                     .count()
             })
             .unwrap_or(0);
-        if complete >= 1 || started.elapsed().as_secs() > 120 {
+        assert!(
+            started.elapsed().as_secs() < 120,
+            "no episode complete in 120 s"
+        );
+        if complete >= 1 {
             break;
         }
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
+    // Still running, so the kill lands mid-collection (`kill` succeeds on an ended child too).
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "finished before it could be killed"
+    );
     child.kill().unwrap();
     child.wait().unwrap();
     let run = collect(&killed).output().unwrap();

@@ -601,13 +601,18 @@ fn a_light_held_green_by_a_scenario_shows_yellow_before_red() {
     let map = load("signal-junction", include_str!("maps/signal_junction.xodr"));
     let route = route(&map, (50.0, -1.75), (200.0, -1.75));
     let id = map.lights[0].id;
-    let mut held_through_red = 0;
+    let (mut held_through_red, mut hold_ended_in_red) = (0, 0);
     for seed in 0..20 {
         let config = WorldConfig {
             vehicles: 0,
             seed,
             ..WorldConfig::default()
         };
+        // Where the light's own cycle is when the hold ends: the case that needs a yellow
+        // between the held green and the cycle's red.
+        let mut unforced = World::new(&map, &route, config);
+        unforced.lights.update(7.05);
+        hold_ended_in_red += usize::from(unforced.light_states()[id] == LightState::Red);
         let mut world = World::new(&map, &route, config);
         // Scenario 7 holds the ego's light green for a while, whatever its cycle says.
         world.lights.force(id, LightState::Green, 7.0);
@@ -625,6 +630,10 @@ fn a_light_held_green_by_a_scenario_shows_yellow_before_red() {
         }
     }
     assert_eq!(held_through_red, 0);
+    assert!(
+        hold_ended_in_red > 0,
+        "no seed's hold ended in its cycle's red"
+    );
 }
 
 #[test]

@@ -133,10 +133,21 @@ impl Server {
         text
     }
 
-    /// The value of one sample line of the metrics page (`name{labels}` exactly), 0 if absent.
+    /// The value of one sample line of the metrics page (`name{labels}` exactly). A labelled
+    /// sample no request has made yet reads 0 (the page lists a family's label sets only once
+    /// they exist); an unlabelled metric the page does not declare is a panic, so a renamed or
+    /// dropped gauge never reads as 0.
     pub fn metric(&self, sample: &str) -> f64 {
-        self.metrics_text()
-            .lines()
+        let text = self.metrics_text();
+        if !sample.contains('{') {
+            let family = sample.strip_suffix("_total").unwrap_or(sample);
+            assert!(
+                text.lines()
+                    .any(|line| line.starts_with(&format!("# TYPE {family} "))),
+                "the metrics page does not declare {family}:\n{text}"
+            );
+        }
+        text.lines()
             .find_map(|line| line.strip_prefix(sample)?.trim().parse().ok())
             .unwrap_or(0.0)
     }

@@ -110,6 +110,35 @@ fn a_rig_that_cannot_be_is_invalid_argument() {
             .unwrap_err();
         assert_eq!(refused.code(), Code::InvalidArgument);
         assert!(refused.message().contains("fov"), "{}", refused.message());
+        // No rig, or an override outside its range, is as invalid.
+        let refused = client
+            .start_episode(v1::StartEpisodeRequest::default())
+            .await
+            .unwrap_err();
+        assert_eq!(refused.code(), Code::InvalidArgument);
+        assert!(
+            refused.message().contains("rig is missing"),
+            "{}",
+            refused.message()
+        );
+        let refused = client
+            .start_episode(v1::StartEpisodeRequest {
+                rig: Some(rig.clone()),
+                overrides: Some(v1::EpisodeOverrides {
+                    fusion_alpha: Some(1.5),
+                }),
+                ..Default::default()
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(refused.code(), Code::InvalidArgument);
+        assert!(
+            refused
+                .message()
+                .contains("fusion_alpha = 1.5 is not in [0, 1]"),
+            "{}",
+            refused.message()
+        );
     });
 }
 
@@ -155,6 +184,12 @@ fn malformed_steps_are_invalid_argument_and_spare_every_episode() {
         let mut request = step(&victim, 0, &rig);
         request.pose = None;
         bad_requests.push((request, "pose is missing"));
+        let mut request = step(&victim, 0, &rig);
+        request.target_point = None;
+        bad_requests.push((request, "target_point is missing"));
+        let mut request = step(&victim, 0, &rig);
+        request.speed_mps = -2.0;
+        bad_requests.push((request, "speed_mps = -2 is negative"));
 
         // The good episode steps between the bad requests and must answer exactly as the
         // reference episode, which sees no bad requests at all.
@@ -394,11 +429,46 @@ fn drive_streams_one_episode_per_stream() {
             .await
             .unwrap_err();
         assert_eq!(status.code(), Code::InvalidArgument);
+        assert!(
+            status.message().contains("must be `start`"),
+            "{}",
+            status.message()
+        );
     });
     // The stream's episode was closed when the stream ended.
     let active =
         server.wait_for_metric("ssr_active_episodes", |n| n == 0.0, Duration::from_secs(10));
     assert_eq!(active, 0.0);
+}
+
+#[test]
+fn a_drive_stream_carries_one_start_and_only_its_own_steps() {
+    let server = STATUS_SERVER.get();
+    runtime().block_on(async {
+        let (mut client, rig) = status_client(server).await;
+        let start = || v1::DriveRequest {
+            message: Some(Message::Start(v1::StartEpisodeRequest {
+                rig: Some(rig.clone()),
+                ..Default::default()
+            })),
+        };
+        let step_of = |id: &str| v1::DriveRequest {
+            message: Some(Message::Step(step(id, 0, &rig))),
+        };
+        for (second, expected) in [
+            (step_of("another-episode"), "carries episode"),
+            (start(), "carries only `step` messages"),
+        ] {
+            let mut answers = client
+                .drive(tokio_stream::iter([start(), second]))
+                .await
+                .unwrap()
+                .into_inner();
+            let status = answers.message().await.unwrap_err();
+            assert_eq!(status.code(), Code::InvalidArgument);
+            assert!(status.message().contains(expected), "{}", status.message());
+        }
+    });
 }
 
 #[test]

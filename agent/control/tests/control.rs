@@ -151,6 +151,11 @@ fn turn_error(car: &Vehicle, config: &ControlConfig, radius: f32, speed: f32) ->
         x += speed * (yaw + beta).cos() * dt;
         y += speed * (yaw + beta).sin() * dt;
         yaw += speed / lr * beta.sin() * dt;
+        // NaN would drop out of `max` and read as "on the path".
+        assert!(
+            x.is_finite() && y.is_finite() && steer.is_finite(),
+            "{x} {y} {steer}"
+        );
         worst = worst.max(distance_to_path([x, y]));
     }
     worst
@@ -352,14 +357,13 @@ fn episode_controller_reports_both_sources() {
     assert!(near(d.branch.throttle, 1.0 / 3.0));
     assert!(near(d.control.throttle, 0.3 * (1.0 / 3.0) + 0.7 * 0.75));
     assert!(!d.turning);
-    assert!(
-        ControlConfig {
-            alpha: 1.5,
-            ..ControlConfig::default()
-        }
-        .validate()
-        .is_err()
-    );
+    let error = ControlConfig {
+        alpha: 1.5,
+        ..ControlConfig::default()
+    }
+    .validate()
+    .unwrap_err();
+    assert!(error.starts_with("alpha = 1.5"), "{error}");
 }
 
 #[test]

@@ -147,10 +147,18 @@ pub fn step_input(rig: &Rig, tick: u32, seed: u32) -> StepInput {
     }
 }
 
+/// The largest |a - b|, element by element; infinite where either side is not finite (so a NaN
+/// output never reads as "no difference": `f32::max` would drop it).
 pub fn max_abs_diff(a: Vec<f32>, b: Vec<f32>) -> f32 {
     assert_eq!(a.len(), b.len());
     a.iter()
         .zip(&b)
-        .map(|(x, y)| (x - y).abs())
+        .map(|(x, y)| {
+            if x.is_finite() && y.is_finite() {
+                (x - y).abs()
+            } else {
+                f32::INFINITY
+            }
+        })
         .fold(0.0, f32::max)
 }

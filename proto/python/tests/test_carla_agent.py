@@ -7,6 +7,7 @@ import unittest
 from enum import Enum
 
 from ssrdrive import carla_agent
+from ssrdrive.client import AgentError
 from ssrdrive.carla_agent import (
     LAT_SCALE,
     LON_SCALE,
@@ -97,8 +98,9 @@ class AdapterTest(unittest.TestCase):
         agent.destroy()
         self.assertIsNone(agent.episode)
         self.assertEqual(carla_agent.get_entry_point(), "SsrAgent")
-        with self.assertRaises(Exception):
+        with self.assertRaises(AgentError) as ended:
             episode.end()  # already ended by destroy()
+        self.assertEqual(ended.exception.code, "NOT_FOUND")
 
 
 if __name__ == "__main__":

@@ -217,7 +217,13 @@ mod tests {
         };
         let error = token_panel(std::slice::from_ref(&huge), 100).unwrap_err();
         assert!(error.contains("65536 x 65536 cells"), "{error}");
-        assert!(occupancy_panel(&[huge.clone(), huge], 100).is_err());
+        let error = occupancy_panel(&[huge.clone(), huge], 100).unwrap_err();
+        assert!(
+            error.contains("occupancy map 0 is 65536 x 65536 cells"),
+            "{error}"
+        );
+        let error = occupancy_panel(&[map(2, 2, 0), map(1, 4, 0)], 100).unwrap_err();
+        assert!(error.contains("differ in size"), "{error}");
     }
 
     #[test]

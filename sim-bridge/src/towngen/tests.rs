@@ -415,7 +415,10 @@ fn training_towns_share_no_geometry_with_the_test_town() {
     }
 }
 
+/// Not a check: prints each town's figures for the README
+/// (`cargo test --release -p sim-bridge print_town_sizes -- --ignored --nocapture`).
 #[test]
+#[ignore = "prints figures, checks nothing"]
 fn print_town_sizes() {
     for style in TownStyle::ALL {
         let (net, _) = load(style);

@@ -9,13 +9,21 @@ use sim_bridge::render::{Appearance, CameraRenderer, SceneState};
 use sim_bridge::world::state::{EgoState, LightState};
 use ssrdrive_proto::camera::Rig;
 
-/// ../shared/carla beside the checkout, if present; prints a skip notice otherwise (the CARLA
-/// maps and routes are never copied into the repository).
+/// ../shared/carla beside the checkout, if present; prints a skip notice otherwise, or fails
+/// with `SSRDRIVE_REQUIRE_CARLA` set (the CARLA maps and routes are never copied into the
+/// repository).
 pub fn carla_dir() -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/carla");
     if dir.is_dir() {
         Some(dir)
     } else {
+        // Where the maps are meant to be there (a CI that provides them), missing is a failure,
+        // not a pass.
+        assert!(
+            std::env::var_os("SSRDRIVE_REQUIRE_CARLA").is_none(),
+            "SSRDRIVE_REQUIRE_CARLA is set and {} is not there",
+            dir.display()
+        );
         eprintln!(
             "SKIP: {} not found; CARLA map and route tests skipped",
             dir.display()

@@ -1,4 +1,6 @@
 #![no_main]
 //! Fuzz target: see `ssrdrive_fuzz_entries::serve_toml`.
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| ssrdrive_fuzz_entries::serve_toml(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    ssrdrive_fuzz_entries::serve_toml(data);
+});

@@ -1,4 +1,6 @@
 #![no_main]
 //! Fuzz target: see `ssrdrive_fuzz_entries::step_log`.
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| ssrdrive_fuzz_entries::step_log(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    ssrdrive_fuzz_entries::step_log(data);
+});
