@@ -401,3 +401,24 @@ pub fn safe_name(raw: &str) -> String {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fnv1a_is_the_published_64_bit_hash() {
+        // Test vectors of the FNV reference (draft-eastlake-fnv): seeds and splits depend on it.
+        assert_eq!(fnv1a(b""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(fnv1a(b"a"), 0xaf63_dc4c_8601_ec8c);
+        assert_eq!(fnv1a(b"foobar"), 0x8594_4171_f739_67e8);
+    }
+
+    #[test]
+    fn safe_names_never_leave_their_folder() {
+        assert_eq!(safe_name("Town05__route_7__r0"), "Town05__route_7__r0");
+        assert_eq!(safe_name("../x"), "---x");
+        assert_eq!(safe_name("a/b\\c d.png"), "a-b-c-d-png");
+        assert_eq!(safe_name("ü"), "-");
+    }
+}

@@ -180,6 +180,58 @@ fn bad_arguments_fail_with_a_clear_message() {
         let err = String::from_utf8_lossy(&run.stderr);
         assert!(!run.status.success() && err.contains("at least 1"), "{err}");
     }
+    // Each command checks its numbers before it loads or connects to anything.
+    let empty = tempfile::tempdir().unwrap();
+    let empty = empty.path().to_str().unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["collect", "--noise-rate=-1", "--out", empty],
+            "--noise-rate must be",
+        ),
+        (
+            &["collect", "--noise-longitudinal", "2", "--out", empty],
+            "--noise-longitudinal must be",
+        ),
+        (
+            &["collect", "--rate", "3", "--out", empty],
+            "--rate 3: must be 20 Hz divided",
+        ),
+        (
+            &["collect", "--noise-steer", "0.5,0.1", "--out", empty],
+            "MIN 0.5 is above MAX 0.1",
+        ),
+        (
+            &["load", "--episodes", "0"],
+            "--episodes and --frames must be at least 1",
+        ),
+        (
+            &["load", "--frames", "0"],
+            "--episodes and --frames must be at least 1",
+        ),
+        (
+            &["eval", "--timeout", "0"],
+            "expected a positive number, got '0'",
+        ),
+        (
+            &["eval", "--timeout", "NaN"],
+            "expected a positive number, got 'NaN'",
+        ),
+        (
+            &["replay", "--call-timeout", "1e300", empty],
+            "longer than any run can take",
+        ),
+        (
+            &["render", "--topdown-radius=-5", "--out", empty],
+            "--topdown-radius must be a positive",
+        ),
+        (&["replay", empty], "no .ssrlog files"),
+    ];
+    for (args, expected) in cases {
+        let run = sim_bridge(args);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{args:?} succeeded");
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
 }
 
 #[test]

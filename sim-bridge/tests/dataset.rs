@@ -16,7 +16,9 @@ use sim_bridge::towngen::bundled;
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::{ACTOR_RANGE, Dataset, DatasetError, FUTURE_COUNT, NoiseConfig};
+use ssrdrive_proto::dataset::{
+    ACTOR_RANGE, Dataset, DatasetError, FUTURE_COUNT, NoiseConfig, parse_frames,
+};
 
 fn small_town() -> (Map, RouteSet) {
     let set = RouteSet::find("train-small").expect("bundled set");
@@ -206,9 +208,29 @@ fn broken_datasets_give_errors_that_name_the_file_and_problem() {
     let dir = data.episode_dir(&name);
     let frames = data.frames(&name).unwrap();
 
-    // A measurements file cut in the middle of a line.
+    // A frame whose image path leaves the episode is refused before anything is read.
+    for escape in ["../../manifest.json", "/etc/passwd"] {
+        let mut record = frames[0].clone();
+        record.images[0] = escape.into();
+        let err = data.images(&name, &record).unwrap_err().to_string();
+        assert!(err.contains("leaves the episode"), "{escape}: {err}");
+    }
+
+    // Frames out of order (one line lost) are named by line.
     let path = dir.join("measurements.jsonl");
     let text = std::fs::read_to_string(&path).unwrap();
+    let skipped: String = text
+        .lines()
+        .enumerate()
+        .filter(|(n, _)| *n != 1)
+        .map(|(_, line)| format!("{line}\n"))
+        .collect();
+    let err = parse_frames(skipped.as_bytes(), &path)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("line 2: frame 2 where 1 was due"), "{err}");
+
+    // A measurements file cut in the middle of a line.
     std::fs::write(&path, &text[..text.len() * 2 / 3]).unwrap();
     let err = data.frames(&name).unwrap_err().to_string();
     assert!(

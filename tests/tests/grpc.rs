@@ -597,8 +597,11 @@ fn a_client_that_stops_reading_its_stream_holds_no_model_thread() {
     rt.block_on(async {
         let mut client = server.client().await;
         let rig = expected_rig(&mut client).await;
-        // A Drive stream that sends steps but never reads an answer.
-        let (send, receive) = tokio::sync::mpsc::channel(64);
+        // A Drive stream that sends steps but never reads an answer: 64 steps asking for the
+        // debug block (about 70 kB an answer), far more than HTTP/2's flow-control windows and
+        // the server's stream buffer hold, so the server's sends must block.
+        let steps = 64;
+        let (send, receive) = tokio::sync::mpsc::channel(steps + 1);
         send.send(v1::DriveRequest {
             message: Some(Message::Start(v1::StartEpisodeRequest {
                 rig: Some(rig.clone()),
@@ -607,9 +610,11 @@ fn a_client_that_stops_reading_its_stream_holds_no_model_thread() {
         })
         .await
         .unwrap();
-        for frame in 0..32 {
+        for frame in 0..steps as u64 {
+            let mut request = step("", frame, &rig);
+            request.debug = true;
             send.send(v1::DriveRequest {
-                message: Some(Message::Step(step("", frame, &rig))),
+                message: Some(Message::Step(request)),
             })
             .await
             .unwrap();
@@ -619,7 +624,23 @@ fn a_client_that_stops_reading_its_stream_holds_no_model_thread() {
             .drive(tokio_stream::wrappers::ReceiverStream::new(receive))
             .await
             .unwrap();
-        tokio::time::sleep(Duration::from_millis(500)).await;
+        // The stream's answers stop (the start's and the steps': one count each) well short of
+        // all of them: back-pressure, not a server that dropped or buffered them all.
+        let answered = r#"ssr_requests_total{method="Drive",code="OK"}"#;
+        let mut last = -1.0;
+        let settled = loop {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let now = server.metric(answered);
+            if now == last {
+                break now;
+            }
+            last = now;
+        };
+        assert!(
+            (1.0..steps as f64).contains(&settled),
+            "{settled} of {} answered",
+            steps + 1
+        );
         // Another episode is served on the one model thread all the while.
         let id = start(&mut client, &rig).await;
         for frame in 0..5 {
@@ -627,6 +648,7 @@ fn a_client_that_stops_reading_its_stream_holds_no_model_thread() {
             request.set_timeout(Duration::from_secs(5));
             client.step(request).await.unwrap();
         }
+        assert_eq!(server.metric(answered), settled, "the stalled stream moved");
         drop(send);
     });
 }

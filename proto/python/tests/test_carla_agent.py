@@ -4,10 +4,10 @@ geometry conversions, TCP's route follower, and whole ticks against a real serve
 import math
 import os
 import unittest
+from dataclasses import replace
 from enum import Enum
 
 from ssrdrive import carla_agent
-from ssrdrive.client import AgentError
 from ssrdrive.carla_agent import (
     LAT_SCALE,
     LON_SCALE,
@@ -17,6 +17,7 @@ from ssrdrive.carla_agent import (
     gnss_to_world,
     to_ego,
 )
+from ssrdrive.client import AgentClient, AgentError
 
 
 class RoadOption(Enum):  # CARLA's agents.navigation.local_planner.RoadOption values
@@ -98,9 +99,12 @@ class AdapterTest(unittest.TestCase):
         agent.destroy()
         self.assertIsNone(agent.episode)
         self.assertEqual(carla_agent.get_entry_point(), "SsrAgent")
+        # destroy() closed the episode on the server: another client cannot end it again.
+        other = AgentClient(os.environ["SSRDRIVE_SERVER"])
         with self.assertRaises(AgentError) as ended:
-            episode.end()  # already ended by destroy()
+            replace(episode, client=other).end()
         self.assertEqual(ended.exception.code, "NOT_FOUND")
+        other.close()
 
 
 if __name__ == "__main__":
