@@ -23,41 +23,31 @@ fn short_routes() -> (Map, Vec<xml::RouteSpec>) {
     (map, xml::parse(set.name, set.bundled_xml()).unwrap())
 }
 
-/// A scripted agent that drives straight on at half throttle, whatever the road does.
-struct StraightOn;
+/// A scripted agent that sends the same control every tick, whatever the road does.
+struct Fixed(Control);
 
-impl Agent for StraightOn {
+/// Straight on at half throttle.
+const STRAIGHT_ON: Control = Control {
+    steer: 0.0,
+    throttle: 0.5,
+    brake: 0.0,
+};
+/// Never moves.
+const PARKED: Control = Control {
+    steer: 0.0,
+    throttle: 0.0,
+    brake: 1.0,
+};
+
+impl Agent for Fixed {
     fn name(&self) -> String {
-        "straight on".into()
+        format!("fixed control {:?}", self.0)
     }
     fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         Ok(())
     }
     fn run_step(&mut self, _obs: &Observation, _world: &World<'_>) -> Result<Control, AgentError> {
-        Ok(Control {
-            steer: 0.0,
-            throttle: 0.5,
-            brake: 0.0,
-        })
-    }
-}
-
-/// A scripted agent that never moves.
-struct Parked;
-
-impl Agent for Parked {
-    fn name(&self) -> String {
-        "parked".into()
-    }
-    fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
-        Ok(())
-    }
-    fn run_step(&mut self, _obs: &Observation, _world: &World<'_>) -> Result<Control, AgentError> {
-        Ok(Control {
-            steer: 0.0,
-            throttle: 0.0,
-            brake: 1.0,
-        })
+        Ok(self.0)
     }
 }
 
@@ -133,7 +123,7 @@ fn an_agent_that_never_moves_is_blocked_after_180_s() {
         &map,
         spec,
         &dense,
-        &mut Parked,
+        &mut Fixed(PARKED),
         config,
         ScoringConfig::default(),
         0,
@@ -167,7 +157,7 @@ fn a_runs_infraction_list_holds_every_infraction_of_its_record() {
             &map,
             spec,
             &dense,
-            &mut StraightOn,
+            &mut Fixed(STRAIGHT_ON),
             config,
             ScoringConfig::default(),
             0,
