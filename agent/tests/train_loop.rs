@@ -532,6 +532,11 @@ fn labels_come_from_the_plan_or_the_driven_path_and_datasets_without_plans_are_r
         batch.waypoints[1]
     };
     assert_eq!(config.labels, Labels::Plan, "the plan by default");
+    // A run's config written before plans were labels names none: its labels were driven.
+    let mut before = serde_json::to_value(&config).unwrap();
+    before.as_object_mut().unwrap().remove("labels");
+    let before: TrainConfig = serde_json::from_value(before).unwrap();
+    assert_eq!(before.labels, Labels::Driven);
     assert_eq!(lateral(&config), 0.25, "the fixture's plan");
     config.labels = Labels::Driven;
     assert_eq!(lateral(&config), 0.0, "where the fixture's car went");

@@ -62,7 +62,7 @@ pub struct TrainConfig {
     #[serde(default)]
     pub history: History,
     /// Where the waypoint labels come from (runs from before the switch: driven positions).
-    #[serde(default)]
+    #[serde(default = "Labels::of_configs_before_plans")]
     pub labels: Labels,
     /// Draw training samples by [`super::data::sampling_weight`] (fewer standstills; more
     /// starts, turns, lane changes and recoveries) instead of uniformly.

@@ -52,15 +52,7 @@ pub struct SampleDraw {
 
 /// Where the waypoint labels come from.
 #[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
+    Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum Labels {
@@ -68,8 +60,15 @@ pub enum Labels {
     /// speed profile): clean inside perturbations, where driven positions follow the drift.
     Plan,
     /// The positions the car went on to drive (the first bundled checkpoint's labels).
-    #[default]
     Driven,
+}
+
+impl Labels {
+    /// The labels of a training config that names none: it was written before plans were
+    /// labels (`TrainConfig::new` and the command line choose [`Labels::Plan`]).
+    pub fn of_configs_before_plans() -> Self {
+        Labels::Driven
+    }
 }
 
 /// One sample: a frame of an episode (indices into [`TrainingData`]).
