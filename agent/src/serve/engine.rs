@@ -214,8 +214,8 @@ impl Engine {
                 self.config.max_pixels_per_step
             )));
         }
-        // A step this rig's images could never fit beside nothing else would be refused
-        // forever; say so now.
+        // One step of this rig would be over the image budget even alone: every step would
+        // be refused, so the episode is refused now.
         let decoded = pixels as usize * DECODED_BYTES_PER_PIXEL;
         if decoded > self.config.max_decoded_bytes() {
             return Err(ServeError::OverBudget(format!(
