@@ -128,7 +128,7 @@ const WAIT_QUIETLY: Duration = Duration::from_secs(5);
 
 /// Connects to `target` and polls `grpc.health.v1.Health/Check` until the whole server reports
 /// SERVING, all within `timeout` (each attempt is bounded too, so a stalled server cannot hold
-/// it up); after [`WAIT_QUIETLY`] it warns, once, that it is still waiting and why.
+/// it up); after 5 s it warns, once, that it is still waiting and why.
 pub async fn connect_when_serving(target: &str, timeout: Duration) -> Result<Channel, AgentError> {
     let endpoint = Endpoint::from_shared(endpoint_uri(target))
         .map_err(|e| AgentError(format!("'{target}' is not a server address: {e}")))?

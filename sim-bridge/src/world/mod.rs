@@ -7,6 +7,7 @@
 //! [`WorldConfig::seed`], so a (map, route, config) triple always replays identically.
 
 pub mod ego;
+pub mod ego_watch;
 pub mod idm;
 pub mod junctions;
 pub mod lights;
@@ -15,6 +16,7 @@ pub mod state;
 pub mod traffic;
 
 use ego::{Ego, EgoParams};
+use ego_watch::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED};
 use glam::{DVec2, DVec3};
 use lights::LightController;
 use rand::SeedableRng;
@@ -22,9 +24,7 @@ use rand_chacha::ChaCha8Rng;
 use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
 use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
-use traffic::{
-    EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED, REQUEST_DISTANCE, Traffic, standing_time,
-};
+use traffic::{REQUEST_DISTANCE, Traffic, standing_time};
 
 use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;

@@ -18,14 +18,8 @@
 //! [`Traffic::ego_may_enter`] before it goes: out of turn, both would end up inside the junction,
 //! each waiting for the other. A vehicle whose path runs into a lane that ends (a lane drop, as on
 //! CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic manager does.
-//! A vehicle near the ego also checks the corridor its path sweeps ([`EGO_WATCH`] m ahead) for the
-//! ego's box, whatever lane the ego is on, and stops short of it; once the ego has stood
-//! [`SQUEEZE_AFTER_S`], a vehicle it holds creeps past with a narrower margin, as drivers do past a
-//! car that waits (see [`SQUEEZE_MARGIN`]). Courtesy: while the ego stands waiting to change into a
-//! lane (its route changes lanes within [`MERGE_WAIT_AHEAD`] m), vehicles coming up that lane
-//! behind it hold back [`COURTESY_GAP`] m short of its rear, within [`COURTESY_RANGE`], so a queue
-//! lets it in, as drivers do for a car that signals (without it a lane change planned inside a
-//! standing or crawling queue never happens). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the
+//! Near the ego, vehicles also keep clear of its box whatever lane it is on, and let it into a
+//! lane it waits to change into ([`super::ego_watch`]). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the
 //! ego's sight (more than [`RESPAWN_CLEARANCE`] away), or at such a lane end anywhere, are moved to
 //! a free place elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
 
@@ -34,9 +28,9 @@ use std::collections::HashMap;
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
 
+use super::ego_watch::{EgoPresence, courtesy_hold, ego_on_path};
 use super::idm::Idm;
 use super::state::{LightState, Obb};
-use crate::map::lanes::LanePose;
 use crate::map::{LaneIdx, LaneKind, Map};
 
 /// How background vehicles follow: gentler than the expert, with a longer headway, and slower
@@ -58,15 +52,6 @@ pub const REQUEST_DISTANCE: f64 = 10.0;
 pub const RESPAWN_AFTER_S: f64 = 40.0;
 /// A stuck vehicle is moved only when farther than this from the ego, m.
 pub const RESPAWN_CLEARANCE: f64 = 50.0;
-/// A lane change on the ego's route this close ahead (along the route, m) while the ego stands
-/// (slower than [`MERGE_WAIT_SPEED`], m/s) asks traffic on the target lane to let it in.
-pub const MERGE_WAIT_AHEAD: f64 = 20.0;
-/// Speed under which the ego counts as waiting to merge, m/s.
-pub const MERGE_WAIT_SPEED: f64 = 1.0;
-/// How far behind a waiting ego's rear the vehicles on the target lane stop, m.
-const COURTESY_GAP: f64 = 1.5;
-/// Vehicles whose front is farther than this behind that stop point go on as usual, m.
-const COURTESY_RANGE: f64 = 30.0;
 /// Chance per second that a vehicle on a multi-lane road starts a lane change.
 const LANE_CHANGE_RATE: f64 = 0.01;
 /// Length over which connectors leaving the same lane still overlap, m.
@@ -79,24 +64,6 @@ const EGO_ID: u32 = 0;
 /// behind each vehicle ahead of it in the junction, m (CARLA's traffic manager keeps 4 m:
 /// `SAFE_DISTANCE_AFTER_JUNCTION`).
 const EXIT_GAP: f64 = 4.0;
-/// How far ahead of its front a vehicle checks its path for the ego's box, m.
-const EGO_WATCH: f64 = 30.0;
-/// Spacing of that check, m.
-const EGO_WATCH_STEP: f64 = 1.0;
-/// Clearance beyond its half width the vehicle keeps from the ego's box, m.
-const EGO_WATCH_MARGIN: f64 = 0.4;
-/// Seconds the ego must have stood before a held vehicle creeps past it with only
-/// [`SQUEEZE_MARGIN`] of clearance. A vehicle that stops for an ego whose corner is near its
-/// path while the ego waits for it (its nose near the ego's path) is a deadlock that neither
-/// breaks: seen mid-junction on Town02, a crossing car and the ego each waiting for the other.
-const SQUEEZE_AFTER_S: f64 = 5.0;
-/// Clearance a vehicle's box keeps from a standing ego's box it creeps past, m.
-const SQUEEZE_MARGIN: f64 = 0.1;
-/// Spacing of the box sweep that checks the room to creep past, m.
-const SQUEEZE_STEP: f64 = 0.25;
-/// Speed under which a vehicle held by the ego creeps past it with [`SQUEEZE_MARGIN`], m/s:
-/// faster, it keeps [`EGO_WATCH_MARGIN`] and brakes, so it passes at about this speed.
-const SQUEEZE_SPEED: f64 = 1.0;
 /// Speed under which a vehicle or the ego counts as standing, m/s.
 pub const STANDING_SPEED: f64 = 0.1;
 
@@ -141,33 +108,6 @@ pub struct Vehicle {
     pub ignores_lights: bool,
     /// Paint colour index, for renderers.
     pub colour: u8,
-}
-
-/// The ego as other traffic sees it.
-#[derive(Debug, Clone, Copy)]
-pub struct EgoPresence {
-    /// Lane and arc length, when the ego is on a driving lane.
-    pub on_lane: Option<(LaneIdx, f64)>,
-    /// Ground box.
-    pub obb: Obb,
-    /// Height of the box's ground, m.
-    pub z: f64,
-    /// Speed.
-    pub speed: f64,
-    /// The lane the ego waits to change into and the ego's arc length projected on it, while
-    /// it stands before a lane change of its route.
-    pub merging_into: Option<(LaneIdx, f64)>,
-    /// The junction connector the ego's route enters next and since when the ego has been
-    /// within [`REQUEST_DISTANCE`] of it, while it is not yet in the junction.
-    pub junction_request: Option<(LaneIdx, f64)>,
-    /// Seconds the ego has stood (slower than [`STANDING_SPEED`]) in a row.
-    pub standing_for: f64,
-}
-
-impl EgoPresence {
-    fn position(&self) -> DVec2 {
-        self.obb.centre
-    }
 }
 
 /// The background traffic of a world.
@@ -718,91 +658,6 @@ fn has_exit_room(map: &Map, v: &Vehicle, occ: &Occupancy) -> bool {
         offset += map.lane(*lane).length();
     }
     true
-}
-
-/// Where the ego's box intrudes on the corridor a vehicle's path sweeps ahead of it, whatever
-/// lane the ego is on (mid-junction, cutting a corner, merging in): the free gap to it and the
-/// ego's speed along the path. The lane occupancy above sees the ego only on the lane it is
-/// matched to; this is the traffic manager's geometric check that keeps a follower from
-/// driving into an ego that turns or stops across its path. A vehicle held by an ego that has
-/// stood [`SQUEEZE_AFTER_S`] sweeps its own box instead ([`squeeze_gap`]).
-fn ego_on_path(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<(f64, f64)> {
-    let (position, _) = v.pose(map);
-    let near = (position.truncate() - ego.position()).length() < EGO_WATCH + 10.0;
-    if !near || (position.z - ego.z).abs() > 3.0 {
-        return None;
-    }
-    if ego.standing_for > SQUEEZE_AFTER_S && v.speed < SQUEEZE_SPEED {
-        return squeeze_gap(map, v, ego).map(|gap| (gap, 0.0));
-    }
-    let corridor = v.half.y + EGO_WATCH_MARGIN;
-    let ego_velocity = DVec2::from_angle(ego.obb.yaw) * ego.speed;
-    path_poses(map, v, v.s + v.half.x, EGO_WATCH_STEP).find_map(|(along, pose)| {
-        (ego.obb.distance_to(pose.position.truncate()) < corridor).then(|| {
-            let speed = ego_velocity.dot(DVec2::from_angle(pose.yaw)).max(0.0);
-            (along, speed)
-        })
-    })
-}
-
-/// How far a vehicle can move along its path before its box, grown by [`SQUEEZE_MARGIN`],
-/// touches a standing ego's box (within [`EGO_WATCH`]); `None` when it passes clear.
-fn squeeze_gap(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<f64> {
-    let half = v.half + DVec2::splat(SQUEEZE_MARGIN);
-    path_poses(map, v, v.s, SQUEEZE_STEP).find_map(|(along, pose)| {
-        let obb = Obb {
-            centre: pose.position.truncate(),
-            yaw: pose.yaw,
-            half,
-        };
-        obb.overlaps(&ego.obb).then_some(along)
-    })
-}
-
-/// Poses along a vehicle's path (its lane, then the lanes it will take) from arc length `from`
-/// on its lane, every `step` metres for [`EGO_WATCH`] metres, each with the distance from
-/// `from`.
-fn path_poses<'a>(
-    map: &'a Map,
-    v: &'a Vehicle,
-    from: f64,
-    step: f64,
-) -> impl Iterator<Item = (f64, LanePose)> + 'a {
-    let mut lanes = std::iter::once(v.lane).chain(v.next.iter().copied());
-    let mut lane = lanes.next().map(|l| map.lane(l));
-    let mut s = from;
-    let mut along = 0.0;
-    std::iter::from_fn(move || {
-        if along > EGO_WATCH {
-            return None;
-        }
-        let mut current = lane?;
-        while s > current.length() {
-            s -= current.length();
-            current = map.lane(lanes.next()?);
-            lane = Some(current);
-        }
-        let item = (along, current.pose_at(s));
-        s += step;
-        along += step;
-        Some(item)
-    })
-}
-
-/// The free gap to where a vehicle coming up the lane a waiting ego changes into holds back
-/// for it (see the module doc), if it is one of those vehicles.
-fn courtesy_hold(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<f64> {
-    let (lane, ego_s) = ego.merging_into?;
-    let s = if v.lane == lane {
-        v.s
-    } else if v.next.first() == Some(&lane) {
-        v.s - map.lane(v.lane).length()
-    } else {
-        return None;
-    };
-    let stop = ego_s - ego.obb.half.x - COURTESY_GAP;
-    let gap = stop - (s + v.half.x);
-    (gap > -0.5 && gap < COURTESY_RANGE).then_some(gap.max(0.0))
 }
 
 trait MinByGap {
