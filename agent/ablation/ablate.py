@@ -11,7 +11,8 @@ forward pass at batch 1 and 8, a training step at batch 8), in interleaved round
 machine's drift falls on all of them alike: timing.json, redone whenever a variant joins (delete
 it to time again on a quiet machine). One table covers every run found under --out:
 ablation.md and ablation.json, with a second that sets each variant against full SSR drive by
-drive (same seed, route and repetition), its DS difference and a 95 % interval.
+drive (same route and repetition, each side's seeds averaged), its DS difference and a 95 %
+interval.
 
 Every variant starts from the same perception, the bundled checkpoint's backbone, BEV encoder
 and occupancy head (`--init-perception`), and draws its scene tokens, navigation gate, heads
@@ -368,16 +369,17 @@ def infraction_rates(loops):
 
 
 def paired_difference(runs, baseline, routes, resamples=2000):
-    """DS of `runs` minus DS of `baseline` over the drives they share (same seed, route and
-    repetition, hence the same traffic at the start), with a 95 % interval from resampling
-    whole routes (a route's drives are alike, so they are not independent draws). None when
-    they share no drive."""
-    base = {(r["seed"], route, rep): ds for r in baseline for route, rep, ds in r[routes]["ds_by_run"]}
+    """DS of `runs` minus DS of `baseline` drive by drive: the same route and repetition, hence
+    the same traffic at the start, each side averaged over its training seeds (so a variant
+    trained once meets every seed of full SSR). The 95 % interval comes from resampling whole
+    routes (a route's drives are alike, so they are not independent draws): it is the spread of
+    the drives for these trained networks, while the table's ± is the spread of training seeds.
+    None when they share no drive."""
+    ours, base = mean_by_drive(runs, routes), mean_by_drive(baseline, routes)
     by_route = {}
-    for r in runs:
-        for route, rep, ds in r[routes]["ds_by_run"]:
-            if (r["seed"], route, rep) in base:
-                by_route.setdefault(route, []).append(ds - base[(r["seed"], route, rep)])
+    for (route, rep), ds in ours.items():
+        if (route, rep) in base:
+            by_route.setdefault(route, []).append(ds - base[(route, rep)])
     if not by_route:
         return None
     names = sorted(by_route)
@@ -393,6 +395,15 @@ def paired_difference(runs, baseline, routes, resamples=2000):
         "low": means[int(0.025 * resamples)],
         "high": means[int(0.975 * resamples) - 1],
     }
+
+
+def mean_by_drive(runs, routes):
+    """(route, repetition) -> DS, the mean over `runs` (one a training seed) that drove it."""
+    drives = {}
+    for run in runs:
+        for route, rep, ds in run[routes]["ds_by_run"]:
+            drives.setdefault((route, rep), []).append(ds)
+    return {drive: statistics.mean(values) for drive, values in drives.items()}
 
 
 def write_table(out, rows):

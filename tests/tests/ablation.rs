@@ -176,3 +176,56 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         "{stderr}"
     );
 }
+
+/// One finished run's figures as the harness keeps them, every drive scoring `ds`.
+fn write_run(kept: &Path, variant: &str, seed: u32, ds: f64) {
+    let run = kept.join(variant).join(format!("seed-{seed}"));
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(
+        run.join("inspect.txt"),
+        "training: {\"validation\": {\"l2_m\": [0.5, 1.0, 1.5]}}\n",
+    )
+    .unwrap();
+    for routes in ["town05-long-style", "town05-short-style"] {
+        let record = serde_json::json!({
+            "route_id": "7",
+            "meta": {"repetition": 0, "route_length": 1000.0},
+            "scores": {"score_composed": ds, "score_route": 100.0, "score_penalty": ds / 100.0},
+            "infractions": {"collisions_vehicle": []},
+        });
+        let results = serde_json::json!({"_checkpoint": {"records": [record]}});
+        std::fs::write(run.join(format!("eval-{routes}.json")), results.to_string()).unwrap();
+    }
+    std::fs::write(run.join("done"), "").unwrap();
+}
+
+#[test]
+fn a_variant_trained_once_is_set_against_every_seed_of_full_ssr() {
+    let tmp = tempfile::tempdir().unwrap();
+    write_run(tmp.path(), "full", 0, 60.0);
+    write_run(tmp.path(), "full", 1, 80.0);
+    write_run(tmp.path(), "tokens-4", 0, 90.0);
+    let bin = binary("sim-bridge").parent().unwrap().to_path_buf();
+    let run = ablate(
+        &["--out", tmp.path().to_str().unwrap(), "--table-only"],
+        &bin,
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    // Full SSR's row is the mean ± standard deviation of its two seeds.
+    assert!(stdout.contains("| full | 0,1 |"), "{stdout}");
+    assert!(stdout.contains("| 70.00 ± 14.14 |"), "{stdout}");
+    // The difference is taken from the mean of both seeds' drive (70), not seed 0's alone (60).
+    let table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("ablation.json")).unwrap())
+            .unwrap();
+    for routes in ["town05-long-style", "town05-short-style"] {
+        let paired = &table["against_full"]["tokens-4"][routes];
+        assert_eq!(paired["drives"], 1, "{paired}");
+        assert_eq!(paired["mean"].as_f64().unwrap(), 20.0, "{paired}");
+    }
+}
