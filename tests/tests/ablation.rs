@@ -20,6 +20,18 @@ fn ablate(args: &[&str], bin: &Path) -> Output {
         .expect("python3 runs")
 }
 
+/// Runs the harness, which must succeed, and returns its standard output.
+fn ablate_ok(args: &[&str], bin: &Path) -> String {
+    let run = ablate(args, bin);
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    stdout
+}
+
 #[test]
 fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     let tmp = tempfile::tempdir().unwrap();
@@ -77,13 +89,7 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
         "--keep",
         kept_arg,
     ];
-    let run = ablate(&args, &bin);
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let stdout = ablate_ok(&args, &bin);
     assert!(stdout.contains("[tokens-4 seed 0] train"), "{stdout}");
     assert!(
         stdout.contains("[timing round 1 of 1] tokens-4 batch 8"),
@@ -130,21 +136,14 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     assert!(markdown.contains("Against full SSR"), "{markdown}");
 
     // Again: nothing is trained or driven twice, and the table is the same.
-    let again = ablate(&args, &bin);
-    let stdout = String::from_utf8_lossy(&again.stdout);
-    assert!(again.status.success(), "{stdout}");
+    let stdout = ablate_ok(&args, &bin);
     assert!(!stdout.contains("(log"), "{stdout}");
     assert_eq!(
         std::fs::read_to_string(out.join("ablation.md")).unwrap(),
         markdown
     );
     // The kept figures, without the checkpoints, rebuild the same table.
-    let rebuilt = ablate(&["--out", kept_arg, "--table-only"], &bin);
-    assert!(
-        rebuilt.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rebuilt.stderr)
-    );
+    ablate_ok(&["--out", kept_arg, "--table-only"], &bin);
     assert_eq!(
         std::fs::read_to_string(kept.join("ablation.md")).unwrap(),
         markdown
@@ -154,9 +153,7 @@ fn ablations_train_drive_time_and_tabulate_each_variant_and_resume() {
     assert!(!kept.join("full/seed-0/train").exists());
     // A run whose evaluations did not all finish stays out of the table.
     std::fs::remove_file(out.join("tokens-4/seed-0/done")).unwrap();
-    let table = ablate(&["--out", out_arg, "--table-only"], &bin);
-    let stdout = String::from_utf8_lossy(&table.stdout);
-    assert!(table.status.success(), "{stdout}");
+    let stdout = ablate_ok(&["--out", out_arg, "--table-only"], &bin);
     assert!(
         stdout.contains("| full | 0 |") && !stdout.contains("tokens-4"),
         "{stdout}"
@@ -206,15 +203,9 @@ fn a_variant_trained_once_is_set_against_every_seed_of_full_ssr() {
     write_run(tmp.path(), "full", 1, 80.0);
     write_run(tmp.path(), "tokens-4", 0, 90.0);
     let bin = binary("sim-bridge").parent().unwrap().to_path_buf();
-    let run = ablate(
+    let stdout = ablate_ok(
         &["--out", tmp.path().to_str().unwrap(), "--table-only"],
         &bin,
-    );
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&run.stderr)
     );
     // Full SSR's row is the mean ± standard deviation of its two seeds.
     assert!(stdout.contains("| full | 0,1 |"), "{stdout}");
