@@ -56,6 +56,7 @@ VARIANTS = {
     "tokens-4": ["--tokens", "4"],
     "tokens-8": ["--tokens", "8"],
     "tokens-32": ["--tokens", "32"],
+    "tokens-64": ["--tokens", "64"],
     "gate-command": ["--gate-command-only"],
 }
 
