@@ -510,6 +510,18 @@ impl SsrPolicy {
             .filter(|_| wants_debug || states.iter().any(|s| s.controller.config().safety.enabled))
             .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
         let channels = OCCUPANCY_CHANNELS.len();
+        // The motion head runs only for the safety stop's motion rule.
+        let motion = self
+            .model
+            .motion
+            .as_ref()
+            .filter(|_| {
+                states.iter().any(|s| {
+                    let safety = &s.controller.config().safety;
+                    safety.enabled && safety.motion
+                })
+            })
+            .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
         // The hazard head runs only for the unstick rule's early creep.
         let hazards = self
             .model
@@ -532,12 +544,14 @@ impl SsrPolicy {
             let bt = [beta[2 * i], beta[2 * i + 1]];
             let control_started = std::time::Instant::now();
             let safety = &state.controller.config().safety;
-            let occupied = match &occupancy {
-                Some(p) if safety.enabled => {
-                    occupied_cells(p, i, &self.config.bev.grid, safety.threshold)
-                }
+            let grid = &self.config.bev.grid;
+            let mut occupied = match &occupancy {
+                Some(p) if safety.enabled => occupied_cells(p, i, grid, safety.threshold),
                 _ => Vec::new(),
             };
+            if let Some(p) = motion.as_ref().filter(|_| safety.enabled && safety.motion) {
+                occupied.extend(occupied_cells(p, i, grid, safety.motion_threshold));
+            }
             let beliefs = Beliefs {
                 occupied: &occupied,
                 clear: hazards.as_ref().map(|p| p[i][Hazard::Clear.index()]),

@@ -364,6 +364,43 @@ fn the_safety_stop_reads_the_occupancy_head_at_its_threshold() {
 }
 
 #[test]
+fn the_safety_stops_motion_rule_reads_the_motion_head_at_its_threshold() {
+    let rig = rig(1, 900, 256);
+    let with_motion = policy_of(SsrConfig {
+        motion_head: true,
+        ..tiny_config()
+    });
+    // The occupancy cells never count (threshold above any probability); the motion head's do
+    // where its threshold lets them.
+    let safety = |motion: bool, motion_threshold: f32| ControlConfig {
+        safety: SafetyStop {
+            enabled: true,
+            threshold: 1.0,
+            half_width: 3.5,
+            motion,
+            motion_threshold,
+            ..SafetyStop::default()
+        },
+        ..ControlConfig::default()
+    };
+    let decide = |policy: &SsrPolicy, control: ControlConfig| {
+        let mut episode = policy.new_episode_with(control);
+        policy
+            .step(&mut episode, &step_input(&rig, 0, 1))
+            .unwrap()
+            .decision
+    };
+    assert!(decide(&with_motion, safety(true, 0.0)).safety_stop);
+    assert!(!decide(&with_motion, safety(true, 1.0)).safety_stop);
+    assert!(
+        !decide(&with_motion, safety(false, 0.0)).safety_stop,
+        "the motion rule is off unless asked for"
+    );
+    // A network without the head gives the rule nothing to see.
+    assert!(!decide(&policy(), safety(true, 0.0)).safety_stop);
+}
+
+#[test]
 fn the_early_creep_reads_the_hazard_head_at_its_threshold() {
     let policy = policy();
     let rig = rig(1, 900, 256);

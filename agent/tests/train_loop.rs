@@ -302,15 +302,29 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
     let (model, _) = checkpoint::load(&done.checkpoint, &Device::flex()).unwrap();
     assert!(model.occupancy.is_none() && model.hazard.is_none());
 
-    // A fine-tune adds the heads to a checkpoint without them.
-    let added = TrainConfig {
+    // A fine-tune adds the heads to a checkpoint without them, the motion head (off by
+    // default) when its loss has a weight: its loss is logged and validation reports it.
+    assert!(model.motion.is_none() && step_lines(&out).iter().all(|s| s.motion.is_none()));
+    let mut added = TrainConfig {
         init: Some(done.checkpoint),
         ..config.clone()
     };
+    added.loss.motion = 1.0;
+    added.model.motion_head = true;
     let out = tmp.dir("head-added");
-    let tuned = train(added, options(&data, &out), open(&data, &config)).unwrap();
+    let tuned = train(added.clone(), options(&data, &out), open(&data, &added)).unwrap();
     let (model, _) = checkpoint::load(&tuned.checkpoint, &Device::flex()).unwrap();
-    assert!(model.occupancy.is_some() && model.hazard.is_some());
+    assert!(model.occupancy.is_some() && model.hazard.is_some() && model.motion.is_some());
+    assert!(
+        step_lines(&out)
+            .iter()
+            .all(|s| s.motion.is_some_and(|v| v > 0.0))
+    );
+    let validation = tuned.validation.unwrap();
+    assert!(
+        validation.motion_accuracy.contains_key("vehicle"),
+        "{validation:?}"
+    );
 }
 
 #[test]

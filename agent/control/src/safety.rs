@@ -12,6 +12,11 @@
 //! controller on a learned occupancy map, and the safety box of TransFuser++'s creep rule; it
 //! uses nothing the network does not see.
 //!
+//! With [`SafetyStop::motion`], the cells the network's motion head believes a road user will
+//! cover 1.5 s later (at [`SafetyStop::motion_threshold`]) count as well: a car crossing towards
+//! the path is braked for before it is on it, which the current cells see too late (a
+//! red-light runner seen from the side by one front camera).
+//!
 //! Where the plan is shorter than the distance checked (a car planning to stand still), the
 //! path goes on straight along its last direction (straight ahead for a plan without one).
 //!
@@ -48,6 +53,11 @@ pub struct SafetyStop {
     /// Seconds the stop may hold a stopped car before it lets the unstick rule's creep
     /// through.
     pub yield_after_s: f32,
+    /// Whether the motion head's cells (where road users will be) count too; needs a network
+    /// with that head.
+    pub motion: bool,
+    /// Probability from which a motion-head cell counts as occupied.
+    pub motion_threshold: f32,
 }
 
 impl Default for SafetyStop {
@@ -61,6 +71,8 @@ impl Default for SafetyStop {
             reaction_s: 0.5,
             decel: 5.0,
             yield_after_s: 100.0,
+            motion: false,
+            motion_threshold: 0.9,
         }
     }
 }
@@ -76,6 +88,7 @@ impl SafetyStop {
             ("safety.reaction_s", self.reaction_s, 0.0, 5.0),
             ("safety.decel", self.decel, 0.5, 20.0),
             ("safety.yield_after_s", self.yield_after_s, 0.05, 3600.0),
+            ("safety.motion_threshold", self.motion_threshold, 0.0, 1.0),
         ];
         super::check_ranges(&fields)
     }

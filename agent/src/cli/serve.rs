@@ -90,6 +90,11 @@ pub struct ServeArgs {
     /// (`ssr-agent control`)].
     #[arg(long, env = "SSR_AGENT_SAFETY_STOP")]
     safety_stop: Option<bool>,
+    /// The safety stop also brakes for the cells where the network's motion head believes a
+    /// road user will be 1.5 s later (needs a checkpoint with the head) [default: the
+    /// checkpoint's setting].
+    #[arg(long, env = "SSR_AGENT_SAFETY_MOTION")]
+    safety_motion: Option<bool>,
     /// How the network gets its history: `chain` (the frame 0.5 s back with the frame 1 s back
     /// as its history; three BEV passes a step), `link` (the frame 0.5 s back on its own; two
     /// passes) or `recursive` (each step's BEV is the history of the step 0.5 s later; one
@@ -154,6 +159,7 @@ impl ServeArgs {
         set(&mut config.backend, &self.backend);
         config.unstick = self.unstick.or(config.unstick);
         config.safety_stop = self.safety_stop.or(config.safety_stop);
+        config.safety_motion = self.safety_motion.or(config.safety_motion);
         config.history = self.history.or(config.history);
         config.validate()?;
         Ok(config)

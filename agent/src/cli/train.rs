@@ -111,6 +111,12 @@ pub struct TrainArgs {
     /// checkpoint without the head adds one; 0 = no head.
     #[arg(long, default_value_t = 1.0)]
     occupancy_weight: f32,
+    /// Weight of the motion head's loss: the occupancy head's twin for where the road users
+    /// will be 1.5 s later (labels: the future frame's actors, in this frame's ego frame), part
+    /// of the network and its checkpoints; the safety stop can read it (`safety.motion`).
+    /// Fine-tuning a checkpoint without the head adds one; 0 = no head.
+    #[arg(long, default_value_t = 0.0)]
+    motion_weight: f32,
     /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
     #[arg(long)]
     no_stl: bool,
@@ -153,6 +159,7 @@ impl TrainArgs {
         model.ego_status |= self.ego_status;
         model.occupancy_head = self.occupancy_weight > 0.0;
         model.hazard_head = self.hazard_weight > 0.0;
+        model.motion_head = self.motion_weight > 0.0;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
         }
@@ -195,6 +202,7 @@ impl TrainArgs {
         config.loss.bev = self.bev_weight;
         config.loss.hazard = self.hazard_weight;
         config.loss.occupancy = self.occupancy_weight;
+        config.loss.motion = self.motion_weight;
         config.future_bev = !self.no_ffp;
         config.validation_fraction = self.validation_fraction;
         config.validate_every = self.validate_every;

@@ -51,6 +51,12 @@ pub struct SsrConfig {
     /// Checkpoints from before it have none.
     #[serde(default)]
     pub hazard_head: bool,
+    /// Whether the network has the motion head ([`super::occupancy`], the occupancy head's
+    /// twin): which BEV cells a road user will cover [`super::occupancy::MOTION_HORIZON_S`]
+    /// later, in this frame's ego frame, so that the safety stop can see where a crossing car
+    /// is going. Checkpoints from before it have none.
+    #[serde(default)]
+    pub motion_head: bool,
 }
 
 fn ego_status_default() -> bool {
@@ -281,6 +287,7 @@ impl SsrConfig {
             ego_status: false,
             occupancy_head: true,
             hazard_head: true,
+            motion_head: false,
         }
     }
 
@@ -340,6 +347,7 @@ impl SsrConfig {
             ego_status: false,
             occupancy_head: true,
             hazard_head: true,
+            motion_head: false,
         }
     }
 

@@ -1,7 +1,8 @@
 //! The SSR network: image backbone -> BEV encoder (spatial cross-attention through the camera
 //! calibration, temporal self-attention over the episode's previous BEV) -> Scenes TokenLearner
 //! (navigation-gated) -> TCP head; plus the Future Feature Predictor used in training and, where
-//! the config has them, the occupancy head on the BEV and the hazard head on the scene tokens.
+//! the config has them, the occupancy and motion heads on the BEV and the hazard head on the
+//! scene tokens.
 //!
 //! [`SsrModel::forward`] is one tick for a batch of episodes. Everything episode-specific
 //! (calibration, ego motion, previous BEV) comes in through [`ModelInput`]; the model holds no
@@ -89,6 +90,8 @@ pub struct SsrModel {
     pub occupancy: Option<OccupancyHead>,
     /// Hazard head, where the config has one.
     pub hazard: Option<HazardHead>,
+    /// Motion head (occupancy [`occupancy::MOTION_HORIZON_S`] ahead), where the config has one.
+    pub motion: Option<OccupancyHead>,
 }
 
 impl SsrConfig {
@@ -102,6 +105,7 @@ impl SsrConfig {
             ffp: FutureFeaturePredictor::new(self, device),
             occupancy: self.init_occupancy_head(device),
             hazard: self.init_hazard_head(device),
+            motion: self.init_motion_head(device),
         }
     }
 
@@ -118,13 +122,21 @@ impl SsrConfig {
 
     /// A freshly initialised occupancy head, where the config has one.
     pub fn init_occupancy_head(&self, device: &Device) -> Option<OccupancyHead> {
-        self.occupancy_head.then(|| {
-            OccupancyHeadConfig {
-                channels: self.channels,
-                hidden: self.channels,
-            }
-            .init(device)
-        })
+        self.occupancy_head
+            .then(|| self.occupancy_head_config().init(device))
+    }
+
+    /// A freshly initialised motion head, where the config has one.
+    pub fn init_motion_head(&self, device: &Device) -> Option<OccupancyHead> {
+        self.motion_head
+            .then(|| self.occupancy_head_config().init(device))
+    }
+
+    fn occupancy_head_config(&self) -> OccupancyHeadConfig {
+        OccupancyHeadConfig {
+            channels: self.channels,
+            hidden: self.channels,
+        }
     }
 }
 

@@ -7,6 +7,11 @@
 //! network, and in its checkpoints, when [`super::config::SsrConfig::occupancy_head`] says so,
 //! so that what the network believes occupied can be read at serving too. The labels and the
 //! loss are the trainer's ([`crate::train::occupancy`]).
+//!
+//! The motion head ([`super::config::SsrConfig::motion_head`]) is a second head of the same
+//! shape trained on where the road users will be [`MOTION_HORIZON_S`] later, in the current
+//! ego frame: the current BEV and the history it attends to show how they move, and the
+//! safety stop reads it to brake for a car crossing towards the path before it is on it.
 
 use burn::module::Module;
 use burn::tensor::activation::relu;
@@ -18,6 +23,10 @@ use super::init::xavier_linear;
 /// The head's channels, in logit order: what the car must not hit on the road (vehicles,
 /// cyclists, obstacles) and walkers.
 pub const OCCUPANCY_CHANNELS: [&str; 2] = ["vehicle", "walker"];
+
+/// How far ahead the motion head looks, seconds (the training sample's future frame, SSR's
+/// 1.5 s horizon).
+pub const MOTION_HORIZON_S: f64 = 1.5;
 
 /// Size of an [`OccupancyHead`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

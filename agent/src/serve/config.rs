@@ -89,6 +89,10 @@ pub struct ServeConfig {
     /// path just ahead occupied; see `ssr_control::safety`) on or off for every episode;
     /// `None` keeps the checkpoint's setting. On needs a checkpoint with the head.
     pub safety_stop: Option<bool>,
+    /// Whether the safety stop also brakes for where the motion head believes road users will
+    /// be (`ssr_control::safety`); `None` keeps the checkpoint's setting. On needs a checkpoint
+    /// with the head.
+    pub safety_motion: Option<bool>,
     /// How the network gets its history (`ssr_control::History`: training's chain, or the
     /// recursion of checkpoints validated before it) for every episode; `None` keeps the
     /// checkpoint's setting.
@@ -120,6 +124,7 @@ impl Default for ServeConfig {
             backend: Backend::Cpu,
             unstick: None,
             safety_stop: None,
+            safety_motion: None,
             history: None,
         }
     }

@@ -96,6 +96,7 @@ pub fn load_policy(
     let mut control = control;
     control.unstick.enabled = config.unstick.unwrap_or(control.unstick.enabled);
     control.safety.enabled = config.safety_stop.unwrap_or(control.safety.enabled);
+    control.safety.motion = config.safety_motion.unwrap_or(control.safety.motion);
     control.history = config.history.unwrap_or(control.history);
     if control.safety.enabled && model.occupancy.is_none() {
         anyhow::bail!(
@@ -104,9 +105,17 @@ pub fn load_policy(
             info.checkpoint
         );
     }
+    if control.safety.enabled && control.safety.motion && model.motion.is_none() {
+        anyhow::bail!(
+            "the safety stop's motion rule reads the network's motion head, and {} has none \
+             (train with --motion-weight above 0, or serve with --safety-motion false)",
+            info.checkpoint
+        );
+    }
     tracing::info!(
         checkpoint = %info.checkpoint,
         safety_stop = control.safety.enabled,
+        safety_motion = control.safety.motion,
         unstick = control.unstick.enabled,
         history = ?control.history,
         wheelbase_m = control.vehicle.wheelbase,

@@ -1,7 +1,7 @@
 //! The auxiliary outputs a run trains beside the imitation losses: the network's hazard head on
-//! the scene tokens ([`crate::model::hazard`]; loss in [`super::hazard`]) and its occupancy
-//! head on the BEV ([`crate::model::occupancy`]; labels and loss in [`super::occupancy`]);
-//! their outputs and losses on a batch.
+//! the scene tokens ([`crate::model::hazard`]; loss in [`super::hazard`]), its occupancy head
+//! on the BEV and the motion head, its twin for the future frame ([`crate::model::occupancy`];
+//! labels and loss in [`super::occupancy`]); their outputs and losses on a batch.
 
 use burn::tensor::{Device, Tensor};
 
@@ -21,6 +21,8 @@ pub struct AuxiliaryOutputs {
     /// `[B, Q, 2]` occupancy logits of the network's head, their targets, and `[B]` 1 for the
     /// samples that record their actors.
     pub occupancy: Option<(Tensor<3>, Tensor<3>, Tensor<1>)>,
+    /// The same for the motion head, against the future frame's actors.
+    pub motion: Option<(Tensor<3>, Tensor<3>, Tensor<1>)>,
 }
 
 impl AuxiliaryOutputs {
@@ -42,6 +44,11 @@ impl AuxiliaryOutputs {
                     batch_targets(batch.actors(), &config.model.bev.grid, device);
                 (head.forward(output.bev.clone()), targets, recorded)
             }),
+            motion: model.motion.as_ref().map(|head| {
+                let (targets, recorded) =
+                    batch_targets(batch.future_actors(), &config.model.bev.grid, device);
+                (head.forward(output.bev.clone()), targets, recorded)
+            }),
         }
     }
 
@@ -54,6 +61,10 @@ impl AuxiliaryOutputs {
                 .map(|logits| hazard_loss(logits, &batch.hazards())),
             occupancy: self
                 .occupancy
+                .clone()
+                .map(|(logits, targets, recorded)| occupancy_loss(logits, targets, recorded)),
+            motion: self
+                .motion
                 .clone()
                 .map(|(logits, targets, recorded)| occupancy_loss(logits, targets, recorded)),
         }

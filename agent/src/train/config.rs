@@ -177,6 +177,7 @@ impl TrainConfig {
             ("augment", self.augment),
             ("loss.hazard", self.loss.hazard),
             ("loss.occupancy", self.loss.occupancy),
+            ("loss.motion", self.loss.motion),
         ];
         if let Some((field, value)) = finite.iter().find(|(_, v)| !v.is_finite() || *v < 0.0) {
             return Err(format!("{field} must be finite and >= 0, got {value}"));
@@ -184,6 +185,7 @@ impl TrainConfig {
         for (head, weight, has) in [
             ("occupancy", self.loss.occupancy, self.model.occupancy_head),
             ("hazard", self.loss.hazard, self.model.hazard_head),
+            ("motion", self.loss.motion, self.model.motion_head),
         ] {
             if (weight > 0.0) != has {
                 return Err(format!(

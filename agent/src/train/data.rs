@@ -29,6 +29,7 @@ use ssrdrive_proto::dataset::{
 
 use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
+use super::occupancy::actors_in_frame_of;
 use crate::control::History;
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
@@ -37,8 +38,9 @@ use crate::model::hazard::Hazard;
 use crate::model::{ModelInput, Navigation, float_tensor};
 use crate::pose::{EgoMotion, Pose2};
 
-/// Seconds from a frame to the future frame whose BEV the FFP predicts (SSR's code: 1.5 s).
-pub const FUTURE_BEV_S: f64 = 1.5;
+/// Seconds from a frame to the future frame whose BEV the FFP predicts (SSR's code: 1.5 s) and
+/// whose actors label the motion head.
+pub const FUTURE_BEV_S: f64 = crate::model::occupancy::MOTION_HORIZON_S;
 
 /// How one sample of a batch is varied: its photometric jitter and whether it trains the
 /// first-frame path (history and ego motion dropped, as on an episode's first tick).
@@ -368,6 +370,11 @@ impl TrainingData {
             batch.expert.push(now.control);
             batch.brake_reasons.push(now.brake_reason);
             batch.actors.push(now.actors.clone());
+            batch
+                .future_actors
+                .push(future.actors.as_ref().map(|actors| {
+                    actors_in_frame_of(actors, future.position, future.yaw, now.position, now.yaw)
+                }));
         }
         batch.context_images.append(&mut future_images);
         batch.context_geometry.append(&mut future_geometry);
@@ -473,6 +480,9 @@ pub struct Batch {
     brake_reasons: Vec<Option<BrakeReason>>,
     /// The actors around the ego now (`None`: the frame records none).
     actors: Vec<Option<Vec<ActorRecord>>>,
+    /// The actors around the ego at the future frame, in the current frame's ego frame (`None`:
+    /// that frame records none).
+    future_actors: Vec<Option<Vec<ActorRecord>>>,
 }
 
 impl Batch {
@@ -499,6 +509,12 @@ impl Batch {
     /// The actors around the ego in each sample: the occupancy head's labels.
     pub fn actors(&self) -> &[Option<Vec<ActorRecord>>] {
         &self.actors
+    }
+
+    /// Where the actors are at each sample's future frame, in the sample's ego frame: the
+    /// motion head's labels.
+    pub fn future_actors(&self) -> &[Option<Vec<ActorRecord>>] {
+        &self.future_actors
     }
 
     fn input(

@@ -38,6 +38,9 @@ pub struct LossWeights {
     /// existed).
     #[serde(default)]
     pub occupancy: f32,
+    /// Weight of the motion head's cross-entropy (where the road users will be); 0 = no head.
+    #[serde(default)]
+    pub motion: f32,
     /// Concentration k of the Beta targets made from the expert's deterministic actions.
     pub target_concentration: f32,
 }
@@ -52,6 +55,7 @@ impl Default for LossWeights {
             bev: 1.0,
             hazard: 0.5,
             occupancy: 1.0,
+            motion: 0.0,
             target_concentration: 10.0,
         }
     }
@@ -139,16 +143,20 @@ pub struct Losses {
     pub hazard: Option<Tensor<1>>,
     /// Occupancy cross-entropy; `None` without an occupancy head.
     pub occupancy: Option<Tensor<1>>,
+    /// Motion cross-entropy; `None` without a motion head.
+    pub motion: Option<Tensor<1>>,
 }
 
-/// The auxiliary losses on a batch (hazard head, occupancy head), each `None` without its
-/// output.
+/// The auxiliary losses on a batch (hazard, occupancy and motion heads), each `None` without
+/// its output.
 #[derive(Debug, Clone, Default)]
 pub struct AuxiliaryLosses {
     /// The hazard head's cross-entropy.
     pub hazard: Option<Tensor<1>>,
     /// The occupancy head's cross-entropy.
     pub occupancy: Option<Tensor<1>>,
+    /// The motion head's cross-entropy.
+    pub motion: Option<Tensor<1>>,
 }
 
 /// Imitation loss of the head's outputs, plus the BEV loss when a prediction and a future BEV
@@ -182,8 +190,16 @@ pub fn losses(
     if let Some(bev) = &bev {
         total = total + bev.clone().mul_scalar(weights.bev);
     }
-    let AuxiliaryLosses { hazard, occupancy } = auxiliary;
-    for (term, weight) in [(&hazard, weights.hazard), (&occupancy, weights.occupancy)] {
+    let AuxiliaryLosses {
+        hazard,
+        occupancy,
+        motion,
+    } = auxiliary;
+    for (term, weight) in [
+        (&hazard, weights.hazard),
+        (&occupancy, weights.occupancy),
+        (&motion, weights.motion),
+    ] {
         if let Some(term) = term {
             total = total + term.clone().mul_scalar(weight);
         }
@@ -197,6 +213,7 @@ pub fn losses(
         bev,
         hazard,
         occupancy,
+        motion,
     }
 }
 

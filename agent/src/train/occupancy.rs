@@ -4,7 +4,8 @@
 //!
 //! The labels come from the actors each stored frame records
 //! ([`ssrdrive_proto::dataset::FrameRecord::actors`]); frames recorded before that have none
-//! and are left out of the loss.
+//! and are left out of the loss. The motion head's labels are the same, taken from the sample's
+//! future frame and moved into the sample's own ego frame ([`actors_in_frame_of`]).
 
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
@@ -47,6 +48,37 @@ pub fn occupancy_targets(actors: &[ActorRecord], grid: &BevGrid) -> Vec<f32> {
         }
     }
     targets
+}
+
+/// `actors`, recorded in the ego frame of an ego at world `position` (box centre) heading
+/// `yaw`, in the ego frame of an ego at `to_position` heading `to_yaw` (x forward, y left).
+pub fn actors_in_frame_of(
+    actors: &[ActorRecord],
+    position: [f64; 3],
+    yaw: f64,
+    to_position: [f64; 3],
+    to_yaw: f64,
+) -> Vec<ActorRecord> {
+    let (sin, cos) = yaw.sin_cos();
+    let (to_sin, to_cos) = to_yaw.sin_cos();
+    actors
+        .iter()
+        .map(|actor| {
+            let [x, y] = actor.centre;
+            let world = [
+                position[0] + x * cos - y * sin - to_position[0],
+                position[1] + x * sin + y * cos - to_position[1],
+            ];
+            ActorRecord {
+                centre: [
+                    world[0] * to_cos + world[1] * to_sin,
+                    -world[0] * to_sin + world[1] * to_cos,
+                ],
+                yaw: actor.yaw + yaw - to_yaw,
+                ..*actor
+            }
+        })
+        .collect()
 }
 
 /// Balanced binary cross-entropy of `logits` to `targets` (both `[B, Q, 2]`) over the samples
@@ -221,6 +253,34 @@ mod tests {
         assert!(marked(&targets, 0).is_empty());
         let behind_the_grid = actor(ActorClass::Vehicle, [-30.0, 0.0], 0.0, [2.4, 1.0]);
         assert!(marked(&occupancy_targets(&[behind_the_grid], &grid), 0).is_empty());
+    }
+
+    #[test]
+    fn actors_move_into_another_ego_frame() {
+        let car = actor(ActorClass::Vehicle, [10.0, 2.0], 0.1, [2.4, 1.0]);
+        // The same pose: nothing moves.
+        let same = actors_in_frame_of(&[car], [5.0, 5.0, 0.0], 0.7, [5.0, 5.0, 0.0], 0.7);
+        assert!((same[0].centre[0] - 10.0).abs() < 1e-9 && (same[0].centre[1] - 2.0).abs() < 1e-9);
+        // Recorded by an ego 10 m further along the x axis, facing +x: 10 m more ahead of an ego
+        // at the origin facing +x; seen from an ego facing +y (turned left), it is on the right.
+        let ahead = actors_in_frame_of(&[car], [10.0, 0.0, 0.0], 0.0, [0.0, 0.0, 0.0], 0.0);
+        assert!(
+            (ahead[0].centre[0] - 20.0).abs() < 1e-9 && (ahead[0].centre[1] - 2.0).abs() < 1e-9
+        );
+        let turned = std::f64::consts::FRAC_PI_2;
+        let right = actors_in_frame_of(&[car], [0.0, 0.0, 0.0], 0.0, [0.0, 0.0, 0.0], turned);
+        assert!(
+            (right[0].centre[0] - 2.0).abs() < 1e-9,
+            "{:?}",
+            right[0].centre
+        );
+        assert!(
+            (right[0].centre[1] + 10.0).abs() < 1e-9,
+            "{:?}",
+            right[0].centre
+        );
+        assert!((right[0].yaw - (0.1 - turned)).abs() < 1e-9);
+        assert_eq!(right[0].half, car.half);
     }
 
     #[test]

@@ -140,6 +140,9 @@ pub struct StepMetrics {
     /// Occupancy cross-entropy; `None` without the occupancy head.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub occupancy: Option<f32>,
+    /// Motion cross-entropy; `None` without the motion head.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<f32>,
     /// Training throughput of this sitting so far, samples per second (validation excluded).
     pub samples_per_s: f64,
 }
@@ -206,7 +209,7 @@ pub fn resumed_config(out: &Path) -> Result<TrainConfig, TrainError> {
 
 /// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
 /// (a fine-tune changes the training, not the network), except that a fine-tune may add the
-/// occupancy or the hazard head to a checkpoint without one: the head starts from random
+/// occupancy, hazard or motion head to a checkpoint without one: the head starts from random
 /// weights.
 fn initial_weights(
     path: &Path,
@@ -216,9 +219,11 @@ fn initial_weights(
     let (mut weights, info) = checkpoint::load(path, device)?;
     let adds_occupancy = model.occupancy_head && !info.config.occupancy_head;
     let adds_hazard = model.hazard_head && !info.config.hazard_head;
+    let adds_motion = model.motion_head && !info.config.motion_head;
     let saved = SsrConfig {
         occupancy_head: info.config.occupancy_head || model.occupancy_head,
         hazard_head: info.config.hazard_head || model.hazard_head,
+        motion_head: info.config.motion_head || model.motion_head,
         ..info.config
     };
     let differences = saved.differences(model);
@@ -234,6 +239,9 @@ fn initial_weights(
     }
     if adds_hazard {
         weights.hazard = model.init_hazard_head(device);
+    }
+    if adds_motion {
+        weights.motion = model.init_motion_head(device);
     }
     Ok(weights)
 }
@@ -480,18 +488,18 @@ impl Trainer {
             let hazards = outputs
                 .hazard
                 .map(|logits| predicted(&float_values(logits)));
-            let occupancy = outputs.occupancy.map(|(logits, targets, recorded)| {
+            let cells = |(logits, targets, recorded): (Tensor<3>, Tensor<3>, Tensor<1>)| {
                 confusion(
                     &float_values(logits),
                     &float_values(targets),
                     &float_values(recorded),
                 )
-            });
+            };
             sums.add(
                 &batch,
                 &head,
                 hazards.as_deref(),
-                occupancy,
+                [outputs.occupancy.map(cells), outputs.motion.map(cells)],
                 p,
                 float_values(terms.total)[0],
             );
@@ -638,6 +646,7 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
         bev: terms.bev.as_ref().map(value),
         hazard: terms.hazard.as_ref().map(value),
         occupancy: terms.occupancy.as_ref().map(value),
+        motion: terms.motion.as_ref().map(value),
         samples_per_s: 0.0,
     }
 }

@@ -3,7 +3,8 @@
 //! command, start-ups from standstill, and what the expert brakes for), since a mean over a
 //! validation set that is half lane following hides the turns, starts and stops closed-loop
 //! driving depends on; with the hazard head on, how often it names that cause; with the
-//! occupancy head on, its balanced accuracy on the BEV cells.
+//! occupancy head on, its balanced accuracy on the BEV cells, and the motion head's on the
+//! future frame's cells.
 
 use std::collections::BTreeMap;
 
@@ -58,6 +59,9 @@ pub struct ValidationMetrics {
     /// that record their actors; empty without the head.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub occupancy_accuracy: BTreeMap<String, f32>,
+    /// The same for the motion head, against the future frame's actors; empty without it.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub motion_accuracy: BTreeMap<String, f32>,
 }
 
 impl ValidationMetrics {
@@ -87,6 +91,11 @@ impl ValidationMetrics {
             .occupancy_accuracy
             .iter()
             .map(|(channel, a)| format!("; {channel} occupancy {:.0} %", 100.0 * a))
+            .chain(
+                self.motion_accuracy
+                    .iter()
+                    .map(|(channel, a)| format!("; {channel} motion {:.0} %", 100.0 * a)),
+            )
             .collect();
         format!(
             "L2 {} m, steer MAE {:.3}; L2 at 2 s by situation: {}{probe}{occupancy}",
@@ -194,24 +203,28 @@ pub struct ValidationSums {
     loss: f64,
     all: GroupSums,
     by_situation: BTreeMap<&'static str, GroupSums>,
-    /// Per occupancy channel: how the head's cells compare with the labels.
-    occupancy: [Confusion; OCCUPANCY_CHANNELS.len()],
+    /// Per occupancy channel: how the occupancy head's cells (then the motion head's) compare
+    /// with the labels.
+    cells: [[Confusion; OCCUPANCY_CHANNELS.len()]; 2],
 }
 
 impl ValidationSums {
-    /// Adds a batch's head output (with `p` waypoints), the hazard head's classes and the
-    /// occupancy head's [`Confusion`] per channel (each where the run has it) and mean loss.
+    /// Adds a batch's head output (with `p` waypoints), the hazard head's classes, the
+    /// occupancy and motion heads' [`Confusion`] per channel (each where the run has it) and
+    /// mean loss.
     pub fn add(
         &mut self,
         batch: &Batch,
         head: &HeadOutput,
         hazards: Option<&[Hazard]>,
-        occupancy: Option<[Confusion; OCCUPANCY_CHANNELS.len()]>,
+        cells: [Option<[Confusion; OCCUPANCY_CHANNELS.len()]>; 2],
         p: usize,
         loss: f32,
     ) {
-        for (sum, batch) in self.occupancy.iter_mut().zip(occupancy.unwrap_or_default()) {
-            sum.add(&batch);
+        for (sums, batch) in self.cells.iter_mut().zip(cells) {
+            for (sum, batch) in sums.iter_mut().zip(batch.unwrap_or_default()) {
+                sum.add(&batch);
+            }
         }
         let waypoints = float_values(head.waypoints.clone());
         let alpha = float_values(head.alpha.clone());
@@ -261,13 +274,19 @@ impl ValidationSums {
                 .iter()
                 .map(|(name, sums)| (name.to_string(), sums.finish(p)))
                 .collect(),
-            occupancy_accuracy: OCCUPANCY_CHANNELS
-                .iter()
-                .zip(self.occupancy)
-                .filter_map(|(channel, c)| Some((channel.to_string(), c.balanced_accuracy()?)))
-                .collect(),
+            occupancy_accuracy: accuracies(&self.cells[0]),
+            motion_accuracy: accuracies(&self.cells[1]),
         }
     }
+}
+
+/// Each channel's balanced accuracy, where it has occupied and empty cells.
+fn accuracies(cells: &[Confusion; OCCUPANCY_CHANNELS.len()]) -> BTreeMap<String, f32> {
+    OCCUPANCY_CHANNELS
+        .iter()
+        .zip(cells)
+        .filter_map(|(channel, c)| Some((channel.to_string(), c.balanced_accuracy()?)))
+        .collect()
 }
 
 /// "0.41 / 0.93 / 1.62" for the horizons, "-" where not planned.

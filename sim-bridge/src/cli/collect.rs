@@ -10,6 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use sim_bridge::agent::Agent;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
+use sim_bridge::eval::suite::evaluation_towns;
 use sim_bridge::map::Map;
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::dataset::{NoiseConfig, fnv1a};
@@ -114,6 +115,14 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         };
         // --route-ids selects across the sets: one set may hold none of them.
         let (map, plans) = one.load_selected()?;
+        if evaluation_towns().contains(&map.name.as_str()) {
+            bail!(
+                "--routes {name} drives {}, a town of an evaluation suite (`eval --suite`): \
+                 training data must not touch it, or the suite no longer measures towns the \
+                 agent never saw; collect on the training towns (`sim-bridge towns list`)",
+                map.name
+            );
+        }
         if !plans.is_empty() || args.route.route_ids.is_empty() {
             let (map, planned) = RouteArgs::keep_planned(name, map, plans)?;
             sets.push((name.to_string(), map, planned));

@@ -1,6 +1,7 @@
 //! `sim-bridge eval`: drive an agent over a route set (a [`Campaign`]: several at once with
 //! `--jobs`, resumable with `--resume`), print a summary table, write the leaderboard results
-//! JSON and, on request, a top-down picture of each run.
+//! JSON and, on request, a top-down picture of each run. `--suite NAME` drives each route file
+//! of a named suite ([`sim_bridge::eval::suite`]) into one folder and sums them up.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -11,7 +12,10 @@ use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use sim_bridge::agent::Agent;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::local::LocalServer;
-use sim_bridge::eval::campaign::{Campaign, CampaignObserver, RunDone, run_campaign};
+use sim_bridge::eval::campaign::{
+    Campaign, CampaignObserver, CampaignReport, RunDone, run_campaign,
+};
+use sim_bridge::eval::suite::{Figures, PartSummary, Suite, SuiteSummary, part_town, suite_table};
 use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
 use sim_bridge::map::Map;
@@ -49,11 +53,17 @@ pub struct EvalArgs {
     ready_timeout: Duration,
     #[command(flatten)]
     route: RouteArgs,
+    /// Drive a named suite instead of --routes: `unseen` (the held-out towns: CARLA Town02 and
+    /// the radial town, maps from --maps, default ../shared/carla) or `home` (the Town05-style
+    /// routes, a regression check); each route file's results go to --out (a folder) and
+    /// suite.json sums them up.
+    #[arg(long, conflicts_with_all = ["routes", "map", "route_ids", "limit"])]
+    suite: Option<String>,
     #[command(flatten)]
     world: WorldArgs,
-    /// Runs of each route; repetition r uses seed S + r.
-    #[arg(long, default_value_t = 1, value_parser = parse_count)]
-    repetitions: usize,
+    /// Runs of each route; repetition r uses seed S + r [default: 1, or the suite's 3].
+    #[arg(long, value_parser = parse_count)]
+    repetitions: Option<usize>,
     /// Runs at once, each with its own agent, longest routes first; results are the same as
     /// one at a time (a `local` agent steps one run per forward pass; a remote server that
     /// batches the runs' steps rounds differently with the batch, and learned agents may then
@@ -64,9 +74,10 @@ pub struct EvalArgs {
     /// of the leaderboard's length-based timeout: for quick smoke runs.
     #[arg(long, value_parser = parse_positive)]
     timeout: Option<f64>,
-    /// Where to write the leaderboard results JSON.
-    #[arg(long, default_value = "results.json")]
-    out: PathBuf,
+    /// Where to write the leaderboard results JSON [default: results.json; with --suite a
+    /// folder, suite-NAME].
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Keep the runs already in --out (from an interrupted evaluation with the same routes,
     /// repetitions and seed) and drive only the missing ones and those whose agent crashed.
     #[arg(long)]
@@ -87,7 +98,123 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
+    if let Some(name) = &args.suite {
+        let suite = Suite::find(name).with_context(|| {
+            format!("--suite {name}: no such suite (suites: {})", Suite::names())
+        })?;
+        return run_suite(&args, suite);
+    }
     let (target, _local_server) = agent_target(&args)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("results.json"));
+    let repetitions = args.repetitions.unwrap_or(1);
+    let report = drive(
+        &args,
+        target.as_deref(),
+        &args.route,
+        repetitions,
+        &out,
+        args.pictures.as_deref(),
+    )?;
+    println!("{}", summary_table(&report.results));
+    println!("results written to {}", out.display());
+    check_report(&report, repetitions)
+}
+
+/// Drive every route file of `suite` into the folder --out, one results JSON each, then write
+/// and print the suite's summary. With --resume each part keeps its finished runs.
+fn run_suite(args: &EvalArgs, suite: &Suite) -> anyhow::Result<()> {
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("suite-{}", suite.name)));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let repetitions = args.repetitions.unwrap_or(suite.repetitions);
+    if repetitions != suite.repetitions {
+        eprintln!(
+            "note: {repetitions} repetitions instead of the suite's {}: these figures are not the \
+             suite's protocol",
+            suite.repetitions
+        );
+    }
+    let maps = args.route.maps.clone().or_else(|| {
+        let default = PathBuf::from(DEFAULT_CARLA_MAPS);
+        default.is_dir().then_some(default)
+    });
+    let (target, _local_server) = agent_target(args)?;
+    let mut parts = Vec::new();
+    let mut failures = Vec::new();
+    for &part in suite.parts {
+        let route = RouteArgs {
+            routes: part.to_string(),
+            map: None,
+            maps: maps.clone(),
+            route_ids: Vec::new(),
+            limit: None,
+            no_placed_lights: args.route.no_placed_lights,
+        };
+        let file = format!("{part}.json");
+        let pictures = args.pictures.as_ref().map(|p| p.join(part));
+        eprintln!("suite {}: {part}", suite.name);
+        let report = drive(
+            args,
+            target.as_deref(),
+            &route,
+            repetitions,
+            &dir.join(&file),
+            pictures.as_deref(),
+        )
+        .with_context(|| format!("suite {}, part {part}", suite.name))?;
+        if let Err(e) = check_report(&report, repetitions) {
+            failures.push(format!("{part}: {e:#}"));
+        }
+        parts.push((part, file, report.results.checkpoint.records));
+    }
+    let all: Vec<_> = parts
+        .iter()
+        .flat_map(|(_, _, r)| r.iter().cloned())
+        .collect();
+    let summary = SuiteSummary {
+        suite: suite.name.to_string(),
+        repetitions,
+        parts: parts
+            .into_iter()
+            .map(|(part, file, records)| PartSummary {
+                name: part.to_string(),
+                town: part_town(part).unwrap_or_default().to_string(),
+                results: file,
+                figures: Figures::of(&records),
+            })
+            .collect(),
+        all: Figures::of(&all),
+    };
+    let path = dir.join("suite.json");
+    let text = serde_json::to_string_pretty(&summary).context("serializing the suite summary")?;
+    ssrdrive_proto::files::write_atomic(&path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("{}", suite_table(&summary));
+    println!("suite summary written to {}", path.display());
+    if !failures.is_empty() {
+        bail!("{}", failures.join("; "));
+    }
+    Ok(())
+}
+
+/// Where the CARLA maps are looked for when --maps is not given (a suite with CARLA towns).
+const DEFAULT_CARLA_MAPS: &str = "../shared/carla";
+
+/// One campaign: `route` driven `repetitions` times by the agent at `target` (or an in-process
+/// one), results to `out`, pictures to `pictures`.
+fn drive(
+    args: &EvalArgs,
+    target: Option<&str>,
+    route: &RouteArgs,
+    repetitions: usize,
+    out: &Path,
+    pictures: Option<&Path>,
+) -> anyhow::Result<CampaignReport> {
     let record_rig = match &args.record {
         Some(dir) => {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -96,39 +223,47 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         None => None,
     };
     let make_agent = || -> Result<Box<dyn Agent>, String> {
-        let agent = build_agent(&args, target.as_deref()).map_err(|e| format!("{e:#}"))?;
+        let agent = build_agent(args, target).map_err(|e| format!("{e:#}"))?;
         Ok(match (&args.record, &record_rig) {
             (Some(dir), Some(rig)) => Box::new(LoggingAgent::new(agent, rig.clone(), dir.clone())),
             _ => agent,
         })
     };
-    let (map, planned) = args.route.load_each()?;
-    if let Some(dir) = &args.pictures {
+    let (map, planned) = route.load_each()?;
+    if let Some(dir) = pictures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let campaign = Campaign {
         map: &map,
         routes: &planned,
-        repetitions: args.repetitions,
+        repetitions,
         world: args.world.config(&map, args.world.seed),
         scoring: ScoringConfig {
             timeout: args.timeout,
             ..ScoringConfig::default()
         },
-        out: args.out.clone(),
+        out: out.to_path_buf(),
         resume: args.resume,
         jobs: args.jobs,
     };
     let display = EvalDisplay {
         bars: MultiProgress::new(),
         quiet: args.quiet,
-        pictures: args.pictures.as_deref(),
+        pictures,
         map: &map,
     };
-    let report = run_campaign(&campaign, &make_agent, &display)?;
-    println!("{}", summary_table(&report.results));
-    println!("results written to {}", args.out.display());
-    let total = planned.len() * args.repetitions;
+    Ok(run_campaign(&campaign, &make_agent, &display)?)
+}
+
+/// An error when some runs' agent crashed or some routes could not be planned.
+fn check_report(report: &CampaignReport, repetitions: usize) -> anyhow::Result<()> {
+    let total = report
+        .results
+        .checkpoint
+        .progress
+        .last()
+        .copied()
+        .unwrap_or(0);
     if report.crashes > 0 {
         bail!(
             "the agent crashed on {} of {total} runs (see above)",
@@ -140,7 +275,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             "{} of {} routes could not be planned; they count as failed runs with zero scores \
              (see above)",
             report.unplannable,
-            planned.len()
+            total / repetitions.max(1)
         );
     }
     Ok(())

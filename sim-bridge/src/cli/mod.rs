@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use sim_bridge::map::{Map, MapOptions};
-use sim_bridge::route::sets::RouteSet;
+use sim_bridge::route::sets::{CARLA_ROUTE_FILES, CarlaRouteFile, RouteSet};
 use sim_bridge::route::xml::{self, RouteSpec};
 use sim_bridge::towngen::TownStyle;
 
@@ -103,24 +103,32 @@ pub fn load_routes(
         };
         return Ok((map, specs));
     }
-    let path = PathBuf::from(routes);
-    if !path.exists() {
-        let names: Vec<&str> = sim_bridge::route::sets::SETS
-            .iter()
-            .map(|s| s.name)
-            .collect();
-        bail!(
-            "--routes {routes}: no such file and no bundled set of that name (bundled: {})",
-            names.join(", ")
-        );
-    }
-    let specs = xml::read_file(&path)?;
+    let (specs, what) = if let Some(file) = CarlaRouteFile::find(routes) {
+        (
+            xml::parse(file.name, file.xml)?,
+            format!("{routes} (routes on {})", file.town),
+        )
+    } else {
+        let path = PathBuf::from(routes);
+        if !path.exists() {
+            let names: Vec<&str> = sim_bridge::route::sets::SETS
+                .iter()
+                .map(|s| s.name)
+                .chain(CARLA_ROUTE_FILES.iter().map(|f| f.name))
+                .collect();
+            bail!(
+                "--routes {routes}: no such file and no bundled set of that name (bundled: {})",
+                names.join(", ")
+            );
+        }
+        (xml::read_file(&path)?, format!("{routes} (a route file)"))
+    };
     let map_arg = match (map_arg, maps) {
         (Some(map), _) => map,
         (None, Some(dir)) => town_map(&specs, dir, routes)?,
         (None, None) => bail!(
-            "--routes {routes} is a route file: give its map with --map <file.xodr | bundled \
-             town>, or a folder of maps named after the towns with --maps DIR"
+            "--routes {what}: give its map with --map <file.xodr | bundled town>, or a folder \
+             of maps named after the towns with --maps DIR (CARLA's: ../shared/carla)"
         ),
     };
     Ok((load_map(&map_arg, options)?, specs))

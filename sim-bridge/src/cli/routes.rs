@@ -82,6 +82,13 @@ pub fn run(cmd: RoutesCommand) -> anyhow::Result<()> {
                     set.description
                 );
             }
+            for file in &sim_bridge::route::sets::CARLA_ROUTE_FILES {
+                let n = sim_bridge::route::xml::parse(file.name, file.xml)?.len();
+                println!(
+                    "{:<20} {:<20} {:>6}  {} (map from --maps)",
+                    file.name, file.town, n, file.description
+                );
+            }
             Ok(())
         }
         RoutesCommand::Show { set, map } => {

@@ -1,4 +1,5 @@
-//! `sim-bridge towns`: list the bundled towns or regenerate their files.
+//! `sim-bridge towns`: list the bundled towns, regenerate their files, or write procedural
+//! training towns.
 
 use std::path::PathBuf;
 
@@ -16,6 +17,46 @@ pub enum TownsCommand {
         #[arg(long, default_value = "sim-bridge/towns")]
         out_dir: PathBuf,
     },
+    /// Write procedural training towns (`ssr_proc_NNN.xodr`, one per seed: grids of varied
+    /// spacing, angles, lanes, widths, bends, gaps and control; see `towngen::procedural`).
+    /// Draw routes on them with `routes random` and collect with `collect --maps DIR`.
+    Procedural {
+        /// Seeds, as FIRST-LAST (inclusive) or a comma-separated list.
+        #[arg(long, value_parser = parse_seeds)]
+        seeds: SeedList,
+        /// Folder to write into.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// The seeds of `towns procedural --seeds`.
+#[derive(Debug, Clone)]
+pub struct SeedList(Vec<u64>);
+
+/// FIRST-LAST or A,B,C (a clap value parser); at most 1,000 seeds.
+fn parse_seeds(text: &str) -> Result<SeedList, String> {
+    let bad = || format!("'{text}' is not FIRST-LAST or a comma-separated list of seeds");
+    let seeds: Vec<u64> = match text.split_once('-') {
+        Some((a, b)) => {
+            let (a, b): (u64, u64) = (
+                a.trim().parse().map_err(|_| bad())?,
+                b.trim().parse().map_err(|_| bad())?,
+            );
+            if a > b {
+                return Err(format!("{text}: FIRST is after LAST"));
+            }
+            (a..=b).collect()
+        }
+        None => text
+            .split(',')
+            .map(|s| s.trim().parse().map_err(|_| bad()))
+            .collect::<Result<_, _>>()?,
+    };
+    if seeds.is_empty() || seeds.len() > 1000 {
+        return Err(format!("{text}: give 1 to 1000 seeds"));
+    }
+    Ok(SeedList(seeds))
 }
 
 pub fn run(cmd: TownsCommand) -> anyhow::Result<()> {
@@ -29,7 +70,9 @@ pub fn run(cmd: TownsCommand) -> anyhow::Result<()> {
                 let map = super::load_map(style.name(), MapOptions::default())?;
                 let size = map.bounds.1 - map.bounds.0;
                 let role = if style.is_test_town() {
-                    "[test] "
+                    "[home test] "
+                } else if style.is_held_out() {
+                    "[held out] "
                 } else {
                     "[train] "
                 };
@@ -41,6 +84,21 @@ pub fn run(cmd: TownsCommand) -> anyhow::Result<()> {
                     map.junctions.len(),
                     map.lights.len(),
                     style.description()
+                );
+            }
+            Ok(())
+        }
+        TownsCommand::Procedural { seeds, out } => {
+            for path in towngen::write_procedural(&out, seeds.0)? {
+                let map = super::load_map(&path.to_string_lossy(), MapOptions::default())?;
+                let size = map.bounds.1 - map.bounds.0;
+                println!(
+                    "{}: {:.0} x {:.0} m, {} junctions, {} lights",
+                    path.display(),
+                    size.x,
+                    size.y,
+                    map.junctions.len(),
+                    map.lights.len()
                 );
             }
             Ok(())

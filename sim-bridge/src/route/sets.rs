@@ -8,6 +8,8 @@
 //! - `town05-short-style`: 20 routes of 100 to 400 m on the same town, for quick checks.
 //! - `train-small`, `train-highway`, `train-dense`: 200 short routes (60 to 300 m, as TCP's
 //!   training routes) on each training town.
+//! - `heldout-radial`: 20 routes of 400 to 1,200 m on the held-out radial town, which no
+//!   training set drives (part of the held-out suite, `eval --suite unseen`).
 //!
 //! A route is a random walk over the lane graph (seeded by the set) that prefers turns at
 //! junctions and sometimes changes lanes; its keypoints are placed every [`KEYPOINT_SPACING`]
@@ -43,7 +45,7 @@ pub struct RouteSet {
 }
 
 /// Every bundled set.
-pub const SETS: [RouteSet; 5] = [
+pub const SETS: [RouteSet; 6] = [
     RouteSet {
         name: "town05-long-style",
         town: TownStyle::Town05Style,
@@ -74,6 +76,12 @@ pub const SETS: [RouteSet; 5] = [
         description: "200 short training routes on the dense multi-lane town",
         seed: 103,
     },
+    RouteSet {
+        name: "heldout-radial",
+        town: TownStyle::HeldOutRadial,
+        description: "20 routes (400-1200 m) on the held-out radial town, in no training set",
+        seed: 57,
+    },
 ];
 
 impl RouteSet {
@@ -89,6 +97,7 @@ impl RouteSet {
             "town05-short-style" => include_str!("../../routes/town05-short-style.xml"),
             "train-small" => include_str!("../../routes/train-small.xml"),
             "train-highway" => include_str!("../../routes/train-highway.xml"),
+            "heldout-radial" => include_str!("../../routes/heldout-radial.xml"),
             _ => include_str!("../../routes/train-dense.xml"),
         }
     }
@@ -98,6 +107,7 @@ impl RouteSet {
         match self.name {
             "town05-long-style" => TOWN05_LONG_LENGTHS.to_vec(),
             "town05-short-style" => (0..20).map(|_| rng.random_range(100.0..400.0)).collect(),
+            "heldout-radial" => (0..20).map(|_| rng.random_range(400.0..1200.0)).collect(),
             _ => (0..200).map(|_| rng.random_range(60.0..300.0)).collect(),
         }
     }
@@ -107,7 +117,7 @@ impl RouteSet {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let long = self.name == "town05-long-style";
         let lengths = self.lengths(&mut rng);
-        let walk_style = if long {
+        let walk_style = if long || self.town.is_held_out() {
             WalkStyle {
                 turn_bias: 0.45,
                 change_rate: 0.5,
@@ -137,6 +147,47 @@ impl RouteSet {
             }
         }
         routes
+    }
+}
+
+/// A route file the project drew itself (`routes random`) on a CARLA town it does not ship,
+/// committed under `sim-bridge/routes/` so that its routes stay fixed: the map comes from a
+/// folder of CARLA maps (`--maps ../shared/carla`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CarlaRouteFile {
+    /// Its name on the command line (`--routes NAME`).
+    pub name: &'static str,
+    /// The CARLA town its routes name (the map file is `<town>.xodr`).
+    pub town: &'static str,
+    /// One line for listings.
+    pub description: &'static str,
+    /// The draw that wrote it: `routes random --map <town>.xodr` with these options.
+    pub draw: RandomRoutes,
+    /// The committed file.
+    pub xml: &'static str,
+}
+
+/// Every committed route file on a CARLA town.
+pub static CARLA_ROUTE_FILES: [CarlaRouteFile; 1] = [CarlaRouteFile {
+    name: "heldout-town02",
+    town: "Town02",
+    description: "40 random routes (400-1200 m) on CARLA's Town02, in no training set",
+    draw: RandomRoutes {
+        count: 40,
+        length: [400.0, 1200.0],
+        seed: 57,
+        style: WalkStyle {
+            turn_bias: 0.45,
+            change_rate: 0.3,
+        },
+    },
+    xml: include_str!("../../routes/heldout-town02.xml"),
+}];
+
+impl CarlaRouteFile {
+    /// The file called `name`.
+    pub fn find(name: &str) -> Option<&'static CarlaRouteFile> {
+        CARLA_ROUTE_FILES.iter().find(|f| f.name == name)
     }
 }
 

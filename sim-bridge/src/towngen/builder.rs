@@ -69,18 +69,21 @@ struct StreetDef {
 
 /// Collects a town's junctions and streets, then builds the [`Town`].
 pub struct TownBuilder {
-    name: &'static str,
+    name: String,
     frame: Frame,
+    /// Junctions declared with lights get no light signals in the file.
+    lights_left_to_simulator: bool,
     junctions: Vec<JunctionDef>,
     streets: Vec<StreetDef>,
 }
 
 impl TownBuilder {
     /// A town called `name` whose layout coordinates are placed by `frame`.
-    pub fn new(name: &'static str, frame: Frame) -> Self {
+    pub fn new(name: impl Into<String>, frame: Frame) -> Self {
         Self {
-            name,
+            name: name.into(),
             frame,
+            lights_left_to_simulator: false,
             junctions: Vec::new(),
             streets: Vec::new(),
         }
@@ -152,6 +155,13 @@ impl TownBuilder {
     /// Give `road` an elevation profile.
     pub fn set_elevation(&mut self, road: RoadId, profile: Vec<Cubic>) {
         self.streets[road.0].elevation = profile;
+    }
+
+    /// Write no traffic-light signal at all, as CARLA's old Town03 and some other CARLA towns
+    /// do: the simulator then places its own lights (beside the rightmost stop line, at
+    /// junctions of four or more approaches with a multi-lane one; `map::control`).
+    pub fn leave_lights_to_simulator(&mut self) {
+        self.lights_left_to_simulator = true;
     }
 
     /// Put a traffic light on every approach of `j`.
@@ -350,6 +360,7 @@ impl TownBuilder {
         let legs = self.legs(j);
         let (kind, approaches): (SignalKind, Vec<usize>) = match &self.junctions[j.0].control {
             Control::Free => return Vec::new(),
+            Control::Lights if self.lights_left_to_simulator => return Vec::new(),
             Control::Lights => (
                 SignalKind::TrafficLight,
                 (0..legs.len()).filter(|&a| legs[a].n_in() > 0).collect(),

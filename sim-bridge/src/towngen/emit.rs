@@ -54,7 +54,7 @@ fn header(xml: &mut Xml, town: &Town) {
         &[
             attr("revMajor", 1),
             attr("revMinor", 4),
-            attr("name", town.name),
+            attr("name", &town.name),
             attr("version", "1"),
             ("north", len(n)),
             ("south", len(s)),

@@ -1,7 +1,7 @@
 //! The deterministic generator of the bundled towns.
 //!
 //! Each [`TownStyle`] is a layout (one file each: [`town05`], [`small`],
-//! [`highway`], [`dense`]) declared on a [`builder::TownBuilder`]: junction
+//! [`highway`], [`dense`], [`radial`]) declared on a [`builder::TownBuilder`]: junction
 //! centres and the streets between them. The builder derives every
 //! junction's connecting roads from its legs and places the traffic lights
 //! and stop signs; [`emit`] writes the result as OpenDRIVE through the small
@@ -10,6 +10,8 @@
 //!
 //! The generated documents are committed under `sim-bridge/towns/` and
 //! compiled in by [`bundled`]; [`write_bundled`] regenerates them.
+//! [`procedural`] adds a family of training towns drawn from a seed, written on request
+//! ([`write_procedural`]) rather than committed.
 
 mod builder;
 mod dense;
@@ -19,7 +21,9 @@ mod geometry;
 mod highway;
 mod junction;
 mod model;
+pub mod procedural;
 mod profile;
+mod radial;
 mod signals;
 mod small;
 mod town05;
@@ -42,24 +46,28 @@ pub enum TownStyle {
     Highway,
     /// A training town: a rotated grid of three- and two-lane streets.
     DenseMultiLane,
+    /// A held-out town of its own layout family: two curved rings joined by spokes.
+    HeldOutRadial,
 }
 
 impl TownStyle {
     /// Every style, the test town first.
-    pub const ALL: [TownStyle; 4] = [
+    pub const ALL: [TownStyle; 5] = [
         TownStyle::Town05Style,
         TownStyle::SmallTJunctions,
         TownStyle::Highway,
         TownStyle::DenseMultiLane,
+        TownStyle::HeldOutRadial,
     ];
 
-    /// File stem, e.g. "ssr_town05" / "ssr_train_small" / "ssr_train_highway" / "ssr_train_dense".
+    /// File stem, e.g. "ssr_town05" / "ssr_train_small" / "ssr_heldout_radial".
     pub fn name(self) -> &'static str {
         match self {
             Self::Town05Style => "ssr_town05",
             Self::SmallTJunctions => "ssr_train_small",
             Self::Highway => "ssr_train_highway",
             Self::DenseMultiLane => "ssr_train_dense",
+            Self::HeldOutRadial => "ssr_heldout_radial",
         }
     }
 
@@ -83,12 +91,25 @@ impl TownStyle {
             Self::DenseMultiLane => {
                 "training town: 350x300 m grid rotated 20 degrees, 3-lane avenues and 2-lane streets, large signalized junctions"
             }
+            Self::HeldOutRadial => {
+                "held-out town, in no training set: two curved rings (radius 95 and 230 m) joined by spokes, junctions at 60-120 degrees"
+            }
         }
     }
 
-    /// true only for Town05Style (the evaluation town); the others are training towns.
+    /// true only for Town05Style (the home evaluation town, a regression check).
     pub fn is_test_town(self) -> bool {
         self == Self::Town05Style
+    }
+
+    /// true for the towns of the held-out suite, which no training set may drive.
+    pub fn is_held_out(self) -> bool {
+        self == Self::HeldOutRadial
+    }
+
+    /// true for the towns training data is collected on.
+    pub fn is_training_town(self) -> bool {
+        !self.is_test_town() && !self.is_held_out()
     }
 }
 
@@ -99,6 +120,7 @@ pub fn generate(style: TownStyle) -> String {
         TownStyle::SmallTJunctions => small::build(),
         TownStyle::Highway => highway::build(),
         TownStyle::DenseMultiLane => dense::build(),
+        TownStyle::HeldOutRadial => radial::build(),
     };
     emit::write_town(&town)
 }
@@ -110,6 +132,7 @@ pub fn bundled(style: TownStyle) -> &'static str {
         TownStyle::SmallTJunctions => include_str!("../../towns/ssr_train_small.xodr"),
         TownStyle::Highway => include_str!("../../towns/ssr_train_highway.xodr"),
         TownStyle::DenseMultiLane => include_str!("../../towns/ssr_train_dense.xodr"),
+        TownStyle::HeldOutRadial => include_str!("../../towns/ssr_heldout_radial.xodr"),
     }
 }
 
@@ -121,4 +144,25 @@ pub fn write_bundled(dir: &Path) -> std::io::Result<()> {
         std::fs::write(dir.join(format!("{}.xodr", style.name())), generate(style))?;
     }
     Ok(())
+}
+
+/// The OpenDRIVE document of the procedural training town of `seed` ([`procedural`]).
+pub fn generate_procedural(seed: u64) -> String {
+    emit::write_town(&procedural::build(seed))
+}
+
+/// Write the procedural towns of `seeds` to `dir/ssr_proc_NNN.xodr`, creating `dir`; returns
+/// the paths written.
+pub fn write_procedural(
+    dir: &Path,
+    seeds: impl IntoIterator<Item = u64>,
+) -> std::io::Result<Vec<std::path::PathBuf>> {
+    std::fs::create_dir_all(dir)?;
+    let mut written = Vec::new();
+    for seed in seeds {
+        let path = dir.join(format!("{}.xodr", procedural::name(seed)));
+        std::fs::write(&path, generate_procedural(seed))?;
+        written.push(path);
+    }
+    Ok(written)
 }

@@ -136,7 +136,7 @@ pub struct Controller {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Town {
     /// The header's `name`.
-    pub name: &'static str,
+    pub name: String,
     /// Every road, streets first, then connecting roads.
     pub roads: Vec<Road>,
     /// Every junction.

@@ -126,6 +126,16 @@ impl Profile {
         }
     }
 
+    /// The same cross-section with every driving lane `width` metres wide.
+    pub fn with_lane_width(mut self, width: f64) -> Self {
+        for spec in self.left.iter_mut().chain(self.right.iter_mut()) {
+            if spec.kind == LaneKind::Driving {
+                spec.width = width;
+            }
+        }
+        self
+    }
+
     /// A two-way highway: `lanes` each way, a shoulder, a sidewalk.
     pub fn highway(lanes: usize, speed_kmh: u32) -> Self {
         let mut side = vec![lane(LaneKind::Driving, LANE_WIDTH); lanes];

@@ -96,11 +96,18 @@ fn connected_share(net: &RoadNetwork, with_changes: bool) -> f64 {
 }
 
 #[test]
-fn names_round_trip_and_only_town05_is_the_test_town() {
+fn names_round_trip_and_each_town_has_one_role() {
     for style in TownStyle::ALL {
         assert_eq!(TownStyle::from_name(style.name()), Some(style));
         assert!(!style.description().is_empty());
         assert_eq!(style.is_test_town(), style == TownStyle::Town05Style);
+        assert_eq!(style.is_held_out(), style == TownStyle::HeldOutRadial);
+        let roles = [
+            style.is_test_town(),
+            style.is_held_out(),
+            style.is_training_town(),
+        ];
+        assert_eq!(roles.iter().filter(|&&r| r).count(), 1, "{}", style.name());
     }
     assert_eq!(TownStyle::from_name("town05"), None);
 }
@@ -407,11 +414,23 @@ fn geometry_lines(xodr: &str) -> BTreeSet<&str> {
 }
 
 #[test]
-fn training_towns_share_no_geometry_with_the_test_town() {
-    let test = geometry_lines(bundled(TownStyle::Town05Style));
-    for style in TownStyle::ALL.into_iter().filter(|s| !s.is_test_town()) {
-        let shared = geometry_lines(bundled(style)).intersection(&test).count();
-        assert_eq!(shared, 0, "{} shares {shared} geometries", style.name());
+fn training_towns_share_no_geometry_with_the_evaluation_towns() {
+    let (training, evaluation): (Vec<_>, Vec<_>) = TownStyle::ALL
+        .into_iter()
+        .partition(|s| s.is_training_town());
+    assert!(evaluation.len() >= 2 && !training.is_empty());
+    for test_style in evaluation {
+        let test = geometry_lines(bundled(test_style));
+        for &style in &training {
+            let shared = geometry_lines(bundled(style)).intersection(&test).count();
+            assert_eq!(
+                shared,
+                0,
+                "{} shares {shared} geometries with {}",
+                style.name(),
+                test_style.name()
+            );
+        }
     }
 }
 
@@ -449,4 +468,55 @@ fn print_town_sizes() {
 fn regenerate_bundled_towns() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("towns");
     write_bundled(&dir).expect("writing the towns");
+}
+
+#[test]
+fn procedural_towns_load_clean_join_up_repeat_and_vary() {
+    let evaluation: BTreeSet<&str> = TownStyle::ALL
+        .into_iter()
+        .filter(|s| !s.is_training_town())
+        .flat_map(|s| geometry_lines(bundled(s)))
+        .collect();
+    let mut without_lights = 0;
+    let mut sizes = BTreeSet::new();
+    for seed in 1..=12 {
+        let xodr = generate_procedural(seed);
+        assert!(
+            xodr == generate_procedural(seed),
+            "seed {seed} is not deterministic"
+        );
+        assert!(xodr.contains(&format!("name=\"{}\"", procedural::name(seed))));
+        let (net, provenance) = xodr::load_str_with_provenance(&xodr)
+            .unwrap_or_else(|e| panic!("seed {seed} does not load: {e}"));
+        let faults: Vec<String> = provenance
+            .warnings
+            .iter()
+            .filter(|w| !w.is_ignored())
+            .map(ToString::to_string)
+            .collect();
+        assert!(faults.is_empty(), "seed {seed}: {faults:#?}");
+        let dead = net
+            .driving_lanes()
+            .filter(|l| l.successors.is_empty() || l.predecessors.is_empty())
+            .count();
+        assert_eq!(dead, 0, "seed {seed}: {dead} dead ends");
+        let share = connected_share(&net, true);
+        assert!(
+            share >= 0.95,
+            "seed {seed}: {:.1}% connected",
+            share * 100.0
+        );
+        let shared = geometry_lines(&xodr).intersection(&evaluation).count();
+        assert_eq!(
+            shared, 0,
+            "seed {seed} shares {shared} geometries with an evaluation town"
+        );
+        without_lights += usize::from(!xodr.contains("1000001"));
+        sizes.insert(net.driving_lanes().count());
+    }
+    assert!(
+        (1..12).contains(&without_lights),
+        "{without_lights} of 12 towns leave their lights to the simulator"
+    );
+    assert!(sizes.len() >= 8, "towns alike in size: {sizes:?}");
 }

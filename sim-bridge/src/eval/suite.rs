@@ -1,0 +1,210 @@
+//! Named evaluation suites: fixed sets of route files, each driven a fixed number of
+//! repetitions, that `sim-bridge eval --suite NAME` drives one after the other and sums up.
+//!
+//! - `unseen`, the held-out suite: towns that no training set, checkpoint choice or controller
+//!   constant may touch. CARLA's Town02 (`heldout-town02`, 40 routes the project drew and
+//!   committed) and the radial town (`heldout-radial`, 20 routes), a layout family no training
+//!   town has. Every choice about the agent is made here.
+//! - `home`: the Town05-style routes, long and short. Choices were made on them in the past,
+//!   so they are a regression check, not a measure of generalization.
+//!
+//! A suite's figures are means over all its runs (routes x repetitions, every run weighing the
+//! same) and infractions per km *driven*: each kind's count over the summed distance the runs
+//! covered (RC x route length). That differs from the leaderboard's global record, which sums
+//! per-route rates (see [`crate::scoring::record::global_record`]); each part's results JSON
+//! keeps the leaderboard's own figures.
+//!
+//! Collection refuses the towns of every suite ([`evaluation_towns`]), so that no training data
+//! is recorded on them.
+
+use serde::Serialize;
+
+use crate::route::sets::{CarlaRouteFile, RouteSet};
+use crate::scoring::InfractionKind;
+use crate::scoring::record::{Infractions, RouteRecord, Scores};
+
+/// A named suite.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Suite {
+    /// Its name on the command line.
+    pub name: &'static str,
+    /// One line for `--help` and listings.
+    pub description: &'static str,
+    /// The route files it drives (bundled set names or committed CARLA route files).
+    pub parts: &'static [&'static str],
+    /// Runs of each route (seeds 0, 1, 2, ...).
+    pub repetitions: usize,
+}
+
+/// Every suite.
+pub static SUITES: [Suite; 2] = [
+    Suite {
+        name: "unseen",
+        description: "held out: CARLA Town02 (40 routes) and the radial town (20), 3 repetitions",
+        parts: &["heldout-town02", "heldout-radial"],
+        repetitions: 3,
+    },
+    Suite {
+        name: "home",
+        description: "regression check: the Town05-style long (10) and short (20) routes, 3 repetitions",
+        parts: &["town05-long-style", "town05-short-style"],
+        repetitions: 3,
+    },
+];
+
+impl Suite {
+    /// The suite called `name`.
+    pub fn find(name: &str) -> Option<&'static Suite> {
+        SUITES.iter().find(|s| s.name == name)
+    }
+
+    /// The suite names, comma separated (for messages).
+    pub fn names() -> String {
+        SUITES.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+    }
+}
+
+/// The town a suite part drives, by map name (a bundled town's name or a CARLA town's).
+pub fn part_town(part: &str) -> Option<&'static str> {
+    RouteSet::find(part)
+        .map(|set| set.town.name())
+        .or_else(|| CarlaRouteFile::find(part).map(|file| file.town))
+}
+
+/// Every town some suite drives: training data must not be recorded on them.
+pub fn evaluation_towns() -> Vec<&'static str> {
+    let mut towns: Vec<&str> = SUITES
+        .iter()
+        .flat_map(|s| s.parts.iter().filter_map(|p| part_town(p)))
+        .collect();
+    towns.sort_unstable();
+    towns.dedup();
+    towns
+}
+
+/// The figures of a group of runs (one part, or a whole suite).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Figures {
+    /// Runs scored.
+    pub runs: usize,
+    /// Runs that ended "Completed".
+    pub completed: usize,
+    /// Means over the runs of DS, RC and IS.
+    pub scores: Scores,
+    /// Kilometres driven: the sum over runs of RC x route length.
+    pub km_driven: f64,
+    /// Events of each kind.
+    pub counts: Infractions<usize>,
+    /// Events of each kind per km driven (0 when nothing was driven).
+    pub per_km: Infractions<f64>,
+}
+
+impl Figures {
+    /// The figures of `records`.
+    pub fn of(records: &[RouteRecord]) -> Figures {
+        let runs = records.len();
+        let mean = |f: fn(&Scores) -> f64| {
+            if runs == 0 {
+                0.0
+            } else {
+                records.iter().map(|r| f(&r.scores)).sum::<f64>() / runs as f64
+            }
+        };
+        let km_driven: f64 = records
+            .iter()
+            .map(|r| r.scores.score_route / 100.0 * r.meta.route_length / 1000.0)
+            .sum();
+        let mut counts = Infractions::<usize>::default();
+        let mut per_km = Infractions::<f64>::default();
+        for kind in InfractionKind::ALL {
+            let n: usize = records.iter().map(|r| r.infractions.count(kind)).sum();
+            *counts.get_mut(kind) = n;
+            if km_driven > 0.0 {
+                *per_km.get_mut(kind) = n as f64 / km_driven;
+            }
+        }
+        Figures {
+            runs,
+            completed: records.iter().filter(|r| r.completed()).count(),
+            scores: Scores {
+                score_composed: mean(|s| s.score_composed),
+                score_route: mean(|s| s.score_route),
+                score_penalty: mean(|s| s.score_penalty),
+            },
+            km_driven,
+            counts,
+            per_km,
+        }
+    }
+}
+
+/// One part's line in a suite summary.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PartSummary {
+    /// The route file's name.
+    pub name: String,
+    /// The town it drives.
+    pub town: String,
+    /// Its results JSON, relative to the suite's folder.
+    pub results: String,
+    /// Its figures.
+    #[serde(flatten)]
+    pub figures: Figures,
+}
+
+/// A suite's summary (`suite.json` beside the parts' results).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SuiteSummary {
+    /// The suite's name.
+    pub suite: String,
+    /// Runs of each route.
+    pub repetitions: usize,
+    /// Each part.
+    pub parts: Vec<PartSummary>,
+    /// Every run of every part together.
+    pub all: Figures,
+}
+
+/// The infraction kinds a summary table shows per km, with their column heads.
+const TABLE_KINDS: [(InfractionKind, &str); 6] = [
+    (InfractionKind::CollisionVehicle, "veh/km"),
+    (InfractionKind::CollisionPedestrian, "walk/km"),
+    (InfractionKind::CollisionLayout, "lay/km"),
+    (InfractionKind::RedLight, "red/km"),
+    (InfractionKind::StopSign, "stop/km"),
+    (InfractionKind::OutsideRouteLanes, "off/km"),
+];
+
+/// A plain-text table of `summary`: one line per part and one for the whole suite.
+pub fn suite_table(summary: &SuiteSummary) -> String {
+    let mut out = format!(
+        "{:<20} {:>5} {:>5} {:>7} {:>7} {:>7} {:>6}",
+        "part", "runs", "done", "km", "DS", "RC", "IS"
+    );
+    for (_, head) in TABLE_KINDS {
+        out.push_str(&format!(" {head:>7}"));
+    }
+    out.push('\n');
+    let line = |name: &str, f: &Figures| {
+        let mut l = format!(
+            "{:<20} {:>5} {:>5} {:>7.2} {:>7.2} {:>7.2} {:>6.3}",
+            name,
+            f.runs,
+            f.completed,
+            f.km_driven,
+            f.scores.score_composed,
+            f.scores.score_route,
+            f.scores.score_penalty
+        );
+        for (kind, _) in TABLE_KINDS {
+            l.push_str(&format!(" {:>7.2}", f.per_km.get(kind)));
+        }
+        l.push('\n');
+        l
+    };
+    for part in &summary.parts {
+        out.push_str(&line(&part.name, &part.figures));
+    }
+    out.push_str(&line(&format!("all ({})", summary.suite), &summary.all));
+    out
+}

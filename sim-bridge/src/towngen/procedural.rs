@@ -1,0 +1,276 @@
+//! Procedurally varied training towns, `ssr_proc_NNN`: one grid family whose every number
+//! comes from a seed, so that training data covers many geometries instead of a few hand-made
+//! towns (`sim-bridge towns procedural --seeds 1-24 --out DIR`).
+//!
+//! A town is a grid of 3-5 columns by 3-5 rows inside a loop with rounded corners, turned by a
+//! random angle. What varies with the seed:
+//! - spacing (60-130 m between lines) and each inner junction's place (up to 12 % of the
+//!   spacing off the grid), so junctions meet at other than right angles;
+//! - each column's and row's cross-section: 1-3 lanes each way, 3.1-3.7 m wide, with or without
+//!   parking, 30-50 km/h; the loop's likewise;
+//! - gaps: some inner stretches are left out, turning four-way junctions into T-junctions;
+//! - bends: some inner stretches curve through an offset midpoint;
+//! - control: lights at most multi-lane crossings and some others, stop signs on the minor
+//!   approaches of others, some junctions free; in about a third of the towns the file carries
+//!   no light at all and the simulator places its own, as on CARLA maps without signals.
+//!
+//! Nothing else is random: the same seed gives the same bytes. None of these towns is an
+//! evaluation town; the held-out radial town is of another layout family.
+
+use std::collections::BTreeSet;
+
+use glam::DVec2;
+use rand::{Rng, RngExt as _, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::builder::{JunctionId, RoadId, TownBuilder};
+use super::geometry::Frame;
+use super::model::Town;
+use super::profile::{Profile, Side, setback};
+
+/// Straight road kept beyond a junction's setback before a bend begins, metres.
+const STRAIGHT: f64 = 3.0;
+
+/// The name of the town of `seed`.
+pub fn name(seed: u64) -> String {
+    format!("ssr_proc_{seed:03}")
+}
+
+/// A random cross-section: 1-3 lanes each way (2 most often), maybe parking, a speed for its
+/// size, lanes 3.1-3.7 m wide.
+fn random_profile(rng: &mut impl Rng) -> Profile {
+    let lanes = match rng.random_range(0..20) {
+        0..=6 => 1,
+        7..=15 => 2,
+        _ => 3,
+    };
+    let parking = rng.random_bool(0.3);
+    let speed = [30, 40, 50][lanes - 1 + usize::from(lanes == 1 && rng.random_bool(0.3))];
+    Profile::street(lanes, parking, speed).with_lane_width(rng.random_range(3.1..3.7))
+}
+
+/// A junction being laid out: where it is and the streets that reach it.
+struct Node {
+    id: JunctionId,
+    /// In layout axes.
+    at: DVec2,
+    /// (street, whether it is a multi-lane street).
+    legs: Vec<(RoadId, bool)>,
+}
+
+/// The town being laid out.
+struct Layout {
+    b: TownBuilder,
+    nodes: Vec<Node>,
+}
+
+impl Layout {
+    fn node(&mut self, name: String, at: DVec2, profiles: &[&Profile]) -> usize {
+        let id = self.b.junction(name, at, setback(profiles) + 1.0);
+        self.nodes.push(Node {
+            id,
+            at,
+            legs: Vec::new(),
+        });
+        self.nodes.len() - 1
+    }
+
+    /// A street from node `a` to node `b` through the corners `via`, rounded with `radius`.
+    fn street(&mut self, a: usize, b: usize, via: &[DVec2], radius: f64, profile: &Profile) {
+        let road = self
+            .b
+            .street_via(self.nodes[a].id, via, radius, self.nodes[b].id, profile);
+        let multi_lane = profile.driving(Side::Right) >= 2;
+        self.nodes[a].legs.push((road, multi_lane));
+        self.nodes[b].legs.push((road, multi_lane));
+    }
+
+    /// A straight street, or one bent through a midpoint moved sideways by up to a fifth of its
+    /// length, where the bend leaves room for the junctions' setbacks.
+    fn street_maybe_bent(&mut self, rng: &mut impl Rng, a: usize, b: usize, profile: &Profile) {
+        let (pa, pb) = (self.nodes[a].at, self.nodes[b].at);
+        let half = (pb - pa).length() / 2.0;
+        let room = half - setback(&[profile]) - 1.0 - STRAIGHT - 5.0;
+        if room > 10.0 && rng.random_bool(0.3) {
+            let offset =
+                rng.random_range(0.08..0.2) * half * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let normal = (pb - pa).perp().normalize();
+            let corner = (pa + pb) / 2.0 + normal * offset;
+            let turn = 2.0 * (offset.abs() / half).atan();
+            // The rounding takes radius * tan(turn / 2) of each straight half.
+            let radius = ((room - 2.0) / (turn / 2.0).tan()).min(600.0);
+            self.street(a, b, &[corner], radius, profile);
+        } else {
+            self.street(a, b, &[], 0.0, profile);
+        }
+    }
+
+    /// Lights (with chance `lights`) or else stop signs on the minor approaches (with chance
+    /// `stops`; a junction whose streets are all alike gets them on a random pair), or nothing.
+    fn control(&mut self, rng: &mut impl Rng, n: usize, lights: f64, stops: f64) {
+        let node = &self.nodes[n];
+        if rng.random_bool(lights) {
+            self.b.lights(node.id);
+            return;
+        }
+        if !rng.random_bool(stops) {
+            return;
+        }
+        let minor: Vec<RoadId> = node.legs.iter().filter(|l| !l.1).map(|l| l.0).collect();
+        let roads = if minor.is_empty() || minor.len() == node.legs.len() {
+            let k = rng.random_range(0..node.legs.len());
+            vec![node.legs[k].0]
+        } else {
+            minor
+        };
+        self.b.stop_signs(node.id, &roads);
+    }
+}
+
+/// Positions from the middle outwards: `n` lines 60-130 m apart, centred on 0.
+fn lines(rng: &mut impl Rng, n: usize) -> Vec<f64> {
+    let steps: Vec<f64> = (1..n).map(|_| rng.random_range(60.0..130.0)).collect();
+    let total: f64 = steps.iter().sum();
+    let mut at = vec![-total / 2.0];
+    for step in steps {
+        at.push(at[at.len() - 1] + step);
+    }
+    at
+}
+
+/// Build the town of `seed`.
+pub fn build(seed: u64) -> Town {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (cols, rows) = (rng.random_range(3..=5usize), rng.random_range(3..=5usize));
+    let xs = lines(&mut rng, cols);
+    let ys = lines(&mut rng, rows);
+    let col_profiles: Vec<Profile> = (0..cols).map(|_| random_profile(&mut rng)).collect();
+    let row_profiles: Vec<Profile> = (0..rows).map(|_| random_profile(&mut rng)).collect();
+    let loop_profile = random_profile(&mut rng);
+    let loop_x = xs[cols - 1] + rng.random_range(55.0..100.0);
+    let loop_y = ys[rows - 1] + rng.random_range(55.0..100.0);
+    let corner_radius = rng.random_range(18.0..40.0);
+    let rotation = rng.random_range(0.0..360.0);
+
+    let mut t = Layout {
+        b: TownBuilder::new(name(seed), Frame::new(rotation, 0.0, 0.0)),
+        nodes: Vec::new(),
+    };
+    if rng.random_bool(0.35) {
+        t.b.leave_lights_to_simulator();
+    }
+    let min_step = |v: &[f64]| v.windows(2).map(|w| w[1] - w[0]).fold(f64::MAX, f64::min);
+    let jitter = 0.12 * min_step(&xs).min(min_step(&ys));
+
+    // Inner junctions (node c * rows + r), each moved off the grid a little.
+    for c in 0..cols {
+        for r in 0..rows {
+            let off = DVec2::new(
+                rng.random_range(-jitter..jitter),
+                rng.random_range(-jitter..jitter),
+            );
+            let profiles = [&col_profiles[c], &row_profiles[r]];
+            t.node(
+                format!("C{c}R{r}"),
+                DVec2::new(xs[c], ys[r]) + off,
+                &profiles,
+            );
+        }
+    }
+    let inner = |c: usize, r: usize| c * rows + r;
+    // T-junctions on the loop where the columns and rows end.
+    let side = |t: &mut Layout, name: &str, ats: Vec<(DVec2, &Profile)>| -> Vec<usize> {
+        ats.into_iter()
+            .enumerate()
+            .map(|(i, (at, p))| t.node(format!("{name}{i}"), at, &[&loop_profile, p]))
+            .collect()
+    };
+    let column_ends = |y: f64| {
+        (0..cols)
+            .map(|c| (DVec2::new(xs[c], y), &col_profiles[c]))
+            .collect()
+    };
+    let row_ends = |x: f64| {
+        (0..rows)
+            .map(|r| (DVec2::new(x, ys[r]), &row_profiles[r]))
+            .collect()
+    };
+    let south = side(&mut t, "S", column_ends(-loop_y));
+    let north = side(&mut t, "N", column_ends(loop_y));
+    let west = side(&mut t, "W", row_ends(-loop_x));
+    let east = side(&mut t, "E", row_ends(loop_x));
+
+    // Inner stretches left out: each keeps both its junctions at three legs or more.
+    let mut legs = vec![4usize; cols * rows];
+    let mut gaps = BTreeSet::new();
+    for (a, b) in (0..cols)
+        .flat_map(|c| (0..rows).map(move |r| (c, r)))
+        .flat_map(|(c, r)| [((c, r), (c, r + 1)), ((c, r), (c + 1, r))])
+        .filter(|&(_, (c2, r2))| c2 < cols && r2 < rows)
+    {
+        let (a, b) = (inner(a.0, a.1), inner(b.0, b.1));
+        if rng.random_bool(0.15) && legs[a] == 4 && legs[b] == 4 {
+            legs[a] = 3;
+            legs[b] = 3;
+            gaps.insert((a, b));
+        }
+    }
+
+    for c in 0..cols {
+        let p = &col_profiles[c];
+        t.street(south[c], inner(c, 0), &[], 0.0, p);
+        for r in 1..rows {
+            if !gaps.contains(&(inner(c, r - 1), inner(c, r))) {
+                t.street_maybe_bent(&mut rng, inner(c, r - 1), inner(c, r), p);
+            }
+        }
+        t.street(inner(c, rows - 1), north[c], &[], 0.0, p);
+    }
+    for r in 0..rows {
+        let p = &row_profiles[r];
+        t.street(west[r], inner(0, r), &[], 0.0, p);
+        for c in 1..cols {
+            if !gaps.contains(&(inner(c - 1, r), inner(c, r))) {
+                t.street_maybe_bent(&mut rng, inner(c - 1, r), inner(c, r), p);
+            }
+        }
+        t.street(inner(cols - 1, r), east[r], &[], 0.0, p);
+    }
+    // The loop, counter-clockwise: up the east side, west along the north, down the west
+    // side, east along the south, corners rounded.
+    let corner = |x: f64, y: f64| DVec2::new(x * loop_x, y * loop_y);
+    let reversed = |v: &[usize]| v.iter().rev().copied().collect::<Vec<_>>();
+    let sides = [
+        (east.clone(), corner(1.0, 1.0)),
+        (reversed(&north), corner(-1.0, 1.0)),
+        (reversed(&west), corner(-1.0, -1.0)),
+        (south.clone(), corner(1.0, -1.0)),
+    ];
+    for (k, (nodes, turn)) in sides.iter().enumerate() {
+        for w in nodes.windows(2) {
+            t.street(w[0], w[1], &[], 0.0, &loop_profile);
+        }
+        let next = sides[(k + 1) % sides.len()].0[0];
+        t.street(
+            nodes[nodes.len() - 1],
+            next,
+            &[*turn],
+            corner_radius,
+            &loop_profile,
+        );
+    }
+
+    for n in 0..cols * rows {
+        let multi_lane = t.nodes[n].legs.iter().any(|l| l.1);
+        let lights = match (t.nodes[n].legs.len(), multi_lane) {
+            (4, true) => 0.75,
+            (4, false) => 0.35,
+            _ => 0.3,
+        };
+        t.control(&mut rng, n, lights, 0.75);
+    }
+    for n in cols * rows..t.nodes.len() {
+        t.control(&mut rng, n, 0.2, 0.65);
+    }
+    t.b.build()
+}
