@@ -183,7 +183,25 @@ fn serve_layers_file_env_and_flags_and_refuses_bad_settings() {
     let stderr = serve(&[], &["--config", "/no/such/file.toml"]);
     assert!(stderr.contains("/no/such/file.toml"), "{stderr}");
     let stderr = serve(&[("SSR_AGENT_METRICS_LISTEN", "nowhere")], &[]);
-    assert!(stderr.contains("expected HOST:PORT or `off`"), "{stderr}");
+    assert!(
+        stderr.contains("expected IP:PORT or HOST:PORT") && stderr.contains("`off`"),
+        "{stderr}"
+    );
+    // A host name is an address (the README's examples say `localhost`): the next problem is
+    // the missing model, not the address.
+    let stderr = serve(
+        &[("SSR_AGENT_CHECKPOINT", "/no/such/model.safetensors")],
+        &["--metrics-listen", "localhost:0"],
+    );
+    assert!(stderr.contains("/no/such/model.safetensors"), "{stderr}");
+    let stderr = serve(&[], &["--metrics-listen", "localhost"]);
+    assert!(stderr.contains("expected IP:PORT or HOST:PORT"), "{stderr}");
+    // The motion rule needs a network with the motion head; the bundled one has none.
+    let stderr = serve(&[], &["--safety-motion", "true"]);
+    assert!(
+        stderr.contains("motion head") && stderr.contains("--safety-motion false"),
+        "{stderr}"
+    );
     let stderr = serve(&[("SSR_AGENT_BACKEND", "tpu")], &[]);
     assert!(stderr.contains("[possible values: cpu, wgpu]"), "{stderr}");
     if cfg!(not(feature = "wgpu")) {

@@ -225,6 +225,53 @@ fn bad_arguments_fail_with_a_clear_message() {
             "--topdown-radius must be a positive",
         ),
         (&["replay", empty], "no .ssrlog files"),
+        (&["eval", "--jobs", "-1"], "at least 1, got '-1'"),
+        (
+            &["render", "--every", "0", "--out", empty],
+            "at least 1, got '0'",
+        ),
+        (
+            &[
+                "eval",
+                "--map",
+                "ssr_town5",
+                "--routes",
+                "town05-short-style",
+            ],
+            "bundled towns: ssr_town05, ssr_train_small",
+        ),
+        (
+            &[
+                "eval",
+                "--routes",
+                "town05-short-style",
+                "--map",
+                "ssr_train_small",
+            ],
+            "route 0 is on town ssr_town05, but the map is ssr_train_small",
+        ),
+        (
+            &[
+                "eval",
+                "--routes",
+                "town05-short-style",
+                "--route-ids",
+                "3,abc,99",
+            ],
+            "abc, 99 not in town05-short-style, whose route ids are 0-19",
+        ),
+        (
+            &[
+                "collect",
+                "--routes",
+                "train-small,train-dense",
+                "--route-ids",
+                "7,300",
+                "--out",
+                empty,
+            ],
+            "300 not in train-small,train-dense",
+        ),
     ];
     for (args, expected) in cases {
         let run = sim_bridge(args);
@@ -363,7 +410,7 @@ fn a_killed_collection_resumes_without_losing_or_duplicating_frames() {
         vec![
             "collect".to_string(),
             "--routes".into(),
-            "town05-short-style".into(),
+            "train-dense".into(),
             "--limit".into(),
             "6".into(),
             "--rig".into(),
@@ -677,7 +724,7 @@ fn a_collection_killed_mid_episode_resumes_to_the_same_bytes() {
     let collect = |out: &std::path::Path| {
         let mut command = Command::new(env!("CARGO_BIN_EXE_sim-bridge"));
         command
-            .args(["collect", "--routes", "town05-short-style", "--limit", "3"])
+            .args(["collect", "--routes", "train-dense", "--limit", "3"])
             .args(["--jobs", "1", "--vehicles", "10", "--quiet", "--out"])
             .arg(out);
         command
@@ -806,11 +853,35 @@ fn a_full_disk_stops_eval_with_the_results_so_far_intact() {
 fn collect_selects_route_ids_across_every_route_set() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("data");
+    // A second route set on the same town whose one route has an id train-small lacks.
+    let file = tmp.path().join("extra.xml");
+    let drawn = sim_bridge(&[
+        "routes",
+        "random",
+        "--map",
+        "ssr_train_small",
+        "--count",
+        "1",
+        "--length",
+        "60,120",
+        "--out",
+        file.to_str().unwrap(),
+    ]);
+    assert!(
+        drawn.status.success(),
+        "{}",
+        String::from_utf8_lossy(&drawn.stderr)
+    );
+    let text = std::fs::read_to_string(&file).unwrap();
+    std::fs::write(&file, text.replace(r#"id="0""#, r#"id="only-here""#)).unwrap();
+    let routes = format!("train-small,{}", file.display());
     let collect = |ids: &str| {
         sim_bridge(&[
             "collect",
             "--routes",
-            "town05-long-style,town05-short-style",
+            &routes,
+            "--map",
+            "ssr_train_small",
             "--route-ids",
             ids,
             "--vehicles",
@@ -821,8 +892,8 @@ fn collect_selects_route_ids_across_every_route_set() {
             out.to_str().unwrap(),
         ])
     };
-    // Route 0 is only in the short set: the long set holding none of the ids is no error.
-    let run = collect("0");
+    // The id is only in the file: train-small holding none of the ids is no error.
+    let run = collect("only-here");
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{stderr}");
     let episodes: Vec<String> = std::fs::read_dir(out.join("episodes"))
@@ -830,10 +901,10 @@ fn collect_selects_route_ids_across_every_route_set() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(episodes.len(), 1, "{episodes:?}");
-    assert!(episodes[0].contains("short"), "{episodes:?}");
+    assert!(episodes[0].contains("extra"), "{episodes:?}");
     // An id in no set is.
     let run = collect("no-such-id");
     assert!(!run.status.success());
     let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(stderr.contains("none of --route-ids"), "{stderr}");
+    assert!(stderr.contains("no-such-id not in train-small"), "{stderr}");
 }

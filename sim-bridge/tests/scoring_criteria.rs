@@ -913,6 +913,33 @@ mod scoring {
     }
 
     #[test]
+    fn a_users_fixed_timeout_stops_the_run_without_an_infraction() {
+        let map = straight_map();
+        let route = straight_route(&map);
+        let config = ScoringConfig {
+            timeout: Some(5.0),
+            ..ScoringConfig::default()
+        };
+        let mut d = Drive::with(&map, &route, config);
+        let mut x = 0.0;
+        let mut end = None;
+        for _ in 0..400 {
+            end = d.step(ego_at(x, -1.75, 5.0), &[], &[]);
+            if end.is_some() {
+                break;
+            }
+            x += 5.0 * DT;
+        }
+        assert_eq!(end, Some(RouteEnd::Stopped));
+        let r = d.finish();
+        assert_eq!(r.status, "Stopped - --timeout reached");
+        assert!(r.infractions.route_timeout.is_empty());
+        assert_eq!(r.meta.stopped_at_s, Some(5.0));
+        assert_eq!(r.scores.score_penalty, 1.0);
+        assert!(!r.status.contains("Agent"), "not an agent error");
+    }
+
+    #[test]
     fn a_timeout_reported_by_the_caller_is_recorded() {
         let map = straight_map();
         let route = straight_route(&map);

@@ -19,6 +19,7 @@ mod scoring {
                 repetition: Some(index % 2),
                 route_length: length,
                 seed: Some(7),
+                stopped_at_s: None,
             },
             route_id: format!("RouteScenario_{index}"),
             scores: Scores {

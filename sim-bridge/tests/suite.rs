@@ -66,6 +66,12 @@ fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
     let mut runs = 0;
     for part in parts {
         let results = read_json(&out.join(part["results"].as_str().unwrap()));
+        // --timeout cuts each run: said so, and not an agent error.
+        assert_eq!(results["entry_status"], "Finished");
+        for record in results["_checkpoint"]["records"].as_array().unwrap() {
+            assert_eq!(record["status"], "Stopped - --timeout reached", "{record}");
+            assert_eq!(record["meta"]["stopped_at_s"], 4.0);
+        }
         let records = results["_checkpoint"]["records"].as_array().unwrap().len();
         assert_eq!(part["runs"].as_u64().unwrap() as usize, records);
         assert_eq!(part["town"], "ssr_town05");

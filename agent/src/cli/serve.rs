@@ -15,7 +15,7 @@ pub struct ServeArgs {
     #[arg(long, env = "SSR_AGENT_CONFIG")]
     config: Option<PathBuf>,
     /// gRPC address [default: 127.0.0.1:50051]; port 0 picks a free one (printed on stdout).
-    #[arg(long, env = "SSR_AGENT_LISTEN")]
+    #[arg(long, env = "SSR_AGENT_LISTEN", value_parser = serve::config::parse_listen)]
     listen: Option<SocketAddr>,
     /// Prometheus /metrics address [default: 127.0.0.1:9090], or `off`.
     #[arg(long, env = "SSR_AGENT_METRICS_LISTEN", value_parser = parse_metrics_listen)]

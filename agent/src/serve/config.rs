@@ -31,7 +31,9 @@ pub enum LogFormat {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ServeConfig {
-    /// gRPC address; port 0 picks a free port (printed on stdout as `listening on ADDR`).
+    /// gRPC address (`IP:PORT` or `HOST:PORT`); port 0 picks a free port (printed on stdout as
+    /// `listening on ADDR`).
+    #[serde(deserialize_with = "listen_text")]
     pub listen: SocketAddr,
     /// Prometheus `/metrics` address; `None` (`"off"` in a file) serves no metrics.
     #[serde(with = "metrics_listen_text")]
@@ -319,15 +321,37 @@ impl ServeConfig {
     }
 }
 
+/// An address to listen on, `IP:PORT` or `HOST:PORT` (`localhost:50051`; a name is resolved
+/// by the system, an IPv4 address preferred).
+pub fn parse_listen(text: &str) -> Result<SocketAddr, String> {
+    if let Ok(address) = text.parse() {
+        return Ok(address);
+    }
+    let resolved: Vec<SocketAddr> = std::net::ToSocketAddrs::to_socket_addrs(text)
+        .map_err(|e| format!("'{text}': {e}; expected IP:PORT or HOST:PORT, e.g. 127.0.0.1:50051"))?
+        .collect();
+    resolved
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or(resolved.first())
+        .copied()
+        .ok_or_else(|| format!("'{text}' names no address; expected IP:PORT or HOST:PORT"))
+}
+
 /// A metrics address as the flag, its variable and config files write it: `HOST:PORT`, or
 /// `off` for none.
 pub fn parse_metrics_listen(text: &str) -> Result<Option<SocketAddr>, String> {
     if text == "off" {
         return Ok(None);
     }
-    text.parse()
+    parse_listen(text)
         .map(Some)
-        .map_err(|e| format!("{e}: expected HOST:PORT or `off`"))
+        .map_err(|e| format!("{e} (or `off`)"))
+}
+
+/// [`ServeConfig::listen`] from a file: an address or a host name ([`parse_listen`]).
+fn listen_text<'de, D: serde::Deserializer<'de>>(input: D) -> Result<SocketAddr, D::Error> {
+    parse_listen(&String::deserialize(input)?).map_err(serde::de::Error::custom)
 }
 
 /// [`ServeConfig::metrics_listen`] as text in files (TOML has no null for "none").

@@ -51,28 +51,25 @@ impl RouteArgs {
         Self::keep_planned(&self.routes, map, plans)
     }
 
-    /// The map and every selected route with its plan or the reason it has none; an error when
-    /// --route-ids names none of the routes.
+    /// The map and every selected route with its plan or the reason it has none; an error
+    /// naming the file's ids when --route-ids names a route the file does not have.
     pub fn load_each(&self) -> anyhow::Result<(Map, Vec<RoutePlan>)> {
-        let (map, plans) = self.load_selected()?;
-        if plans.is_empty() && !self.route_ids.is_empty() {
-            bail!(
-                "none of --route-ids {:?} is in {}",
-                self.route_ids,
-                self.routes
-            );
-        }
+        let (map, plans, ids) = self.load_selected()?;
+        check_route_ids(&self.route_ids, &ids, &self.routes)?;
         Ok((map, plans))
     }
 
-    /// [`RouteArgs::load_each`], where a selection of no route is empty, not an error (one
-    /// route set among several may hold none of --route-ids).
-    pub fn load_selected(&self) -> anyhow::Result<(Map, Vec<RoutePlan>)> {
+    /// The map, the selected routes with their plans (a selection of no route is empty, not an
+    /// error: one route set among several may hold none of --route-ids), and every id of the
+    /// route file.
+    pub fn load_selected(&self) -> anyhow::Result<(Map, Vec<RoutePlan>, Vec<String>)> {
         let options = MapOptions {
             place_missing_lights: !self.no_placed_lights,
         };
         let (map, mut specs) =
             super::load_routes(&self.routes, self.map.as_ref(), self.maps.as_ref(), options)?;
+        check_towns(&specs, &map, &self.routes)?;
+        let ids: Vec<String> = specs.iter().map(|s| s.id.clone()).collect();
         if !self.route_ids.is_empty() {
             specs.retain(|s| self.route_ids.contains(&s.id));
         }
@@ -86,7 +83,7 @@ impl RouteArgs {
                 (spec, dense)
             })
             .collect();
-        Ok((map, plans))
+        Ok((map, plans, ids))
     }
 
     /// The routes of `plans` that could be planned (each other one is reported); none is an
@@ -108,6 +105,65 @@ impl RouteArgs {
         }
         Ok((map, planned))
     }
+}
+
+/// An error naming the ids of `wanted` (--route-ids) that are not among `ids` (those of the
+/// route files `routes`), and listing the ids there are.
+pub fn check_route_ids(wanted: &[String], ids: &[String], routes: &str) -> anyhow::Result<()> {
+    let missing: Vec<&str> = wanted
+        .iter()
+        .filter(|id| !ids.contains(id))
+        .map(String::as_str)
+        .collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    bail!(
+        "--route-ids: {} not in {routes}, whose route ids are {}",
+        missing.join(", "),
+        describe_ids(ids)
+    )
+}
+
+/// "0-19" for the ids 0 to 19 in order, else the ids comma separated (the first 30); each id
+/// once.
+fn describe_ids(ids: &[String]) -> String {
+    let mut seen = std::collections::HashSet::new();
+    let ids: Vec<String> = ids.iter().filter(|id| seen.insert(*id)).cloned().collect();
+    let numbers: Option<Vec<u64>> = ids.iter().map(|id| id.parse().ok()).collect();
+    if let Some(numbers) = numbers.filter(|n| !n.is_empty()) {
+        let (first, last) = (numbers[0], numbers[numbers.len() - 1]);
+        if numbers.iter().zip(first..).all(|(&n, k)| n == k) {
+            return format!("{first}-{last}");
+        }
+    }
+    let shown: Vec<&str> = ids.iter().take(30).map(String::as_str).collect();
+    let more = ids.len().saturating_sub(30);
+    if more > 0 {
+        format!("{} and {more} more", shown.join(", "))
+    } else {
+        shown.join(", ")
+    }
+}
+
+/// An error when the routes name a town other than `map` (a route drawn on one town, snapped
+/// onto another, drives somewhere else and scores as if it had not).
+fn check_towns(specs: &[RouteSpec], map: &Map, routes: &str) -> anyhow::Result<()> {
+    let other = specs
+        .iter()
+        .find(|s| !s.town.is_empty() && !s.town.eq_ignore_ascii_case(&map.name));
+    if let Some(spec) = other {
+        bail!(
+            "--routes {routes}: route {} is on town {}, but the map is {}; give that town's map \
+             (--map <{}.xodr | bundled town>, or --maps DIR holding {}.xodr)",
+            spec.id,
+            spec.town,
+            map.name,
+            spec.town,
+            spec.town
+        );
+    }
+    Ok(())
 }
 
 /// What populates the world.

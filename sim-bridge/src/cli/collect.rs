@@ -17,7 +17,7 @@ use ssrdrive_proto::dataset::{NoiseConfig, fnv1a};
 
 use sim_bridge::client::local::LocalRole;
 
-use super::args::{PlannedRoute, RouteArgs, WorldArgs, server_target};
+use super::args::{PlannedRoute, RouteArgs, WorldArgs, check_route_ids, server_target};
 
 #[derive(Debug, Args)]
 pub struct CollectArgs {
@@ -64,7 +64,7 @@ pub struct CollectArgs {
     #[arg(long)]
     tag: Option<String>,
     /// Worker threads (one route run each).
-    #[arg(long, default_value_t = default_jobs(), value_parser = clap::value_parser!(u64).range(1..=256))]
+    #[arg(long, default_value_t = default_jobs(), allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(1..=256))]
     jobs: u64,
     /// No progress bar.
     #[arg(long)]
@@ -102,6 +102,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     }
     let rig = Rig::from_name_or_file(&args.rig)?;
     let mut sets: Vec<(String, Map, Vec<PlannedRoute>)> = Vec::new();
+    let mut ids = Vec::new();
     for name in args
         .route
         .routes
@@ -114,7 +115,8 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             ..args.route.clone()
         };
         // --route-ids selects across the sets: one set may hold none of them.
-        let (map, plans) = one.load_selected()?;
+        let (map, plans, set_ids) = one.load_selected()?;
+        ids.extend(set_ids);
         if evaluation_towns().contains(&map.name.as_str()) {
             bail!(
                 "--routes {name} drives {}, a town of an evaluation suite (`eval --suite`): \
@@ -128,13 +130,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             sets.push((name.to_string(), map, planned));
         }
     }
-    if sets.is_empty() {
-        bail!(
-            "none of --route-ids {:?} is in {}",
-            args.route.route_ids,
-            args.route.routes
-        );
-    }
+    check_route_ids(&args.route.route_ids, &ids, &args.route.routes)?;
     let mut tasks = Vec::new();
     for repetition in 0..args.repetitions {
         for (set, map, planned) in &sets {

@@ -62,13 +62,13 @@ pub struct EvalArgs {
     #[command(flatten)]
     world: WorldArgs,
     /// Runs of each route; repetition r uses seed S + r [default: 1, or the suite's 3].
-    #[arg(long, value_parser = parse_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_count)]
     repetitions: Option<usize>,
     /// Runs at once, each with its own agent, longest routes first; results are the same as
     /// one at a time (a `local` agent steps one run per forward pass; a remote server that
     /// batches the runs' steps rounds differently with the batch, and learned agents may then
     /// diverge)
-    #[arg(long, default_value_t = 1, value_parser = parse_count)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = parse_count)]
     jobs: usize,
     /// End every route after this many simulated seconds (a timeout without penalty) instead
     /// of the leaderboard's length-based timeout: for quick smoke runs.

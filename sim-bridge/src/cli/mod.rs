@@ -164,5 +164,13 @@ pub fn load_map(arg: &str, options: MapOptions) -> anyhow::Result<Map> {
         return Map::from_str(style.name(), sim_bridge::towngen::bundled(style), options)
             .with_context(|| format!("bundled town {arg}"));
     }
-    Ok(Map::load_file(&PathBuf::from(arg), options)?)
+    let path = PathBuf::from(arg);
+    if !path.exists() {
+        let towns: Vec<&str> = TownStyle::ALL.iter().map(|s| s.name()).collect();
+        bail!(
+            "map {arg}: no such .xodr file and no bundled town of that name (bundled towns: {})",
+            towns.join(", ")
+        );
+    }
+    Ok(Map::load_file(&path, options)?)
 }

@@ -43,8 +43,8 @@ pub struct RenderArgs {
     #[arg(long)]
     rig: Option<String>,
     /// Ticks (20 Hz) between two rendered frames: 10 gives 2 Hz.
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
-    every: u64,
+    #[arg(long, default_value_t = 10, allow_negative_numbers = true, value_parser = super::args::parse_count)]
+    every: usize,
     /// Render at most this many frames per route (the run goes on unrendered).
     #[arg(long, default_value_t = 400)]
     max_frames: usize,
@@ -187,7 +187,7 @@ struct Film<'a> {
 impl Film<'_> {
     /// Whether tick `frame` is one to render and write.
     fn renders(&self, frame: u64) -> bool {
-        frame.is_multiple_of(self.args.every) && self.written < self.args.max_frames
+        frame.is_multiple_of(self.args.every as u64) && self.written < self.args.max_frames
     }
 
     fn record(

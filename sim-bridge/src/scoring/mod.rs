@@ -181,6 +181,9 @@ pub enum RouteEnd {
     TimedOut,
     /// The agent failed (LB1.0's AgentError: "Agent crashed").
     AgentCrashed,
+    /// The user's fixed timeout (`ScoringConfig::timeout`, `eval --timeout`) cut the run: not
+    /// the leaderboard's, no timeout infraction (ours).
+    Stopped,
 }
 
 impl RouteEnd {
@@ -192,6 +195,7 @@ impl RouteEnd {
             RouteEnd::Blocked => "Failed - Agent got blocked",
             RouteEnd::TimedOut => "Failed - Agent timed out",
             RouteEnd::AgentCrashed => "Failed - Agent crashed",
+            RouteEnd::Stopped => "Stopped - --timeout reached",
         }
     }
 }
@@ -404,7 +408,8 @@ impl<'a> RouteScorer<'a> {
         }
 
         let timed_out = t >= self.timeout;
-        if timed_out && !completed {
+        let cut = timed_out && self.config.timeout.is_some();
+        if timed_out && !completed && !cut {
             self.push_timeout(t, ego.position);
         }
 
@@ -414,6 +419,8 @@ impl<'a> RouteScorer<'a> {
             Some(RouteEnd::Blocked)
         } else if deviated {
             Some(RouteEnd::Deviated)
+        } else if cut {
+            Some(RouteEnd::Stopped)
         } else if timed_out {
             Some(RouteEnd::TimedOut)
         } else {
@@ -544,6 +551,7 @@ impl<'a> RouteScorer<'a> {
                 route_length: self.route.keypoint_length,
                 repetition: None,
                 seed: None,
+                stopped_at_s: (end == Some(RouteEnd::Stopped)).then_some(self.timeout),
             },
             route_id: route_id.to_string(),
             scores: Scores {

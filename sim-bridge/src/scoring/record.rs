@@ -112,6 +112,10 @@ pub struct RouteMeta {
     /// Seed of the run (ours; not in LB1.0).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
+    /// Where the user's fixed timeout (`eval --timeout`) cut the run, simulated seconds (ours;
+    /// the status is then "Stopped - --timeout reached").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stopped_at_s: Option<f64>,
 }
 
 /// The record of one route run (LB1.0 `RouteRecord`).
