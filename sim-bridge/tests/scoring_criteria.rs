@@ -363,6 +363,7 @@ mod scoring {
             other_id: id,
             class,
             location: DVec3::new(x, -1.75, 0.0),
+            contact: None,
         }
     }
 
@@ -414,6 +415,7 @@ mod scoring {
             other_id: 12,
             class: CollisionClass::Vehicle,
             location: DVec3::new(20.034_56, -1.75, 0.0),
+            contact: None,
         };
         d.step(ego_at(20.0, -1.75, 5.0), &[event], &[]);
         assert_eq!(
@@ -557,9 +559,18 @@ mod scoring {
             "{}",
             event.text
         );
+        // Ours: where it was run from, in the record's events.
+        let detail = event.detail.clone().unwrap();
+        assert!(
+            detail.starts_with("map light, lane 1 of ") && detail.contains("ego 10.0 m/s"),
+            "{detail}"
+        );
         let r = d.finish();
         assert!(close(r.scores.score_penalty, 0.70, 1e-12));
         assert!(close(r.scores.score_composed, 70.0, 1e-9));
+        assert_eq!(r.meta.events.len(), 1);
+        assert_eq!(r.meta.events[0].kind, "red_light");
+        assert_eq!(r.meta.events[0].detail, detail);
     }
 
     #[test]

@@ -20,6 +20,7 @@ mod scoring {
                 route_length: length,
                 seed: Some(7),
                 stopped_at_s: None,
+                events: Vec::new(),
             },
             route_id: format!("RouteScenario_{index}"),
             scores: Scores {

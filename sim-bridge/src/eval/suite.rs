@@ -14,14 +14,20 @@
 //! per-route rates (see [`crate::scoring::record::global_record`]); each part's results JSON
 //! keeps the leaderboard's own figures.
 //!
+//! Failure classes: each part and the whole suite also count the records' `meta.events` by
+//! class ([`event_class`]: how vehicle collisions happened, whose red lights were run), per km
+//! driven.
+//!
 //! Collection refuses the towns of every suite ([`evaluation_towns`]), so that no training data
 //! is recorded on them.
+
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 
 use crate::route::sets::{CarlaRouteFile, RouteSet};
 use crate::scoring::InfractionKind;
-use crate::scoring::record::{Infractions, RouteRecord, Scores};
+use crate::scoring::record::{Infractions, RouteEvent, RouteRecord, Scores};
 
 /// A named suite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -97,6 +103,29 @@ pub struct Figures {
     pub counts: Infractions<usize>,
     /// Events of each kind per km driven (0 when nothing was driven).
     pub per_km: Infractions<f64>,
+    /// Events with a detail, by [`event_class`]: count and count per km driven.
+    pub classes: BTreeMap<String, ClassCount>,
+}
+
+/// How often one failure class happened.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct ClassCount {
+    /// Events.
+    pub count: usize,
+    /// Events per km driven.
+    pub per_km: f64,
+}
+
+/// The class of an event: its kind and the first words of its detail, e.g.
+/// "collisions_vehicle: crossing, in a junction" or "red_light: placed light".
+pub fn event_class(event: &RouteEvent) -> String {
+    let words = if event.kind == "collisions_vehicle" {
+        2
+    } else {
+        1
+    };
+    let head: Vec<&str> = event.detail.split(", ").take(words).collect();
+    format!("{}: {}", event.kind, head.join(", "))
 }
 
 impl Figures {
@@ -123,6 +152,15 @@ impl Figures {
                 *per_km.get_mut(kind) = n as f64 / km_driven;
             }
         }
+        let mut classes: BTreeMap<String, ClassCount> = BTreeMap::new();
+        for event in records.iter().flat_map(|r| &r.meta.events) {
+            classes.entry(event_class(event)).or_default().count += 1;
+        }
+        for class in classes.values_mut() {
+            if km_driven > 0.0 {
+                class.per_km = class.count as f64 / km_driven;
+            }
+        }
         Figures {
             runs,
             completed: records.iter().filter(|r| r.completed()).count(),
@@ -134,6 +172,7 @@ impl Figures {
             km_driven,
             counts,
             per_km,
+            classes,
         }
     }
 }
@@ -206,5 +245,84 @@ pub fn suite_table(summary: &SuiteSummary) -> String {
         out.push_str(&line(&part.name, &part.figures));
     }
     out.push_str(&line(&format!("all ({})", summary.suite), &summary.all));
+    if !summary.all.classes.is_empty() {
+        out.push_str("\nfailure classes (all runs)              count  per km\n");
+        for (class, c) in &summary.all.classes {
+            out.push_str(&format!("{class:<40} {:>5} {:>7.2}\n", c.count, c.per_km));
+        }
+    }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scoring::record::RouteMeta;
+
+    fn run(rc: f64, length: f64, events: &[(&str, &str)]) -> RouteRecord {
+        RouteRecord {
+            meta: RouteMeta {
+                route_length: length,
+                events: events
+                    .iter()
+                    .map(|(kind, detail)| RouteEvent {
+                        kind: kind.to_string(),
+                        detail: detail.to_string(),
+                        ..RouteEvent::default()
+                    })
+                    .collect(),
+                ..RouteMeta::default()
+            },
+            scores: Scores {
+                score_composed: rc,
+                score_route: rc,
+                score_penalty: 1.0,
+            },
+            status: "Completed".into(),
+            ..RouteRecord::default()
+        }
+    }
+
+    #[test]
+    fn figures_count_per_km_driven_and_by_failure_class() {
+        let crossing = (
+            "collisions_vehicle",
+            "crossing, in a junction, other 6.0 m/s, ego 3.0 m/s",
+        );
+        let placed = (
+            "red_light",
+            "placed light, lane 1 of 3, head 2 m ahead 9 m right, ego 7.5 m/s",
+        );
+        let records = [
+            run(100.0, 1000.0, &[crossing, placed]),
+            run(50.0, 2000.0, &[crossing]),
+        ];
+        let f = Figures::of(&records);
+        assert_eq!((f.runs, f.completed), (2, 2));
+        assert!((f.km_driven - 2.0).abs() < 1e-12);
+        assert!((f.scores.score_route - 75.0).abs() < 1e-12);
+        let class = &f.classes["collisions_vehicle: crossing, in a junction"];
+        assert_eq!(class.count, 2);
+        assert!((class.per_km - 1.0).abs() < 1e-12);
+        assert_eq!(f.classes["red_light: placed light"].count, 1);
+        assert_eq!(f.classes.len(), 2);
+        // Nothing driven: rates are 0, not a division by zero.
+        let still = Figures::of(&[run(0.0, 1000.0, &[crossing])]);
+        assert_eq!(
+            still.classes["collisions_vehicle: crossing, in a junction"].per_km,
+            0.0
+        );
+        assert_eq!(still.km_driven, 0.0);
+    }
+
+    #[test]
+    fn every_suite_part_is_a_known_route_file_and_its_towns_are_refused() {
+        for suite in &SUITES {
+            for part in suite.parts {
+                assert!(part_town(part).is_some(), "{part}");
+            }
+        }
+        let towns = evaluation_towns();
+        assert_eq!(towns, ["Town02", "ssr_heldout_radial", "ssr_town05"]);
+    }
 }

@@ -12,10 +12,13 @@
 //! criteria updates, and the update then prunes the memory. The scorer does the same per call:
 //! first the contacts detected since the last call (stamped with the current time), then the
 //! pruning at the current ego location. A collision never ends the route.
+//!
+//! Ours: each counted vehicle collision says how the two met ([`vehicle_contact`]), for the
+//! record's `meta.events`.
 
 use glam::DVec3;
 
-use crate::world::state::{CollisionClass, CollisionEvent};
+use crate::world::state::{CollisionClass, CollisionEvent, ContactGeometry};
 
 use super::{Infraction, InfractionKind, ScoringConfig, fmt_location};
 
@@ -38,6 +41,7 @@ impl Collisions {
         &mut self,
         t: f64,
         events: &[CollisionEvent],
+        in_junction: bool,
         cfg: &ScoringConfig,
         out: &mut Vec<Infraction>,
     ) {
@@ -80,6 +84,10 @@ impl Collisions {
                     fmt_location(location)
                 ),
                 factor,
+                detail: event
+                    .contact
+                    .filter(|_| event.class == CollisionClass::Vehicle)
+                    .map(|c| vehicle_contact(&c, in_junction)),
             });
             self.collision_time = t;
             self.registered.push(location);
@@ -96,5 +104,66 @@ impl Collisions {
         if self.last_id.is_some() && t - self.collision_time > cfg.collision_id_seconds {
             self.last_id = None;
         }
+    }
+}
+
+/// How a vehicle collision happened, e.g. "crossing, in a junction, other 6.2 m/s, ego 4.0
+/// m/s": `crossing` (the other's heading 45-135 degrees off the ego's and it moving),
+/// `standing across` (the same, it standing), `ego rear-ends` (headings within 45 degrees, the
+/// other ahead), `hit from behind` (the other behind), `head-on` (more than 135 degrees); where
+/// the ego stood (in a junction or on a road); both speeds.
+pub fn vehicle_contact(c: &ContactGeometry, in_junction: bool) -> String {
+    let off = c.relative_yaw.abs().to_degrees();
+    let moving = c.other_speed > 0.5;
+    let how = if off > 135.0 {
+        "head-on"
+    } else if off >= 45.0 {
+        if moving {
+            "crossing"
+        } else {
+            "standing across"
+        }
+    } else if c.other_offset.x > 0.0 {
+        "ego rear-ends"
+    } else {
+        "hit from behind"
+    };
+    let place = if in_junction {
+        "in a junction"
+    } else {
+        "on a road"
+    };
+    format!(
+        "{how}, {place}, other {:.1} m/s, ego {:.1} m/s",
+        c.other_speed, c.ego_speed
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec2;
+
+    use super::*;
+
+    fn contact(relative_deg: f64, ahead: f64, other_speed: f64) -> ContactGeometry {
+        ContactGeometry {
+            relative_yaw: relative_deg.to_radians(),
+            other_offset: DVec2::new(ahead, 0.5),
+            other_speed,
+            ego_speed: 4.0,
+        }
+    }
+
+    #[test]
+    fn vehicle_contacts_are_named_by_how_the_cars_met() {
+        let named = |c: ContactGeometry, junction: bool| vehicle_contact(&c, junction);
+        assert_eq!(
+            named(contact(90.0, 3.0, 6.0), true),
+            "crossing, in a junction, other 6.0 m/s, ego 4.0 m/s"
+        );
+        assert!(named(contact(-80.0, 3.0, 0.0), false).starts_with("standing across, on a road"));
+        assert!(named(contact(10.0, 4.0, 0.0), false).starts_with("ego rear-ends"));
+        assert!(named(contact(-5.0, -4.0, 8.0), false).starts_with("hit from behind"));
+        assert!(named(contact(170.0, 3.0, 8.0), false).starts_with("head-on"));
     }
 }

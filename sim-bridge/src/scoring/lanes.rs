@@ -172,6 +172,7 @@ impl OutsideRouteLanes {
             location,
             text,
             factor: 1.0 - percentage / 100.0,
+            detail: None,
         })
     }
 }

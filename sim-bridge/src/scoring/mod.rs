@@ -45,8 +45,8 @@ use crate::world::state::{CollisionEvent, EgoState, LightState};
 
 pub use progress::route_timeout;
 pub use record::{
-    Checkpoint, GlobalMeta, GlobalRecord, Infractions, LABELS, Results, ResultsError, RouteMeta,
-    RouteRecord, Scores, global_record,
+    Checkpoint, GlobalMeta, GlobalRecord, Infractions, LABELS, Results, ResultsError, RouteEvent,
+    RouteMeta, RouteRecord, Scores, global_record,
 };
 pub use summary::summary_table;
 
@@ -282,6 +282,10 @@ pub struct Infraction {
     pub text: String,
     /// What it multiplies IS by (1.0 for the route-ending events).
     pub factor: f64,
+    /// Ours, for failure analysis (the record's `meta.events`): how a vehicle collision
+    /// happened ([`collisions::vehicle_contact`]) or which lane and head a red light was run
+    /// from; `None` for the other kinds.
+    pub detail: Option<String>,
 }
 
 /// Scores one route with the LB1.0 criteria. Create it when the route starts, call
@@ -362,8 +366,11 @@ impl<'a> RouteScorer<'a> {
             .map
             .waypoint(ego.position, |l| l.kind == LaneKind::Driving);
 
+        let in_junction = driving
+            .as_ref()
+            .is_some_and(|w| self.map.lane(w.lane).in_junction());
         self.collisions
-            .register(t, collisions, cfg, &mut self.infractions);
+            .register(t, collisions, in_junction, cfg, &mut self.infractions);
         self.collisions.update(t, ego.position, cfg);
 
         let deviated = self.in_route.update(self.route, ego.position, cfg);
@@ -377,6 +384,7 @@ impl<'a> RouteScorer<'a> {
                     fmt_location(ego.position)
                 ),
                 factor: 1.0,
+                detail: None,
             });
         }
 
@@ -404,6 +412,7 @@ impl<'a> RouteScorer<'a> {
                 location: ego.position,
                 text: format!("Agent got blocked at {}", fmt_location(ego.position)),
                 factor: 1.0,
+                detail: None,
             });
         }
 
@@ -436,6 +445,7 @@ impl<'a> RouteScorer<'a> {
             location,
             text: "Route timeout.".to_string(),
             factor: 1.0,
+            detail: None,
         });
     }
 
@@ -552,6 +562,18 @@ impl<'a> RouteScorer<'a> {
                 repetition: None,
                 seed: None,
                 stopped_at_s: (end == Some(RouteEnd::Stopped)).then_some(self.timeout),
+                events: self
+                    .infractions
+                    .iter()
+                    .filter_map(|i| {
+                        Some(RouteEvent {
+                            kind: i.kind.key().to_string(),
+                            time: i.time,
+                            location: [i.location.x, i.location.y],
+                            detail: i.detail.clone()?,
+                        })
+                    })
+                    .collect(),
             },
             route_id: route_id.to_string(),
             scores: Scores {

@@ -116,6 +116,23 @@ pub struct RouteMeta {
     /// the status is then "Stopped - --timeout reached").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stopped_at_s: Option<f64>,
+    /// The infractions that say more than the leaderboard's message, in time order (ours, for
+    /// failure analysis): how a vehicle collision happened, where a red light was run from.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<RouteEvent>,
+}
+
+/// One infraction with its detail (ours; see [`RouteMeta::events`]).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct RouteEvent {
+    /// The LB1.0 infraction key, e.g. `collisions_vehicle`.
+    pub kind: String,
+    /// Simulated seconds since the route started.
+    pub time: f64,
+    /// Where, map frame (x, y), m.
+    pub location: [f64; 2],
+    /// What happened, e.g. "crossing, in a junction, other 6.2 m/s, ego 4.0 m/s".
+    pub detail: String,
 }
 
 /// The record of one route run (LB1.0 `RouteRecord`).

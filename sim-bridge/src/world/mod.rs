@@ -23,7 +23,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
 use ssrdrive_proto::control::Control;
-use state::{ActorKind, CollisionEvent, EgoState, LightState, Obb};
+use state::{ActorKind, CollisionEvent, ContactGeometry, EgoState, LightState, Obb};
 use traffic::{REQUEST_DISTANCE, Traffic, standing_time};
 
 use crate::map::{LaneIdx, Map};
@@ -360,10 +360,20 @@ impl<'m> World<'m> {
             }
             if let Some(face) = ego_box.contact_face_of(&a.obb) {
                 kept -= kept.dot(face).min(0.0) * face;
+                let (sin, cos) = ego.yaw.sin_cos();
                 events.push(CollisionEvent {
                     other_id: a.id,
                     class: a.kind.collision_class(),
                     location: ego.position,
+                    contact: Some(ContactGeometry {
+                        relative_yaw: crate::map::wrap_angle(a.obb.yaw - ego.yaw),
+                        other_offset: DVec2::new(
+                            offset.x * cos + offset.y * sin,
+                            -offset.x * sin + offset.y * cos,
+                        ),
+                        other_speed: a.velocity.length(),
+                        ego_speed: ego.speed,
+                    }),
                 });
             }
         }

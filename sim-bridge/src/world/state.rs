@@ -145,6 +145,21 @@ pub struct CollisionEvent {
     pub class: CollisionClass,
     /// Where the ego was, world frame.
     pub location: DVec3,
+    /// How the two boxes met (ours, for failure analysis); `None` where not known.
+    pub contact: Option<ContactGeometry>,
+}
+
+/// How the ego and the actor it touched stood and moved at the contact.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactGeometry {
+    /// The other actor's heading minus the ego's, radians in (-pi, pi].
+    pub relative_yaw: f64,
+    /// The other actor's centre in the ego frame (x forward, y left), m.
+    pub other_offset: DVec2,
+    /// The other actor's speed, m/s.
+    pub other_speed: f64,
+    /// The ego's speed, m/s.
+    pub ego_speed: f64,
 }
 
 /// A traffic light's state.
