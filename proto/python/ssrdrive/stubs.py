@@ -1,44 +1,52 @@
-"""The generated protobuf and gRPC modules, (re)generated from the repository's proto file with
-grpcio-tools when they are missing or older than the proto. Nothing is checked in."""
+"""The generated protobuf and gRPC modules (``ssrdrive.v1.agent_pb2`` and ``agent_pb2_grpc``).
 
+- Installed (``pip install ./proto/python``): the build generated them into the package.
+- From a source checkout (``PYTHONPATH=proto/python``): they are generated at first import with
+  grpcio-tools into a cache folder outside the source tree (``$SSRDRIVE_STUB_DIR``, else
+  ``~/.cache/ssrdrive/stubs``), one per content of agent.proto, so a read-only checkout works
+  and an edited proto is never served stale stubs. Nothing generated is checked in.
+"""
+
+import hashlib
 import importlib
+import os
 import sys
 from pathlib import Path
+
+import ssrdrive
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROTO_ROOT = PACKAGE_DIR.parents[1]
 PROTO_FILE = PROTO_ROOT / "ssrdrive" / "v1" / "agent.proto"
-GENERATED = [PACKAGE_DIR / "v1" / "agent_pb2.py", PACKAGE_DIR / "v1" / "agent_pb2_grpc.py"]
 
 
-def _stale() -> bool:
-    """Missing stubs, or stubs older than a proto file that is there to regenerate from."""
-    if not all(path.exists() for path in GENERATED):
-        return True
-    if not PROTO_FILE.exists():
-        return False
-    return min(path.stat().st_mtime for path in GENERATED) < PROTO_FILE.stat().st_mtime
+def cache_root() -> Path:
+    """Where stubs for a source checkout go."""
+    override = os.environ.get("SSRDRIVE_STUB_DIR")
+    if override:
+        return Path(override)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "ssrdrive" / "stubs"
 
 
-def generate() -> None:
-    """Runs protoc (from grpcio-tools) on agent.proto into this package."""
+def generate(out: Path) -> None:
+    """Runs protoc (from grpcio-tools) on agent.proto into ``out`` (as ``out/ssrdrive/v1``)."""
     try:
         from grpc_tools import protoc
     except ImportError as error:  # pragma: no cover - depends on the environment
         raise ImportError(
-            "ssrdrive needs grpcio-tools to generate its stubs: "
-            "pip install -r proto/python/requirements.txt"
+            "ssrdrive from a source checkout generates its stubs with grpcio-tools: "
+            "pip install -r proto/python/requirements.txt, or pip install ./proto/python"
         ) from error
-    if not PROTO_FILE.exists():
-        raise FileNotFoundError(f"{PROTO_FILE} is missing; use the client from the repository")
+    out.mkdir(parents=True, exist_ok=True)
     include = str(Path(protoc.__file__).parent / "_proto")
     status = protoc.main(
         [
             "protoc",
             f"-I{PROTO_ROOT}",
             f"-I{include}",
-            f"--python_out={PACKAGE_DIR.parent}",
-            f"--grpc_python_out={PACKAGE_DIR.parent}",
+            f"--python_out={out}",
+            f"--grpc_python_out={out}",
             str(PROTO_FILE),
         ]
     )
@@ -46,10 +54,35 @@ def generate() -> None:
         raise RuntimeError(f"protoc failed on {PROTO_FILE} (exit {status})")
 
 
+def _source_stubs() -> Path:
+    """The cache folder holding stubs for this checkout's agent.proto, generated if missing."""
+    digest = hashlib.sha256(PROTO_FILE.read_bytes()).hexdigest()[:16]
+    folder = cache_root() / digest
+    if not (folder / "ssrdrive" / "v1" / "agent_pb2_grpc.py").exists():
+        # Generate beside, then rename: a concurrent import never sees half a folder.
+        partial = folder.with_name(f".{digest}.{os.getpid()}")
+        generate(partial)
+        try:
+            partial.rename(folder)
+        except OSError:
+            if not folder.exists():
+                raise
+    return folder
+
+
 def load():
-    """Returns (agent_pb2, agent_pb2_grpc), generating them first if needed."""
-    if _stale():
-        generate()
+    """Returns (agent_pb2, agent_pb2_grpc)."""
+    installed = (PACKAGE_DIR / "v1" / "agent_pb2.py").exists() and not PROTO_FILE.exists()
+    if not installed:
+        if not PROTO_FILE.exists():
+            raise FileNotFoundError(
+                f"{PROTO_FILE} is missing and no built stubs are installed: "
+                "pip install ./proto/python from the ssrdrive repository"
+            )
+        extra = str(_source_stubs() / "ssrdrive")
+        if extra not in ssrdrive.__path__:
+            # First, so that stubs an older version generated into the source tree lose.
+            ssrdrive.__path__.insert(0, extra)
         importlib.invalidate_caches()
     pb2 = importlib.import_module("ssrdrive.v1.agent_pb2")
     pb2_grpc = importlib.import_module("ssrdrive.v1.agent_pb2_grpc")
@@ -57,5 +90,4 @@ def load():
 
 
 if __name__ == "__main__":
-    generate()
-    sys.stdout.write(f"generated {GENERATED[0].parent}\n")
+    sys.stdout.write(f"stubs in {_source_stubs()}\n")
