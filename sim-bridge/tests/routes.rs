@@ -67,6 +67,10 @@ fn malformed_route_files_name_the_problem() {
             "<routes><route id='5'><waypoint x='1' y='2'/></route></routes>",
             "at least 2",
         ),
+        (
+            "<routes><route id='6'><waypoint x='1' y='2'/>\n<waypont x='5' y='2'/><waypoint x='9' y='2'/></route></routes>",
+            "route 6: unknown element <waypont> on line 2",
+        ),
     ];
     for (text, needle) in cases {
         let err = xml::parse("bad.xml", text).expect_err(text).to_string();

@@ -97,6 +97,10 @@ pub fn read_file(path: &Path) -> Result<Vec<RouteSpec>, RouteFileError> {
     parse(&shown, &text)
 }
 
+/// The elements a `<route>` may hold: keypoints, and what the leaderboard's route files carry
+/// beside them (weather; the 2.0 format's scenarios), which this reader does not use.
+const ROUTE_CHILDREN: [&str; 4] = ["waypoint", "weather", "weathers", "scenarios"];
+
 /// Parse a route file held in memory; `origin` names it in errors.
 pub fn parse(origin: &str, text: &str) -> Result<Vec<RouteSpec>, RouteFileError> {
     let invalid = |message: String| RouteFileError::Invalid {
@@ -130,6 +134,24 @@ pub fn parse(origin: &str, text: &str) -> Result<Vec<RouteSpec>, RouteFileError>
             ))
         })?;
         let town = node.attribute("town").unwrap_or("").to_string();
+        // A misspelt <waypoint> would silently drop its keypoint: name it instead.
+        if let Some(other) = node
+            .children()
+            .filter(|n| n.is_element())
+            .find(|n| !ROUTE_CHILDREN.contains(&n.tag_name().name()))
+        {
+            let line = doc.text_pos_at(other.range().start).row;
+            return Err(invalid(format!(
+                "route {id}: unknown element <{}> on line {line}; a route holds <waypoint> \
+                 elements (and optionally {})",
+                other.tag_name().name(),
+                ROUTE_CHILDREN[1..]
+                    .iter()
+                    .map(|t| format!("<{t}>"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
         let mut keypoints = Vec::new();
         for wp in node.descendants().filter(|n| n.has_tag_name("waypoint")) {
             if keypoints.len() == MAX_KEYPOINTS {
