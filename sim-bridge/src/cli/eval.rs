@@ -326,12 +326,22 @@ impl CampaignObserver for EvalDisplay<'_> {
         };
         if let Some(dir) = self.pictures {
             let path = dir.join(safe_name(&format!("route_{id}_rep{repetition}")) + ".png");
+            let s = done.record.scores;
+            let title = format!(
+                "{} route {id} rep {repetition}: {}  DS {:.1} RC {:.1} IS {:.2}",
+                self.map.name,
+                done.record.status,
+                s.score_composed,
+                s.score_route,
+                s.score_penalty
+            );
             write_run_png(
                 self.map,
                 dense,
                 &run.trace,
                 &run.final_actors,
                 &run.infractions,
+                &title,
                 &path,
             )
             .map_err(|e| format!("writing {}: {e}", path.display()))?;

@@ -14,6 +14,7 @@ use sim_bridge::client::local::LocalRole;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::render::bev_maps::{occupancy_panel, token_panel};
+use sim_bridge::render::canvas::label;
 use sim_bridge::render::topdown::{Intent, local_view};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::scoring::ScoringConfig;
@@ -263,6 +264,32 @@ impl Film<'_> {
         blit(cameras_width, 0, side, topdown.pixels());
         for (k, map) in maps.iter().enumerate() {
             blit(cameras_width + (1 + k as u32) * side, 0, side, &map.rgb);
+        }
+        // What each panel shows.
+        let mut y = 0;
+        for (frame, image) in obs.frames.iter().zip(&cameras) {
+            label(&mut rgb, width, 2, y as i64 + 2, &format!("camera {}", frame.camera));
+            y += image.height;
+        }
+        // (title at the top, key at the bottom), short enough for a 288-pixel panel.
+        let titles = [
+            ("top-down, north up", "plan cyan, target magenta"),
+            ("token attention", "ego frame, ahead up"),
+            ("occupancy", "vehicle orange, walker cyan"),
+        ];
+        let mut kinds = vec![titles[0]];
+        if let Some(debug) = debug {
+            if !debug.token_attention.is_empty() {
+                kinds.push(titles[1]);
+            }
+            if !debug.occupancy.is_empty() {
+                kinds.push(titles[2]);
+            }
+        }
+        for (k, (title, key)) in kinds.into_iter().enumerate() {
+            let x = (cameras_width + k as u32 * side) as i64 + 2;
+            label(&mut rgb, width, x, 2, title);
+            label(&mut rgb, width, x, height as i64 - 16, key);
         }
         if !maps.is_empty() {
             let path = self.dir.join(format!("{:06}_view.png", obs.frame));

@@ -1,5 +1,7 @@
 //! A tiny RGB raster with the few primitives the top-down view needs: thick lines, filled
-//! convex polygons and discs, in world coordinates through a fixed scale, written as PNG.
+//! convex polygons and discs, in world coordinates through a fixed scale; rectangles and text
+//! (an 8x8 bitmap font, scaled by whole pixels) in pixel coordinates for titles, legends and
+//! scale bars; written as PNG.
 
 use std::io::Write;
 
@@ -55,6 +57,41 @@ impl Canvas {
             origin: centre - DVec2::splat(radius),
             scale: side as f64 / (2.0 * radius.max(1e-3)),
         }
+    }
+
+    /// The same canvas with `rows` pixel rows of `colour` added above it (for a title and a
+    /// legend): the world keeps its place, measured from the bottom edge.
+    pub fn with_header(mut self, rows: u32, colour: [u8; 3]) -> Self {
+        let mut pixels: Vec<u8> = colour
+            .iter()
+            .copied()
+            .cycle()
+            .take((self.width * rows * 3) as usize)
+            .collect();
+        pixels.append(&mut self.pixels);
+        self.pixels = pixels;
+        self.height += rows;
+        self
+    }
+
+    /// Fill the pixel rectangle from (`x`, `y`) (top left), `w` x `h` pixels.
+    pub fn rect_px(&mut self, x: i64, y: i64, w: i64, h: i64, c: [u8; 3]) {
+        for yy in y..y + h {
+            for xx in x..x + w {
+                self.put(xx, yy, c);
+            }
+        }
+    }
+
+    /// Write `text` (ASCII; other characters show as '?') with its top left at pixel (`x`,
+    /// `y`), each glyph 8 x 8 pixels times `size`; returns the x after the last glyph.
+    pub fn text_px(&mut self, x: i64, y: i64, text: &str, size: i64, c: [u8; 3]) -> i64 {
+        glyph_cells(x, y, text, size, |cx, cy| self.rect_px(cx, cy, size, size, c))
+    }
+
+    /// Where the world point `p` falls, in pixels.
+    pub fn pixel_of(&self, p: DVec2) -> DVec2 {
+        self.to_px(p)
     }
 
     /// Row-major RGB8 pixels.
@@ -140,5 +177,70 @@ impl Canvas {
         encoder.set_depth(png::BitDepth::Eight);
         let mut writer = encoder.write_header()?;
         writer.write_image_data(&self.pixels)
+    }
+}
+
+/// Calls `cell` with the top left of every lit `size` x `size` cell of `text` written from
+/// (`x`, `y`) in the 8x8 font; returns the x after the last glyph.
+fn glyph_cells(x: i64, y: i64, text: &str, size: i64, mut cell: impl FnMut(i64, i64)) -> i64 {
+    let mut at = x;
+    for ch in text.chars() {
+        let code = if ch.is_ascii() { ch as usize } else { '?' as usize };
+        for (row, bits) in font8x8::legacy::BASIC_LEGACY[code].iter().enumerate() {
+            for col in 0..8 {
+                if bits & (1 << col) != 0 {
+                    cell(at + col * size, y + row as i64 * size);
+                }
+            }
+        }
+        at += 8 * size;
+    }
+    at
+}
+
+/// Write `text` in white on a dark box with its top left at pixel (`x`, `y`) of a row-major
+/// RGB8 image `width` pixels wide (a label on a panel of a composed picture); what falls
+/// outside the image is left out.
+pub fn label(rgb: &mut [u8], width: u32, x: i64, y: i64, text: &str) {
+    let height = (rgb.len() / (width as usize * 3).max(1)) as i64;
+    let mut fill = |x0: i64, y0: i64, w: i64, h: i64, c: [u8; 3]| {
+        for yy in y0.max(0)..(y0 + h).min(height) {
+            for xx in x0.max(0)..(x0 + w).min(width as i64) {
+                let i = (yy as usize * width as usize + xx as usize) * 3;
+                rgb[i..i + 3].copy_from_slice(&c);
+            }
+        }
+    };
+    let text_width = 8 * text.chars().count() as i64;
+    fill(x, y, text_width + 6, 14, [20, 20, 24]);
+    glyph_cells(x + 3, y + 3, text, 1, |cx, cy| fill(cx, cy, 1, 1, [240, 240, 240]));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn count(pixels: &[u8], c: [u8; 3]) -> usize {
+        pixels.chunks_exact(3).filter(|p| *p == c).count()
+    }
+
+    #[test]
+    fn a_header_keeps_the_world_in_place_from_the_bottom_and_text_lands_in_it() {
+        let canvas = Canvas::fit(DVec2::ZERO, DVec2::new(100.0, 50.0), 0.0, 200, [0, 0, 0]);
+        let (w, h) = (canvas.width, canvas.height);
+        let corner = canvas.pixel_of(DVec2::new(10.0, 10.0));
+        let mut canvas = canvas.with_header(30, [9, 9, 9]);
+        assert_eq!((canvas.width, canvas.height), (w, h + 30));
+        let moved = canvas.pixel_of(DVec2::new(10.0, 10.0));
+        assert_eq!(moved, corner + DVec2::new(0.0, 30.0));
+        assert_eq!(count(canvas.pixels(), [9, 9, 9]), (w * 30) as usize);
+        // "A" at size 2 in the header: lit cells of 2 x 2 pixels, nothing outside its 16 x 16.
+        let end = canvas.text_px(4, 4, "A", 2, [200, 0, 0]);
+        assert_eq!(end, 4 + 16);
+        let lit = count(canvas.pixels(), [200, 0, 0]);
+        assert!(lit > 0 && lit % 4 == 0 && lit <= 16 * 16, "{lit}");
+        let mut rgb = vec![0u8; 40 * 20 * 3];
+        label(&mut rgb, 40, 0, 0, "hi there, past the edge");
+        assert!(count(&rgb, [240, 240, 240]) > 0 && count(&rgb, [20, 20, 24]) > 0);
     }
 }

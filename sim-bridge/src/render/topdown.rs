@@ -1,6 +1,7 @@
 //! Top-down pictures: the whole of one route run (lanes coloured by type, the route in blue, the
 //! ego's trace in green, red where it ended, other actors at the end of the run, each
-//! infraction as a marker coloured by kind), and the local view around the ego at one instant
+//! infraction as a marker coloured by kind; a title, a legend and a scale bar), and the local
+//! view around the ego at one instant
 //! that `sim-bridge render` puts beside the camera frames, with the agent's planned trajectory
 //! and target point drawn over it.
 
@@ -103,7 +104,7 @@ fn draw_map(c: &mut Canvas, map: &Map, route: &DenseRoute, near: Option<(DVec2, 
     for w in route.points.windows(2) {
         let (a, b) = (w[0].position.truncate(), w[1].position.truncate());
         if keep(a) || keep(b) {
-            c.line(a, b, 1.2, [60, 120, 235]);
+            c.line(a, b, 1.2, ROUTE_COLOUR);
         }
     }
 }
@@ -127,41 +128,111 @@ fn draw_box(c: &mut Canvas, obb: &Obb, colour: [u8; 3]) {
     );
 }
 
-/// Draw a run and write it as PNG to `path`.
+/// Colours of a run picture's marks, in legend order.
+const TRACE_COLOUR: [u8; 3] = [80, 230, 90];
+const ROUTE_COLOUR: [u8; 3] = [60, 120, 235];
+const START_COLOUR: [u8; 3] = [255, 255, 255];
+const END_COLOUR: [u8; 3] = [240, 40, 40];
+const COLLISION_COLOUR: [u8; 3] = [255, 0, 0];
+const SIGNAL_COLOUR: [u8; 3] = [255, 0, 255];
+const OTHER_INFRACTION_COLOUR: [u8; 3] = [255, 255, 0];
+/// The title band's colour and its text's.
+const HEADER: [u8; 3] = [24, 24, 28];
+const HEADER_TEXT: [u8; 3] = [235, 235, 235];
+/// Glyph scale of the title and legend (8 px glyphs times this).
+const TEXT_SIZE: i64 = 2;
+
+/// The colour of an infraction's marker.
+fn infraction_colour(kind: InfractionKind) -> [u8; 3] {
+    match kind {
+        InfractionKind::CollisionPedestrian
+        | InfractionKind::CollisionVehicle
+        | InfractionKind::CollisionLayout => COLLISION_COLOUR,
+        InfractionKind::RedLight | InfractionKind::StopSign => SIGNAL_COLOUR,
+        _ => OTHER_INFRACTION_COLOUR,
+    }
+}
+
+/// Draw a run and write it as PNG to `path`, with `title` (route, repetition, status, scores)
+/// above a legend of what the colours mean, and a scale bar.
 pub fn write_run_png(
     map: &Map,
     route: &DenseRoute,
     trace: &[DVec3],
     actors: &[ActorView],
     infractions: &[Infraction],
+    title: &str,
     path: &Path,
 ) -> std::io::Result<()> {
-    let mut c = Canvas::fit(map.bounds.0, map.bounds.1, 10.0, MAX_SIDE, BACKGROUND);
+    let line = 10 * TEXT_SIZE;
+    let mut c = Canvas::fit(map.bounds.0, map.bounds.1, 10.0, MAX_SIDE, BACKGROUND)
+        .with_header((3 * line + 8) as u32, HEADER);
     draw_map(&mut c, map, route, None);
     for w in trace.windows(2) {
-        c.line(w[0].truncate(), w[1].truncate(), 0.9, [80, 230, 90]);
+        c.line(w[0].truncate(), w[1].truncate(), 0.9, TRACE_COLOUR);
     }
     for a in actors {
         draw_box(&mut c, &a.obb, actor_colour(a.kind));
     }
     if let Some(last) = trace.last() {
-        c.disc(last.truncate(), 2.5, [240, 40, 40]);
+        c.disc(last.truncate(), 2.5, END_COLOUR);
     }
     if let Some(first) = route.points.first() {
-        c.disc(first.position.truncate(), 2.5, [255, 255, 255]);
+        c.disc(first.position.truncate(), 2.5, START_COLOUR);
     }
     for inf in infractions {
-        let colour = match inf.kind {
-            InfractionKind::CollisionPedestrian
-            | InfractionKind::CollisionVehicle
-            | InfractionKind::CollisionLayout => [255, 0, 0],
-            InfractionKind::RedLight | InfractionKind::StopSign => [255, 0, 255],
-            _ => [255, 255, 0],
-        };
         c.disc(inf.location.truncate(), 4.0, [0, 0, 0]);
-        c.disc(inf.location.truncate(), 3.0, colour);
+        c.disc(inf.location.truncate(), 3.0, infraction_colour(inf.kind));
     }
+    c.text_px(8, 6, title, TEXT_SIZE, HEADER_TEXT);
+    legend(&mut c, 8, 6 + line + 4, line);
+    scale_bar(&mut c);
     let file = std::fs::File::create(path)?;
     c.write_png(std::io::BufWriter::new(file))
         .map_err(std::io::Error::other)
+}
+
+/// Two rows of swatches and names, from pixel (`x`, `y`), `line` pixels apart.
+fn legend(c: &mut Canvas, x: i64, y: i64, line: i64) {
+    let rows: [&[(&str, [u8; 3])]; 2] = [
+        &[
+            ("route", ROUTE_COLOUR),
+            ("trace", TRACE_COLOUR),
+            ("start", START_COLOUR),
+            ("end", END_COLOUR),
+            ("collision", COLLISION_COLOUR),
+            ("red light/stop", SIGNAL_COLOUR),
+            ("other infraction", OTHER_INFRACTION_COLOUR),
+        ],
+        &[
+            ("vehicle", actor_colour(ActorKind::Vehicle)),
+            ("cyclist", actor_colour(ActorKind::Cyclist)),
+            ("walker", actor_colour(ActorKind::Walker)),
+            ("prop", actor_colour(ActorKind::Static)),
+        ],
+    ];
+    for (r, items) in rows.iter().enumerate() {
+        let mut at = x;
+        let top = y + r as i64 * line;
+        for (name, colour) in *items {
+            c.rect_px(at, top + 2, 12, 12, *colour);
+            at = c.text_px(at + 16, top, name, TEXT_SIZE, HEADER_TEXT) + 20;
+        }
+    }
+}
+
+/// A white bar of a round length (10 m to 1 km, about a fifth of the width at most) at the
+/// bottom left, its length written above it.
+fn scale_bar(c: &mut Canvas) {
+    let width_m = c.width as f64 / c.scale();
+    let metres = [10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
+        .into_iter()
+        .rev()
+        .find(|&m| m <= 0.2 * width_m)
+        .unwrap_or(10.0);
+    let length = (metres * c.scale()).round() as i64;
+    let (x, y) = (12, c.height as i64 - 14);
+    c.rect_px(x - 1, y - 1, length + 2, 8, [0, 0, 0]);
+    c.rect_px(x, y, length, 6, [255, 255, 255]);
+    c.text_px(x, y - 20, &format!("{metres:.0} m"), TEXT_SIZE, [255, 255, 255]);
 }
