@@ -329,11 +329,7 @@ impl CampaignObserver for EvalDisplay<'_> {
             let s = done.record.scores;
             let title = format!(
                 "{} route {id} rep {repetition}: {}  DS {:.1} RC {:.1} IS {:.2}",
-                self.map.name,
-                done.record.status,
-                s.score_composed,
-                s.score_route,
-                s.score_penalty
+                self.map.name, done.record.status, s.score_composed, s.score_route, s.score_penalty
             );
             write_run_png(
                 self.map,

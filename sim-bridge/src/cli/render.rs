@@ -268,7 +268,13 @@ impl Film<'_> {
         // What each panel shows.
         let mut y = 0;
         for (frame, image) in obs.frames.iter().zip(&cameras) {
-            label(&mut rgb, width, 2, y as i64 + 2, &format!("camera {}", frame.camera));
+            label(
+                &mut rgb,
+                width,
+                2,
+                y as i64 + 2,
+                &format!("camera {}", frame.camera),
+            );
             y += image.height;
         }
         // (title at the top, key at the bottom), short enough for a 288-pixel panel.

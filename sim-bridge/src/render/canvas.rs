@@ -86,7 +86,9 @@ impl Canvas {
     /// Write `text` (ASCII; other characters show as '?') with its top left at pixel (`x`,
     /// `y`), each glyph 8 x 8 pixels times `size`; returns the x after the last glyph.
     pub fn text_px(&mut self, x: i64, y: i64, text: &str, size: i64, c: [u8; 3]) -> i64 {
-        glyph_cells(x, y, text, size, |cx, cy| self.rect_px(cx, cy, size, size, c))
+        glyph_cells(x, y, text, size, |cx, cy| {
+            self.rect_px(cx, cy, size, size, c)
+        })
     }
 
     /// Where the world point `p` falls, in pixels.
@@ -185,7 +187,11 @@ impl Canvas {
 fn glyph_cells(x: i64, y: i64, text: &str, size: i64, mut cell: impl FnMut(i64, i64)) -> i64 {
     let mut at = x;
     for ch in text.chars() {
-        let code = if ch.is_ascii() { ch as usize } else { '?' as usize };
+        let code = if ch.is_ascii() {
+            ch as usize
+        } else {
+            '?' as usize
+        };
         for (row, bits) in font8x8::legacy::BASIC_LEGACY[code].iter().enumerate() {
             for col in 0..8 {
                 if bits & (1 << col) != 0 {
@@ -213,7 +219,9 @@ pub fn label(rgb: &mut [u8], width: u32, x: i64, y: i64, text: &str) {
     };
     let text_width = 8 * text.chars().count() as i64;
     fill(x, y, text_width + 6, 14, [20, 20, 24]);
-    glyph_cells(x + 3, y + 3, text, 1, |cx, cy| fill(cx, cy, 1, 1, [240, 240, 240]));
+    glyph_cells(x + 3, y + 3, text, 1, |cx, cy| {
+        fill(cx, cy, 1, 1, [240, 240, 240])
+    });
 }
 
 #[cfg(test)]

@@ -234,5 +234,11 @@ fn scale_bar(c: &mut Canvas) {
     let (x, y) = (12, c.height as i64 - 14);
     c.rect_px(x - 1, y - 1, length + 2, 8, [0, 0, 0]);
     c.rect_px(x, y, length, 6, [255, 255, 255]);
-    c.text_px(x, y - 20, &format!("{metres:.0} m"), TEXT_SIZE, [255, 255, 255]);
+    c.text_px(
+        x,
+        y - 20,
+        &format!("{metres:.0} m"),
+        TEXT_SIZE,
+        [255, 255, 255],
+    );
 }
