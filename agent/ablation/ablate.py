@@ -60,7 +60,7 @@ VARIANTS = {
     "gate-command": ["--gate-command-only"],
 }
 
-# The bundled recipe's last stage (README, "Training"; v9): the flags every variant shares.
+# The bundled recipe's last stage (agent/README.md, "Training"): the flags every variant shares.
 RECIPE = [
     "--lr", "3e-4", "--warmup-steps", "500", "--history-dropout", "0.1", "--history", "link",
     "--hazard-weight", "0.5", "--occupancy-weight", "1.0",

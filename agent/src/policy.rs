@@ -621,8 +621,8 @@ impl SsrPolicy {
     /// first-frame "deep" BEV; its context BEV, attending to the deep BEV 0.5 s back), a linked
     /// one two, a recursive one one: so the BEV the head reads has the history training gave
     /// it (`crate::train::data::Batch`) instead of a recursion of unbounded depth, whose
-    /// history BEVs training never showed the network (the v6 learner stopped and started
-    /// every second in a period-two cycle of the recursion).
+    /// history BEVs training never showed the network (a learner served on the recursion stopped
+    /// and started every second in a period-two cycle of it).
     ///
     /// # Shapes
     /// - features: `[B * cameras, C, h, w]` (the backbone's)

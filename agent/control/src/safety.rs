@@ -38,7 +38,8 @@ pub struct SafetyStop {
     pub enabled: bool,
     /// Occupancy probability from which a cell counts as occupied. The default, 0.98, found
     /// 94 % of the validation frames with a vehicle 1-14 m ahead within 2 m of the axis, and 81 %
-    /// of the frames where it saw one had one (v5 step 3,000 of the closed-loop recipe).
+    /// of the frames where it saw one had one (an early checkpoint of the closed-loop recipe;
+    /// the model card has the figures).
     pub threshold: f32,
     /// Distance from the ego origin (the box centre) to its front bumper, m.
     pub front: f32,

@@ -14,7 +14,7 @@
 //! and well under the leaderboard's 180 s "agent blocked". The early creep needs the hazard head
 //! (`ssr_agent::model::hazard`), which tells a red light from a free road
 //! (its "clear" on the frames where the expert starts from standstill: 96.7 %, and 96.0 % of
-//! light stops named as such, v6 validation); without it only the plain wait acts. While
+//! light stops named as such, in validation); without it only the plain wait acts. While
 //! creeping, the trajectory's steer follows the plan (or the target point when the plan gives
 //! no direction).
 

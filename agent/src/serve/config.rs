@@ -54,7 +54,7 @@ pub struct ServeConfig {
     /// Steps waiting for the network at most; more get RESOURCE_EXHAUSTED.
     pub max_queue: usize,
     /// Model threads, each forming and running its own batches. Two forward passes side by
-    /// side fill a 2-core CPU better than one spread over both (see README, Serving figures).
+    /// side fill a 2-core CPU better than one spread over both (see agent/README.md, "Serving figures").
     pub model_threads: usize,
     /// Size of the rayon pool each model thread gets to itself, or 0: every model thread uses
     /// rayon's global pool (one thread per core). Own pools keep one model thread's work off another's

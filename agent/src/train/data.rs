@@ -388,13 +388,13 @@ impl TrainingData {
 pub const LEARNER_DROVE_WEIGHT: f32 = 3.0;
 
 /// How much more often a frame where the expert brakes for a stop sign it has not yet stopped
-/// at is drawn: 0.7 % of the frames (7 of 1,024 validation samples of train-v3), and the agent
-/// ran 7 stop signs in 60 Town05-style short runs.
+/// at is drawn: about 0.7 % of the expert's frames, and an agent trained without it ran 7 stop
+/// signs in 60 Town05-style short runs.
 pub const STOP_SIGN_WEIGHT: f32 = 3.0;
 
 /// How much more often a frame where the expert brakes for a walker on its path is drawn: 0.26 %
-/// of the frames (131 of 49,827 in 300 episodes of train-v4), and the v7 learner crept on at
-/// the expert's walking pace into walkers crossing its lane in 5 of 30 home long runs.
+/// of the expert's frames, and a learner trained without it crept on at the expert's walking
+/// pace into walkers crossing its lane in 5 of 30 home long runs.
 pub const WALKER_BRAKE_WEIGHT: f32 = 4.0;
 
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying

@@ -1,7 +1,7 @@
 //! Traffic control derived from a map: junctions with their approaches, traffic lights and stop
 //! signs, each with the stop lines the world and the scorer test against.
 //!
-//! Rules (documented in the README):
+//! Rules (documented in sim-bridge/README.md):
 //! - A junction's *approaches* are its incoming driving lanes (lanes outside the junction whose
 //!   successors are inside it), grouped by incoming road and side.
 //! - A junction is signalized when the file has a traffic-light `<signal>` (dynamic, type

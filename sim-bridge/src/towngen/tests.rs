@@ -434,7 +434,7 @@ fn training_towns_share_no_geometry_with_the_evaluation_towns() {
     }
 }
 
-/// Not a check: prints each town's figures for the README
+/// Not a check: prints each town's figures for sim-bridge/README.md
 /// (`cargo test --release -p sim-bridge print_town_sizes -- --ignored --nocapture`).
 #[test]
 #[ignore = "prints figures, checks nothing"]

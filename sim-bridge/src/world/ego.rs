@@ -1,6 +1,6 @@
 //! The ego vehicle: a kinematic bicycle model of a mid-size sedan (CARLA's Lincoln MKZ class).
 //!
-//! Numbers (documented in the README): wheelbase 2.85 m, box 4.90 x 2.12 m, front-wheel lock
+//! Numbers (documented in sim-bridge/README.md): wheelbase 2.85 m, box 4.90 x 2.12 m, front-wheel lock
 //! 35 degrees reached at steer = 1 (steer +1 is full RIGHT, CARLA's convention), steering rate
 //! limited to full lock in 0.4 s; drive force gives 3.5 m/s^2 at rest falling linearly to 0 at
 //! 60 m/s (so ~2.9 m/s^2 at 10 m/s, 0-100 km/h in about 9 s); brake = 1 gives 8.0 m/s^2 (dry
