@@ -305,3 +305,32 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
         "{stderr}"
     );
 }
+
+#[test]
+fn logs_into_a_file_or_pipe_carry_no_colour_codes() {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ssr-agent"))
+        .args([
+            "serve",
+            "--untrained-config",
+            "cpu-default",
+            "--listen",
+            "127.0.0.1:0",
+        ])
+        .args(["--metrics-listen", "off"])
+        .env("RUST_LOG", "info")
+        .env_remove("SSR_AGENT_CHECKPOINT")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("runs");
+    let stderr = child.stderr.take().unwrap();
+    let line = BufReader::new(stderr)
+        .lines()
+        .map_while(Result::ok)
+        .find(|l| l.contains("INFO"));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let line = line.expect("an INFO line before the server stopped");
+    assert!(!line.contains('\u{1b}'), "{line:?}");
+}
