@@ -182,3 +182,19 @@ fn bad_checkpoints_are_clear_errors() {
         CheckpointError::MissingConfig { .. }
     ));
 }
+
+/// Not a check: writes the fuzz replay's accepted checkpoint seed, a tiny network with random
+/// weights and controller settings (`cargo test --release -p ssr-agent --test checkpoint --
+/// --ignored write_the_fuzz_seed`); `tests/fuzz/entries/tests/replay.rs` must accept it.
+#[test]
+#[ignore = "writes tests/fuzz/seeds/checkpoint/tiny.safetensors"]
+fn write_the_fuzz_seed() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let model = config.init(&device);
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/fuzz/seeds/checkpoint/tiny.safetensors");
+    let control = serde_json::to_string(&ControlConfig::default()).unwrap();
+    save(&model, &config, &[(CONTROL_KEY, control)], &path).unwrap();
+    assert!(load(&path, &device).is_ok());
+}

@@ -40,7 +40,17 @@ fn eval_writes_leaderboard_results_and_a_summary() {
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(json["_checkpoint"]["progress"], serde_json::json!([2, 2]));
     assert_eq!(json["_checkpoint"]["records"].as_array().unwrap().len(), 2);
-    assert!(json["_checkpoint"]["global_record"]["scores"]["score_composed"].is_number());
+    // The global DS is the mean of the runs' DS.
+    let records = json["_checkpoint"]["records"].as_array().unwrap();
+    let mean = records
+        .iter()
+        .map(|r| r["scores"]["score_composed"].as_f64().unwrap())
+        .sum::<f64>()
+        / records.len() as f64;
+    let global = json["_checkpoint"]["global_record"]["scores"]["score_composed"]
+        .as_f64()
+        .unwrap();
+    assert!((global - mean).abs() < 1e-9, "{global} vs {mean}");
     assert_eq!(std::fs::read_dir(&pictures).unwrap().count(), 2);
 }
 

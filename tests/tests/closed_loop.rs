@@ -55,7 +55,7 @@ impl Agent for Fixed {
 fn the_expert_completes_short_routes_with_traffic() {
     let (map, specs) = short_routes();
     let mut expert = Expert::new();
-    let mut rc = 0.0;
+    let (mut rc, mut ds, mut collisions) = (0.0, 0.0, 0);
     for (i, spec) in specs.iter().take(4).enumerate() {
         let dense = plan_route(&map, spec).unwrap();
         let config = WorldConfig {
@@ -74,8 +74,19 @@ fn the_expert_completes_short_routes_with_traffic() {
             |_| {},
         );
         rc += run.record.scores.score_route;
+        ds += run.record.scores.score_composed;
+        collisions += [
+            InfractionKind::CollisionVehicle,
+            InfractionKind::CollisionPedestrian,
+            InfractionKind::CollisionLayout,
+        ]
+        .iter()
+        .map(|&k| run.record.infractions.count(k))
+        .sum::<usize>();
     }
     assert!(rc / 4.0 > 99.0, "mean RC {}", rc / 4.0);
+    assert!(ds / 4.0 > 95.0, "mean DS {}", ds / 4.0);
+    assert_eq!(collisions, 0, "the expert collided");
 }
 
 #[test]

@@ -190,7 +190,15 @@ mod tests {
         );
         let logits = head.forward(tokens);
         assert_eq!(logits.dims(), [2, 5]);
-        assert!(float_values(logits).iter().all(|v| v.is_finite()));
+        let values = float_values(logits);
+        assert!(values.iter().all(|v| v.is_finite()));
+        // The two samples' tokens differ, and so do their logits: the head reads its input.
+        assert!(
+            values[..5]
+                .iter()
+                .zip(&values[5..])
+                .any(|(a, b)| (a - b).abs() > 1e-6)
+        );
     }
 
     #[test]
