@@ -136,7 +136,14 @@ fn config_files_override_defaults_and_bad_values_are_named() {
     );
     let path = write_temp("bad-metrics.toml", "metrics_listen = \"nowhere\"\n");
     let error = ServeConfig::from_file(&path).unwrap_err();
-    assert!(error.to_string().contains("HOST:PORT or `off`"), "{error}");
+    assert!(
+        error.to_string().contains("HOST:PORT") && error.to_string().contains("`off`"),
+        "{error}"
+    );
+    // A host name is an address, in a file too.
+    let path = write_temp("named.toml", "listen = \"localhost:0\"\n");
+    let listen = ServeConfig::from_file(&path).unwrap().listen;
+    assert!(listen.ip().is_loopback() && listen.port() == 0, "{listen}");
 
     let path = write_temp("typo.toml", "max_bach = 4\n");
     let error = ServeConfig::from_file(&path).unwrap_err();

@@ -9,12 +9,14 @@
 //! [`SsrPolicy::step_batch`] runs several episodes in one forward pass.
 //!
 //! Every input is checked before anything runs; a bad input returns a [`StepError`] naming the
-//! episode and the field, and leaves every episode's state as it was.
+//! episode and the field, and leaves every episode's state as it was. [`outputs`] reads a
+//! group's forward pass back into per-episode views.
+
+mod outputs;
 
 use std::collections::VecDeque;
 
 use burn::module::Module;
-use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::camera::{Rig, RigError};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
@@ -22,12 +24,12 @@ use ssrdrive_proto::image::RgbImage;
 
 use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController, History};
 use crate::model::backbone::frame_to_input;
-use crate::model::bev::{BevGrid, GeometryTensors, HISTORY_TICKS, ImageFeatures, SampleGeometry};
+use crate::model::bev::{GeometryTensors, HISTORY_TICKS, ImageFeatures, SampleGeometry};
 use crate::model::config::SsrConfig;
-use crate::model::hazard::{Hazard, probabilities};
-use crate::model::occupancy::OCCUPANCY_CHANNELS;
-use crate::model::{ModelOutput, Navigation, SsrModel, float_tensor, float_values};
+use crate::model::hazard::Hazard;
+use crate::model::{Navigation, SsrModel, float_tensor};
 use crate::pose::{EgoMotion, Pose2};
+use outputs::{EpisodeOutputs, GroupOutputs, Needs, occupied_cells};
 
 /// Largest target-point distance accepted, metres.
 const MAX_TARGET_DISTANCE: f32 = 1000.0;
@@ -176,6 +178,16 @@ impl EpisodeState {
         self.recent
             .front()
             .filter(|_| self.recent.len() == HISTORY_TICKS)
+    }
+
+    /// Keeps a step's links (dropping the oldest once [`HISTORY_TICKS`] are kept) and counts
+    /// the step.
+    fn remember(&mut self, links: ChainLinks) {
+        if self.recent.len() == HISTORY_TICKS {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(links);
+        self.ticks += 1;
     }
 }
 
@@ -400,19 +412,15 @@ impl SsrPolicy {
         float_tensor(values, [frames.len(), 3, height, width], &self.device)
     }
 
+    /// One forward pass for a group of episodes with the same number of cameras, then each
+    /// episode's control and its links for later steps: navigation inputs, BEV passes, plan,
+    /// the optional heads the group needs, per-episode decisions.
     fn run_group(
         &self,
         states: &mut [&mut EpisodeState],
         inputs: &[&StepInput],
         cameras: usize,
     ) -> Vec<StepOutput> {
-        let b = inputs.len();
-        let (q, c) = (self.config.bev.grid.cells(), self.config.channels);
-        let heights = &self.config.bev.pillar_heights;
-        let geometry = |input: &StepInput, motion: Option<EgoMotion>| {
-            let speed = self.config.shown_speed(input.speed);
-            SampleGeometry::new(&self.config.bev.grid, heights, &input.rig, motion, speed)
-        };
         let geometries: Vec<SampleGeometry> = inputs
             .iter()
             .zip(states.iter())
@@ -420,14 +428,55 @@ impl SsrPolicy {
                 let motion = state
                     .history()
                     .map(|links| EgoMotion::between(links.pose, input.pose));
-                geometry(input, motion)
+                self.geometry(input, motion)
             })
             .collect();
+        let navigation = self.navigation(inputs);
+        let features = self.model.image_features(self.images(inputs));
+        let bevs = self.encode(states, inputs, features, cameras, geometries);
+        let (scene, head) = self.model.plan(bevs.plan.clone(), &navigation);
+        let needs = Needs {
+            debug: inputs.iter().any(|i| i.debug),
+            occupancy: states.iter().any(|s| s.controller.config().safety.enabled),
+            motion: states.iter().any(|s| {
+                let safety = &s.controller.config().safety;
+                safety.enabled && safety.motion
+            }),
+            hazard: states.iter().any(|s| s.controller.config().unstick.enabled),
+        };
+        let outputs = GroupOutputs::read(
+            &self.model,
+            &self.config.bev.grid,
+            &bevs.plan,
+            &scene,
+            &head,
+            needs,
+        );
+        let mut results = Vec::with_capacity(inputs.len());
+        for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
+            results.push(self.decide(state, input, outputs.episode(i)));
+            state.remember(bevs.links(i, state.controller.config().history, input.pose));
+        }
+        results
+    }
+
+    /// The BEV each episode plans from, and the links it keeps for later steps: one, two or
+    /// three BEV passes ([`SsrPolicy::encode_passes`]), as the group's histories need.
+    fn encode(
+        &self,
+        states: &[&mut EpisodeState],
+        inputs: &[&StepInput],
+        features: Tensor<4>,
+        cameras: usize,
+        geometries: Vec<SampleGeometry>,
+    ) -> GroupBevs {
+        let b = inputs.len();
+        let (q, c) = (self.config.bev.grid.cells(), self.config.channels);
+        let zeros = || Tensor::zeros([1, q, c], &self.device);
         let history = |link: fn(&ChainLinks) -> &Tensor<3>| {
-            let bevs = states.iter().map(|s| match s.history() {
-                Some(links) => link(links).clone(),
-                None => Tensor::zeros([1, q, c], &self.device),
-            });
+            let bevs = states
+                .iter()
+                .map(|s| s.history().map_or_else(zeros, |l| link(l).clone()));
             Tensor::cat(bevs.collect(), 0)
         };
         // The history the BEV each step plans from attends to (zeros before there is one).
@@ -439,13 +488,101 @@ impl SsrPolicy {
                         History::Chain | History::Recursive => links.context.clone(),
                         History::Link => links.deep.clone(),
                     },
-                    None => Tensor::zeros([1, q, c], &self.device),
+                    None => zeros(),
                 })
                 .collect(),
             0,
         );
+        let with_history = |mode: History| {
+            states
+                .iter()
+                .any(|s| s.has_previous_bev() && s.controller.config().history == mode)
+        };
+        // Chained episodes keep the context BEV (the step's BEV attending to the deep one
+        // before it); chained and linked ones the deep BEV (the step's first-frame BEV).
+        let context_pass = with_history(History::Chain);
+        let deep_pass = context_pass || with_history(History::Link);
+        let mut passes = vec![(geometries.clone(), previous_bev)];
+        if deep_pass {
+            let first_frames = inputs
+                .iter()
+                .map(|input| self.geometry(input, None))
+                .collect();
+            passes.push((first_frames, Tensor::zeros([b, q, c], &self.device)));
+        }
+        if context_pass {
+            passes.push((geometries, history(|links| &links.deep)));
+        }
+        let bevs = self.encode_passes(features, cameras, passes);
+        // Without a pass of its own, a link is the planning BEV: the first-frame BEV of an
+        // episode without history yet, or a recursive episode's.
+        GroupBevs {
+            deep: bevs.get(1).unwrap_or(&bevs[0]).clone(),
+            context: bevs.get(2).unwrap_or(&bevs[0]).clone(),
+            plan: bevs[0].clone(),
+        }
+    }
+
+    /// An episode's geometry for this step: its rig, the ego motion since its history
+    /// (`None`: a first-frame BEV) and the speed the network is shown.
+    fn geometry(&self, input: &StepInput, motion: Option<EgoMotion>) -> SampleGeometry {
+        let speed = self.config.shown_speed(input.speed);
+        let bev = &self.config.bev;
+        SampleGeometry::new(&bev.grid, &bev.pillar_heights, &input.rig, motion, speed)
+    }
+
+    /// The controller's decision for one episode from its share of the group's outputs.
+    fn decide(
+        &self,
+        state: &mut EpisodeState,
+        input: &StepInput,
+        out: EpisodeOutputs<'_>,
+    ) -> StepOutput {
+        let control_started = std::time::Instant::now();
+        let safety = &state.controller.config().safety;
+        let grid = &self.config.bev.grid;
+        let mut occupied = match out.occupancy {
+            Some(p) if safety.enabled => occupied_cells(p, grid, safety.threshold),
+            _ => Vec::new(),
+        };
+        if let Some(p) = out.motion.filter(|_| safety.enabled && safety.motion) {
+            occupied.extend(occupied_cells(p, grid, safety.motion_threshold));
+        }
+        let beliefs = Beliefs {
+            occupied: &occupied,
+            clear: out.hazard(Hazard::Clear),
+            stop_sign: out.hazard(Hazard::Sign),
+        };
+        let decision = state.controller.act(
+            &out.path,
+            input.target_point,
+            input.speed,
+            out.alpha,
+            out.beta,
+            beliefs,
+        );
+        let control_time = control_started.elapsed();
+        let debug = input.debug.then(|| StepDebug {
+            token_attention: out.attention.clone().unwrap_or_default(),
+            bev_rows: grid.rows,
+            bev_cols: grid.cols,
+            alpha: out.alpha,
+            beta: out.beta,
+            predicted_speed: out.predicted_speed,
+            occupancy: out.occupancy_maps(),
+        });
+        StepOutput {
+            decision,
+            control_time,
+            waypoints: out.path,
+            debug,
+        }
+    }
+    /// The planner's inputs besides the BEV: the speed it is shown, target points, commands.
+    fn navigation(&self, inputs: &[&StepInput]) -> Navigation {
+        let b = inputs.len();
         let command: Vec<f32> = inputs.iter().flat_map(|i| i.command.one_hot()).collect();
-        let navigation = Navigation {
+        Navigation {
             speed: float_tensor(
                 inputs
                     .iter()
@@ -460,156 +597,30 @@ impl SsrPolicy {
                 &self.device,
             ),
             command: float_tensor(command, [b, COMMANDS], &self.device),
-        };
-        let features = self.model.image_features(self.images(inputs));
-        let with_history = |mode: History| {
-            states
-                .iter()
-                .any(|s| s.has_previous_bev() && s.controller.config().history == mode)
-        };
-        // Chained episodes keep the context BEV (the step's BEV attending to the deep one
-        // before it); chained and linked ones the deep BEV (the step's first-frame BEV).
-        let context_pass = with_history(History::Chain);
-        let deep_pass = context_pass || with_history(History::Link);
-        let mut passes = vec![(geometries.clone(), previous_bev)];
-        if deep_pass {
-            let first_frames = inputs.iter().map(|input| geometry(input, None)).collect();
-            passes.push((first_frames, Tensor::zeros([b, q, c], &self.device)));
         }
-        if context_pass {
-            passes.push((geometries, history(|links| &links.deep)));
-        }
-        let bevs = self.encode_passes(features, cameras, passes);
-        let bev = bevs[0].clone();
-        // Without a pass of its own, a link is the planning BEV: the first-frame BEV of an
-        // episode without history yet, or a recursive episode's.
-        let deep = bevs.get(1).unwrap_or(&bev).clone();
-        let context = bevs.get(2).unwrap_or(&bev).clone();
-        let (scene, head) = self.model.plan(bev.clone(), &navigation);
-        let output = ModelOutput { bev, scene, head };
+    }
+}
 
-        let pred_len = self.config.head.pred_len;
-        let waypoints = float_values(output.head.waypoints.clone());
-        let alpha = float_values(output.head.alpha.clone());
-        let beta = float_values(output.head.beta.clone());
-        let speed = float_values(output.head.speed.clone());
-        let wants_debug = inputs.iter().any(|i| i.debug);
-        let attention = output
-            .scene
-            .attention
-            .clone()
-            .filter(|_| wants_debug)
-            .map(float_values);
-        let tokens = self.config.tokens.num_tokens;
-        // The occupancy head runs only for the safety stop and for debug outputs (and only
-        // where an episode asks for one of them).
-        let occupancy = self
-            .model
-            .occupancy
-            .as_ref()
-            .filter(|_| wants_debug || states.iter().any(|s| s.controller.config().safety.enabled))
-            .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
-        let channels = OCCUPANCY_CHANNELS.len();
-        // The motion head runs only for the safety stop's motion rule.
-        let motion = self
-            .model
-            .motion
-            .as_ref()
-            .filter(|_| {
-                states.iter().any(|s| {
-                    let safety = &s.controller.config().safety;
-                    safety.enabled && safety.motion
-                })
-            })
-            .map(|head| float_values(sigmoid(head.forward(output.bev.clone()))));
-        // The hazard head runs only for the unstick rule's early creep.
-        let hazards = self
-            .model
-            .hazard
-            .as_ref()
-            .filter(|_| states.iter().any(|s| s.controller.config().unstick.enabled))
-            .map(|head| probabilities(&float_values(head.forward(output.scene.tokens.clone()))));
+/// A group's BEVs, `[B, Q, C]` each: the one each episode plans from, and the links
+/// ([`ChainLinks`]) its later steps read.
+struct GroupBevs {
+    plan: Tensor<3>,
+    deep: Tensor<3>,
+    context: Tensor<3>,
+}
 
-        let mut results = Vec::with_capacity(b);
-        for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
-            let path: Vec<[f32; 2]> = (0..pred_len)
-                .map(|k| {
-                    [
-                        waypoints[(i * pred_len + k) * 2],
-                        waypoints[(i * pred_len + k) * 2 + 1],
-                    ]
-                })
-                .collect();
-            let a = [alpha[2 * i], alpha[2 * i + 1]];
-            let bt = [beta[2 * i], beta[2 * i + 1]];
-            let control_started = std::time::Instant::now();
-            let safety = &state.controller.config().safety;
-            let grid = &self.config.bev.grid;
-            let mut occupied = match &occupancy {
-                Some(p) if safety.enabled => occupied_cells(p, i, grid, safety.threshold),
-                _ => Vec::new(),
-            };
-            if let Some(p) = motion.as_ref().filter(|_| safety.enabled && safety.motion) {
-                occupied.extend(occupied_cells(p, i, grid, safety.motion_threshold));
-            }
-            let beliefs = Beliefs {
-                occupied: &occupied,
-                clear: hazards.as_ref().map(|p| p[i][Hazard::Clear.index()]),
-                stop_sign: hazards.as_ref().map(|p| p[i][Hazard::Sign.index()]),
-            };
-            let decision =
-                state
-                    .controller
-                    .act(&path, input.target_point, input.speed, a, bt, beliefs);
-            let control_time = control_started.elapsed();
-            let debug = (input.debug).then(|| {
-                let token_attention = attention.as_ref().map(|maps| {
-                    (0..tokens)
-                        .map(|s| maps[(i * tokens + s) * q..(i * tokens + s + 1) * q].to_vec())
-                        .collect()
-                });
-                StepDebug {
-                    token_attention: token_attention.unwrap_or_default(),
-                    bev_rows: self.config.bev.grid.rows,
-                    bev_cols: self.config.bev.grid.cols,
-                    alpha: a,
-                    beta: bt,
-                    predicted_speed: speed[i] * crate::model::tcp_head::SPEED_SCALE,
-                    occupancy: occupancy
-                        .as_ref()
-                        .map(|p| {
-                            (0..channels)
-                                .map(|c| {
-                                    (0..q)
-                                        .map(|cell| p[(i * q + cell) * channels + c])
-                                        .collect()
-                                })
-                                .collect()
-                        })
-                        .unwrap_or_default(),
-                }
-            });
-            if state.recent.len() == HISTORY_TICKS {
-                state.recent.pop_front();
-            }
-            let context = match state.controller.config().history {
-                History::Chain => &context,
-                History::Recursive | History::Link => &output.bev,
-            };
-            state.recent.push_back(ChainLinks {
-                deep: deep.clone().narrow(0, i, 1),
-                context: context.clone().narrow(0, i, 1),
-                pose: input.pose,
-            });
-            state.ticks += 1;
-            results.push(StepOutput {
-                decision,
-                control_time,
-                waypoints: path,
-                debug,
-            });
+impl GroupBevs {
+    /// Episode `i`'s links, for an episode on `history` at `pose`.
+    fn links(&self, i: usize, history: History, pose: Pose2) -> ChainLinks {
+        let context = match history {
+            History::Chain => &self.context,
+            History::Recursive | History::Link => &self.plan,
+        };
+        ChainLinks {
+            deep: self.deep.clone().narrow(0, i, 1),
+            context: context.clone().narrow(0, i, 1),
+            pose,
         }
-        results
     }
 }
 
@@ -655,24 +666,4 @@ impl SsrPolicy {
             .map(|k| bevs.clone().narrow(0, k * b, b))
             .collect()
     }
-}
-
-/// The ego-frame centres of the cells of episode `episode` whose occupancy probability (any
-/// channel) is at least `threshold`, from `[B, Q, channels]` probabilities.
-fn occupied_cells(
-    probabilities: &[f32],
-    episode: usize,
-    grid: &BevGrid,
-    threshold: f32,
-) -> Vec<[f32; 2]> {
-    let (q, k) = (grid.cells(), OCCUPANCY_CHANNELS.len());
-    let cells = &probabilities[episode * q * k..(episode + 1) * q * k];
-    (0..q)
-        .filter(|&cell| {
-            cells[cell * k..(cell + 1) * k]
-                .iter()
-                .any(|&p| p >= threshold)
-        })
-        .map(|cell| grid.cell_centre(cell))
-        .collect()
 }
