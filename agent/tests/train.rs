@@ -106,6 +106,7 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
             AuxiliaryLosses {
                 hazard: Some(hazard),
                 occupancy: Some(occupancy),
+                motion: None,
             },
             &weights,
         )

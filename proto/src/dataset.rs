@@ -103,6 +103,36 @@ pub struct FrameRecord {
     /// existed, which is not the same as none near.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub actors: Option<Vec<ActorRecord>>,
+    /// The traffic light whose stop line ends a lane of the route ahead, nearest first, within
+    /// the expert's scan (privileged ground truth, a training aid: the light head's label).
+    /// `None` in datasets recorded before it existed; [`LightAhead::None`] when no light is
+    /// ahead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light: Option<LightAhead>,
+}
+
+/// The light that governs the ego's route ahead, and the free distance from the ego's front to
+/// its stop line (m).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "state", rename_all = "snake_case")]
+pub enum LightAhead {
+    /// No light on the route within the scan.
+    None,
+    /// Go.
+    Green {
+        /// Metres from the ego's front to the stop line.
+        distance: f64,
+    },
+    /// Stop if you can.
+    Yellow {
+        /// Metres from the ego's front to the stop line.
+        distance: f64,
+    },
+    /// Stop.
+    Red {
+        /// Metres from the ego's front to the stop line.
+        distance: f64,
+    },
 }
 
 /// How far from the ego's centre [`FrameRecord::actors`] reaches, m (the default BEV's corners

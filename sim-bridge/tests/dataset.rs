@@ -17,7 +17,7 @@ use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{
-    ACTOR_RANGE, Dataset, DatasetError, FUTURE_COUNT, NoiseConfig, parse_frames,
+    ACTOR_RANGE, Dataset, DatasetError, FUTURE_COUNT, LightAhead, NoiseConfig, parse_frames,
 };
 
 fn small_town() -> (Map, RouteSet) {
@@ -117,10 +117,20 @@ fn a_collection_reads_back_with_consistent_futures() {
     }
     assert_eq!(total, m.frames);
     assert!(noisy > 0, "noise at 0.5 per second must show up");
-    // Every frame records the actors around the ego (its BEV occupancy labels), within range.
-    let mut near = 0;
+    // Every frame records the actors around the ego (its BEV occupancy labels), within range,
+    // and the light ahead (a light head's label), if any, with a distance to its stop line.
+    let (mut near, mut lights) = (0, 0);
     for entry in &m.episode_list {
         for frame in data.frames(&entry.name).unwrap() {
+            match frame.light.expect("every frame records the light ahead") {
+                LightAhead::None => {}
+                LightAhead::Green { distance }
+                | LightAhead::Yellow { distance }
+                | LightAhead::Red { distance } => {
+                    assert!((0.0..200.0).contains(&distance), "{distance}");
+                    lights += 1;
+                }
+            }
             let actors = frame.actors.expect("every frame records its actors");
             for actor in &actors {
                 let [x, y] = actor.centre;
@@ -131,6 +141,7 @@ fn a_collection_reads_back_with_consistent_futures() {
         }
     }
     assert!(near > 0, "the town's traffic is somewhere near");
+    eprintln!("{lights} frames with a light ahead");
 }
 
 /// The expert with a camera, keeping every frame it is shown at 2 Hz.

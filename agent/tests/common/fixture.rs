@@ -7,8 +7,8 @@ use std::path::Path;
 
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{
-    ActorClass, ActorRecord, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FrameRecord, Manifest,
-    NoiseConfig, TownCount, safe_name,
+    ActorClass, ActorRecord, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FrameRecord, LightAhead,
+    Manifest, NoiseConfig, TownCount, safe_name,
 };
 use ssrdrive_proto::image::encode_png;
 
@@ -72,6 +72,11 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
                         yaw: 0.0,
                         half: [2.4, 1.0],
                     }]
+                }),
+                // The even routes approach a red light 20 m ahead; the odd ones record none,
+                // as datasets from before the label.
+                light: (route % 2 == 0).then_some(LightAhead::Red {
+                    distance: 20.0 - index as f64,
                 }),
             };
             lines.push_str(&serde_json::to_string(&record).unwrap());

@@ -263,6 +263,7 @@ impl<'d> EpisodeRecorder<'d> {
                 future_complete: false,
                 images,
                 actors: Some(actors_near(obs, world)),
+                light: Some(self.expert.light_ahead()),
             });
             self.frames += 1;
         }

@@ -70,6 +70,9 @@ pub struct HazardView {
     pub nosing_in: bool,
     /// The forecast predicts a collision.
     pub collision_predicted: bool,
+    /// The nearest light whose stop line ends a lane of the path ahead, whatever its colour:
+    /// (free gap from the front to the line in metres, its state). A training label.
+    pub light_ahead: Option<(f64, LightState)>,
 }
 
 impl HazardView {
@@ -300,7 +303,11 @@ fn stop_lines(
             .iter()
             .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
         {
-            match world.light_states()[light.id] {
+            let state = world.light_states()[light.id];
+            if !front_past && view.light_ahead.is_none_or(|(nearest, _)| gap < nearest) {
+                view.light_ahead = Some((gap.max(0.0), state));
+            }
+            match state {
                 LightState::Red if front_past => {}
                 LightState::Red => view.obstacle(gap, 0.0, BrakeReason::TrafficLight),
                 LightState::Yellow if stops_at_yellow(world, light, lane) => {

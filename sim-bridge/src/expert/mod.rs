@@ -18,7 +18,7 @@ pub mod plan;
 
 use glam::DVec2;
 use ssrdrive_proto::control::Control;
-use ssrdrive_proto::dataset::BrakeReason;
+use ssrdrive_proto::dataset::{BrakeReason, LightAhead};
 
 use crate::agent::{Agent, AgentError, Observation, RouteContext};
 use crate::map::angle_diff;
@@ -26,6 +26,7 @@ use crate::route::DenseRoute;
 use crate::world::World;
 use crate::world::ego::EgoParams;
 use crate::world::idm::Idm;
+use crate::world::state::LightState;
 
 /// Cruise speed on road, m/s.
 pub const ROAD_SPEED: f64 = 8.0;
@@ -59,6 +60,8 @@ pub struct Expert {
     hazards: hazards::HazardMemory,
     params: EgoParams,
     reason: Option<BrakeReason>,
+    /// The last tick's light ahead: free gap to its stop line (m) and state.
+    light_ahead: Option<(f64, LightState)>,
     /// The last tick's plan, ego frame.
     plan: Vec<DVec2>,
 }
@@ -73,6 +76,18 @@ impl Expert {
     /// when it does not brake or brakes only for speed (curves, junctions).
     pub fn brake_reason(&self) -> Option<BrakeReason> {
         self.reason
+    }
+
+    /// The last tick's light ahead, as a training label: the nearest light whose stop line ends
+    /// a lane of the route within the expert's scan, with the free distance from the ego's
+    /// front to that line; [`LightAhead::None`] when there is none.
+    pub fn light_ahead(&self) -> LightAhead {
+        match self.light_ahead {
+            None => LightAhead::None,
+            Some((distance, LightState::Green)) => LightAhead::Green { distance },
+            Some((distance, LightState::Yellow)) => LightAhead::Yellow { distance },
+            Some((distance, LightState::Red)) => LightAhead::Red { distance },
+        }
     }
 }
 
@@ -116,6 +131,7 @@ impl Expert {
         let steer = pure_pursuit(route, self.index, &ego, &self.params);
 
         let view = hazards::scan(world, route, self.index, &mut self.hazards);
+        self.light_ahead = view.light_ahead;
         let mut target = target_speed(map, route, self.index, &view);
         if angle_diff(ego.yaw, route.points[self.index].yaw).abs() > ALIGN_ERROR {
             target = target.min(obs.speed.max(ALIGN_SPEED));

@@ -4,8 +4,8 @@
 //! two lanes) are curved the whole way round; six two-lane spokes join them, and three more
 //! run from every other inner junction to a three-way junction at the centre. Junctions meet
 //! at 60, 90 and 120 degrees: four-way crossings on the inner ring, T-junctions on the outer
-//! ring and a Y at the centre. The centre, the inner crossings and three outer T-junctions
-//! have traffic lights; the other T-junctions have stop signs on their spokes.
+//! ring and a Y at the centre. The inner crossings and three outer T-junctions have traffic
+//! lights; the Y is an all-way stop, and the other T-junctions have stop signs on their spokes.
 //!
 //! No training set drives it (`TownStyle::is_held_out`): it is part of the held-out suite
 //! (`sim-bridge eval --suite unseen`), so that generalization is measured on a town that no
@@ -78,14 +78,15 @@ pub fn build() -> Town {
         }
     }
     let mut spokes = Vec::with_capacity(SPOKES);
+    let mut to_centre = Vec::new();
     for k in 0..SPOKES {
         spokes.push(b.street(inner[k], outer[k], &spoke));
         if k % 2 == 0 {
-            b.street(centre, inner[k], &spoke);
+            to_centre.push(b.street(centre, inner[k], &spoke));
         }
     }
 
-    b.lights(centre);
+    b.stop_signs(centre, &to_centre);
     for k in (0..SPOKES).step_by(2) {
         b.lights(inner[k]);
     }
