@@ -107,6 +107,7 @@ fn one_step_lowers_the_loss_and_reaches_every_module() {
                 hazard: Some(hazard),
                 occupancy: Some(occupancy),
                 motion: None,
+                light: None,
             },
             &weights,
         )

@@ -326,6 +326,8 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
     };
     added.loss.motion = 1.0;
     added.model.motion_head = true;
+    added.loss.light = 1.0;
+    added.model.light_head = true;
     let out = tmp.dir("head-added");
     let tuned = train(added.clone(), options(&data, &out), open(&data, &added)).unwrap();
     let (model, _) = checkpoint::load(&tuned.checkpoint, &Device::flex()).unwrap();
@@ -340,6 +342,19 @@ fn the_auxiliary_outputs_resume_with_the_run_and_can_be_left_out() {
         validation.motion_accuracy.contains_key("vehicle"),
         "{validation:?}"
     );
+    // The light head too: the fixture's even routes record a red light ahead, the odd ones no
+    // label; a loss on every step, and validation says how many red lights it calls red.
+    assert!(model.light.is_some());
+    assert!(
+        step_lines(&out)
+            .iter()
+            .all(|s| s.light.is_some_and(f32::is_finite))
+    );
+    let recall = validation
+        .light_red_recall
+        .expect("red lights in validation");
+    assert!((0.0..=1.0).contains(&recall), "{recall}");
+    assert!(validation.light_accuracy.is_some());
 }
 
 #[test]

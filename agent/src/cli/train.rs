@@ -117,6 +117,12 @@ pub struct TrainArgs {
     /// Fine-tuning a checkpoint without the head adds one; 0 = no head.
     #[arg(long, default_value_t = 0.0)]
     motion_weight: f32,
+    /// Weight of the light head's loss: a classifier of the state of the light ahead (none
+    /// within 40 m, green, yellow, red) from the scene tokens (labels: the light each frame
+    /// records; frames of datasets from before that are left out of it), part of the network
+    /// and its checkpoints. Fine-tuning a checkpoint without the head adds one; 0 = no head.
+    #[arg(long, default_value_t = 0.0)]
+    light_weight: f32,
     /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
     #[arg(long)]
     no_stl: bool,
@@ -160,6 +166,7 @@ impl TrainArgs {
         model.occupancy_head = self.occupancy_weight > 0.0;
         model.hazard_head = self.hazard_weight > 0.0;
         model.motion_head = self.motion_weight > 0.0;
+        model.light_head = self.light_weight > 0.0;
         if let Some(tokens) = self.tokens {
             model.tokens.num_tokens = tokens;
         }
@@ -203,6 +210,7 @@ impl TrainArgs {
         config.loss.hazard = self.hazard_weight;
         config.loss.occupancy = self.occupancy_weight;
         config.loss.motion = self.motion_weight;
+        config.loss.light = self.light_weight;
         config.future_bev = !self.no_ffp;
         config.validation_fraction = self.validation_fraction;
         config.validate_every = self.validate_every;

@@ -57,6 +57,11 @@ pub struct SsrConfig {
     /// is going. Checkpoints from before it have none.
     #[serde(default)]
     pub motion_head: bool,
+    /// Whether the network has the light head ([`super::light`]): the state of the traffic
+    /// light governing the route ahead, from the scene tokens, trained from the light each
+    /// frame records. Checkpoints from before it have none.
+    #[serde(default)]
+    pub light_head: bool,
 }
 
 fn ego_status_default() -> bool {
@@ -288,6 +293,7 @@ impl SsrConfig {
             occupancy_head: true,
             hazard_head: true,
             motion_head: false,
+            light_head: false,
         }
     }
 
@@ -348,6 +354,7 @@ impl SsrConfig {
             occupancy_head: true,
             hazard_head: true,
             motion_head: false,
+            light_head: false,
         }
     }
 

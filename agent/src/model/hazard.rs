@@ -9,15 +9,10 @@
 //! At serving it tells the controller when a stopped car has nothing to wait for: the unstick
 //! rule creeps early while the head says [`Hazard::Clear`] (or [`Hazard::Sign`], which a car
 //! that has stopped has served; `ssr_control::unstick`). It is in
-//! the network, and in its checkpoints, when [`super::config::SsrConfig::hazard_head`] says so.
+//! the network, and in its checkpoints, when [`super::config::SsrConfig::hazard_head`] says so:
+//! a [`super::classifier::TokenClassifier`] with a logit per [`Hazard`].
 
-use burn::module::Module;
-use burn::tensor::activation::relu;
-use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::dataset::BrakeReason;
-
-use super::fused::FusedLinear;
-use super::init::xavier_linear;
 
 /// What the car waits for: the head's classes, in logit order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,47 +73,6 @@ impl Hazard {
     }
 }
 
-/// Size of a [`HazardHead`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct HazardHeadConfig {
-    /// Channels of the scene tokens (the network's `channels`).
-    pub channels: usize,
-    /// Width of the hidden layer.
-    pub hidden: usize,
-}
-
-impl HazardHeadConfig {
-    /// A randomly initialised head.
-    pub fn init(&self, device: &Device) -> HazardHead {
-        HazardHead {
-            hidden: xavier_linear(2 * self.channels, self.hidden, device),
-            out: xavier_linear(self.hidden, Hazard::ALL.len(), device),
-        }
-    }
-}
-
-/// Mean- and max-pooled scene tokens, one hidden layer, a logit per [`Hazard`].
-#[derive(Module, Debug)]
-pub struct HazardHead {
-    hidden: FusedLinear,
-    out: FusedLinear,
-}
-
-impl HazardHead {
-    /// Hazard logits of the scene tokens.
-    ///
-    /// # Shapes
-    /// - tokens: `[B, S, C]`
-    /// - output: `[B, 5]` (in [`Hazard::ALL`] order)
-    pub fn forward(&self, tokens: Tensor<3>) -> Tensor<2> {
-        let [b, _, c] = tokens.dims();
-        let mean = tokens.clone().mean_dim(1).reshape([b, c]);
-        let max = tokens.max_dim(1).reshape([b, c]);
-        self.out
-            .forward(relu(self.hidden.forward(Tensor::cat(vec![mean, max], 1))))
-    }
-}
-
 /// The probability of each class (softmax) in each row of `logits` (`[B, 5]` values,
 /// row-major), in [`Hazard::ALL`] order.
 pub fn probabilities(logits: &[f32]) -> Vec<[f32; 5]> {
@@ -173,32 +127,6 @@ mod tests {
         for (i, hazard) in Hazard::ALL.iter().enumerate() {
             assert_eq!(hazard.index(), i);
         }
-    }
-
-    #[test]
-    fn the_head_maps_tokens_to_a_logit_per_class() {
-        let device = Device::flex();
-        let head = HazardHeadConfig {
-            channels: 8,
-            hidden: 16,
-        }
-        .init(&device);
-        let tokens = float_tensor(
-            (0..2 * 3 * 8).map(|v| v as f32 * 0.01).collect(),
-            [2, 3, 8],
-            &device,
-        );
-        let logits = head.forward(tokens);
-        assert_eq!(logits.dims(), [2, 5]);
-        let values = float_values(logits);
-        assert!(values.iter().all(|v| v.is_finite()));
-        // The two samples' tokens differ, and so do their logits: the head reads its input.
-        assert!(
-            values[..5]
-                .iter()
-                .zip(&values[5..])
-                .any(|(a, b)| (a - b).abs() > 1e-6)
-        );
     }
 
     #[test]

@@ -1,8 +1,8 @@
 //! The SSR network: image backbone -> BEV encoder (spatial cross-attention through the camera
 //! calibration, temporal self-attention over the episode's previous BEV) -> Scenes TokenLearner
 //! (navigation-gated) -> TCP head; plus the Future Feature Predictor used in training and, where
-//! the config has them, the occupancy and motion heads on the BEV and the hazard head on the
-//! scene tokens.
+//! the config has them, the occupancy and motion heads on the BEV and the hazard and light
+//! heads on the scene tokens.
 //!
 //! [`SsrModel::forward`] is one tick for a batch of episodes. Everything episode-specific
 //! (calibration, ego motion, previous BEV) comes in through [`ModelInput`]; the model holds no
@@ -10,12 +10,14 @@
 
 pub mod backbone;
 pub mod bev;
+pub mod classifier;
 pub mod config;
 pub mod cpu_kernels;
 pub mod ffp;
 pub mod fused;
 pub mod hazard;
 pub(crate) mod init;
+pub mod light;
 mod norm;
 pub mod occupancy;
 pub mod sampling;
@@ -28,9 +30,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use backbone::Backbone;
 use bev::{BevEncoder, GeometryTensors};
+use classifier::{TokenClassifier, TokenClassifierConfig};
 use config::SsrConfig;
 use ffp::FutureFeaturePredictor;
-use hazard::{HazardHead, HazardHeadConfig};
 use occupancy::{OccupancyHead, OccupancyHeadConfig};
 use stl::{SceneTokenLearner, SceneTokens};
 use tcp_head::{HeadOutput, TcpHead};
@@ -89,9 +91,12 @@ pub struct SsrModel {
     /// Occupancy head, where the config has one.
     pub occupancy: Option<OccupancyHead>,
     /// Hazard head, where the config has one.
-    pub hazard: Option<HazardHead>,
+    pub hazard: Option<TokenClassifier>,
     /// Motion head (occupancy [`occupancy::MOTION_HORIZON_S`] ahead), where the config has one.
     pub motion: Option<OccupancyHead>,
+    /// Light head (the state of the light ahead, [`light::LightClass`]), where the config has
+    /// one.
+    pub light: Option<TokenClassifier>,
 }
 
 impl SsrConfig {
@@ -106,18 +111,32 @@ impl SsrConfig {
             occupancy: self.init_occupancy_head(device),
             hazard: self.init_hazard_head(device),
             motion: self.init_motion_head(device),
+            light: self.init_light_head(device),
         }
     }
 
     /// A freshly initialised hazard head, where the config has one.
-    pub fn init_hazard_head(&self, device: &Device) -> Option<HazardHead> {
+    pub fn init_hazard_head(&self, device: &Device) -> Option<TokenClassifier> {
         self.hazard_head.then(|| {
-            HazardHeadConfig {
-                channels: self.channels,
-                hidden: self.head.hidden_dim,
-            }
-            .init(device)
+            self.token_classifier(hazard::Hazard::ALL.len())
+                .init(device)
         })
+    }
+
+    /// A freshly initialised light head, where the config has one.
+    pub fn init_light_head(&self, device: &Device) -> Option<TokenClassifier> {
+        self.light_head.then(|| {
+            self.token_classifier(light::LightClass::ALL.len())
+                .init(device)
+        })
+    }
+
+    fn token_classifier(&self, classes: usize) -> TokenClassifierConfig {
+        TokenClassifierConfig {
+            channels: self.channels,
+            hidden: self.head.hidden_dim,
+            classes,
+        }
     }
 
     /// A freshly initialised occupancy head, where the config has one.

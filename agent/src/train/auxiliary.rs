@@ -1,5 +1,6 @@
 //! The auxiliary outputs a run trains beside the imitation losses: the network's hazard head on
-//! the scene tokens ([`crate::model::hazard`]; loss in [`super::hazard`]), its occupancy head
+//! the scene tokens ([`crate::model::hazard`]; loss in [`super::hazard`]), its light head on
+//! them ([`crate::model::light`]; labels and loss in [`super::light`]), its occupancy head
 //! on the BEV and the motion head, its twin for the future frame ([`crate::model::occupancy`];
 //! labels and loss in [`super::occupancy`]); their outputs and losses on a batch.
 
@@ -8,6 +9,7 @@ use burn::tensor::{Device, Tensor};
 use super::config::TrainConfig;
 use super::data::Batch;
 use super::hazard::hazard_loss;
+use super::light::{light_labels, light_loss};
 use super::loss::AuxiliaryLosses;
 use super::occupancy::{batch_targets, occupancy_loss};
 use crate::model::{ModelOutput, SsrModel};
@@ -23,6 +25,8 @@ pub struct AuxiliaryOutputs {
     pub occupancy: Option<(Tensor<3>, Tensor<3>, Tensor<1>)>,
     /// The same for the motion head, against the future frame's actors.
     pub motion: Option<(Tensor<3>, Tensor<3>, Tensor<1>)>,
+    /// `[B, 4]` light logits.
+    pub light: Option<Tensor<2>>,
 }
 
 impl AuxiliaryOutputs {
@@ -49,6 +53,10 @@ impl AuxiliaryOutputs {
                     batch_targets(batch.future_actors(), &config.model.bev.grid, device);
                 (head.forward(output.bev.clone()), targets, recorded)
             }),
+            light: model
+                .light
+                .as_ref()
+                .map(|head| head.forward(output.scene.tokens.clone())),
         }
     }
 
@@ -67,6 +75,10 @@ impl AuxiliaryOutputs {
                 .motion
                 .clone()
                 .map(|(logits, targets, recorded)| occupancy_loss(logits, targets, recorded)),
+            light: self
+                .light
+                .clone()
+                .map(|logits| light_loss(logits, &light_labels(batch.lights()))),
         }
     }
 }

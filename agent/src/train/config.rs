@@ -178,6 +178,7 @@ impl TrainConfig {
             ("loss.hazard", self.loss.hazard),
             ("loss.occupancy", self.loss.occupancy),
             ("loss.motion", self.loss.motion),
+            ("loss.light", self.loss.light),
         ];
         if let Some((field, value)) = finite.iter().find(|(_, v)| !v.is_finite() || *v < 0.0) {
             return Err(format!("{field} must be finite and >= 0, got {value}"));
@@ -186,6 +187,7 @@ impl TrainConfig {
             ("occupancy", self.loss.occupancy, self.model.occupancy_head),
             ("hazard", self.loss.hazard, self.model.hazard_head),
             ("motion", self.loss.motion, self.model.motion_head),
+            ("light", self.loss.light, self.model.light_head),
         ] {
             if (weight > 0.0) != has {
                 return Err(format!(

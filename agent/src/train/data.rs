@@ -24,7 +24,7 @@ use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{
-    ActorRecord, BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord, fnv1a,
+    ActorRecord, BrakeReason, Dataset, DatasetError, FUTURE_STEP, FrameRecord, LightAhead, fnv1a,
 };
 
 use super::augment::Photometric;
@@ -370,6 +370,7 @@ impl TrainingData {
             batch.expert.push(now.control);
             batch.brake_reasons.push(now.brake_reason);
             batch.actors.push(now.actors.clone());
+            batch.lights.push(now.light);
             batch
                 .future_actors
                 .push(future.actors.as_ref().map(|actors| {
@@ -483,6 +484,8 @@ pub struct Batch {
     /// The actors around the ego at the future frame, in the current frame's ego frame (`None`:
     /// that frame records none).
     future_actors: Vec<Option<Vec<ActorRecord>>>,
+    /// The light ahead of each sample (`None`: the frame records none).
+    lights: Vec<Option<LightAhead>>,
 }
 
 impl Batch {
@@ -509,6 +512,11 @@ impl Batch {
     /// The actors around the ego in each sample: the occupancy head's labels.
     pub fn actors(&self) -> &[Option<Vec<ActorRecord>>] {
         &self.actors
+    }
+
+    /// The light ahead of each sample: the light head's labels.
+    pub fn lights(&self) -> &[Option<LightAhead>] {
+        &self.lights
     }
 
     /// Where the actors are at each sample's future frame, in the sample's ego frame: the

@@ -41,6 +41,9 @@ pub struct LossWeights {
     /// Weight of the motion head's cross-entropy (where the road users will be); 0 = no head.
     #[serde(default)]
     pub motion: f32,
+    /// Weight of the light head's cross-entropy (the state of the light ahead); 0 = no head.
+    #[serde(default)]
+    pub light: f32,
     /// Concentration k of the Beta targets made from the expert's deterministic actions.
     pub target_concentration: f32,
 }
@@ -56,6 +59,7 @@ impl Default for LossWeights {
             hazard: 0.5,
             occupancy: 1.0,
             motion: 0.0,
+            light: 0.0,
             target_concentration: 10.0,
         }
     }
@@ -145,6 +149,8 @@ pub struct Losses {
     pub occupancy: Option<Tensor<1>>,
     /// Motion cross-entropy; `None` without a motion head.
     pub motion: Option<Tensor<1>>,
+    /// Light cross-entropy; `None` without a light head.
+    pub light: Option<Tensor<1>>,
 }
 
 /// The auxiliary losses on a batch (hazard, occupancy and motion heads), each `None` without
@@ -157,6 +163,8 @@ pub struct AuxiliaryLosses {
     pub occupancy: Option<Tensor<1>>,
     /// The motion head's cross-entropy.
     pub motion: Option<Tensor<1>>,
+    /// The light head's cross-entropy.
+    pub light: Option<Tensor<1>>,
 }
 
 /// Imitation loss of the head's outputs, plus the BEV loss when a prediction and a future BEV
@@ -194,11 +202,13 @@ pub fn losses(
         hazard,
         occupancy,
         motion,
+        light,
     } = auxiliary;
     for (term, weight) in [
         (&hazard, weights.hazard),
         (&occupancy, weights.occupancy),
         (&motion, weights.motion),
+        (&light, weights.light),
     ] {
         if let Some(term) = term {
             total = total + term.clone().mul_scalar(weight);
@@ -214,6 +224,7 @@ pub fn losses(
         hazard,
         occupancy,
         motion,
+        light,
     }
 }
 

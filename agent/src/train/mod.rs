@@ -9,6 +9,7 @@ pub mod auxiliary;
 pub mod config;
 pub mod data;
 pub mod hazard;
+pub mod light;
 pub mod loader;
 pub mod loss;
 pub mod occupancy;

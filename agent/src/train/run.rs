@@ -32,6 +32,7 @@ use ssrdrive_proto::dataset::DatasetError;
 use super::auxiliary::AuxiliaryOutputs;
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
+use super::light::{light_hits, light_labels, predicted_classes};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::occupancy::confusion;
@@ -41,6 +42,7 @@ use crate::checkpoint::{self, CheckpointError};
 use crate::control::{ControlConfig, History};
 use crate::model::config::SsrConfig;
 use crate::model::hazard::predicted;
+use crate::model::light::LightClass;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
 
@@ -143,6 +145,9 @@ pub struct StepMetrics {
     /// Motion cross-entropy; `None` without the motion head.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion: Option<f32>,
+    /// Light cross-entropy; `None` without the light head.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light: Option<f32>,
     /// Training throughput of this sitting so far, samples per second (validation excluded).
     pub samples_per_s: f64,
 }
@@ -209,7 +214,7 @@ pub fn resumed_config(out: &Path) -> Result<TrainConfig, TrainError> {
 
 /// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
 /// (a fine-tune changes the training, not the network), except that a fine-tune may add the
-/// occupancy, hazard or motion head to a checkpoint without one: the head starts from random
+/// occupancy, hazard, motion or light head to a checkpoint without one: the head starts from random
 /// weights.
 fn initial_weights(
     path: &Path,
@@ -220,10 +225,12 @@ fn initial_weights(
     let adds_occupancy = model.occupancy_head && !info.config.occupancy_head;
     let adds_hazard = model.hazard_head && !info.config.hazard_head;
     let adds_motion = model.motion_head && !info.config.motion_head;
+    let adds_light = model.light_head && !info.config.light_head;
     let saved = SsrConfig {
         occupancy_head: info.config.occupancy_head || model.occupancy_head,
         hazard_head: info.config.hazard_head || model.hazard_head,
         motion_head: info.config.motion_head || model.motion_head,
+        light_head: info.config.light_head || model.light_head,
         ..info.config
     };
     let differences = saved.differences(model);
@@ -242,6 +249,9 @@ fn initial_weights(
     }
     if adds_motion {
         weights.motion = model.init_motion_head(device);
+    }
+    if adds_light {
+        weights.light = model.init_light_head(device);
     }
     Ok(weights)
 }
@@ -495,11 +505,16 @@ impl Trainer {
                     &float_values(recorded),
                 )
             };
+            let lights = outputs.light.map(|logits| {
+                let predicted = predicted_classes(&float_values(logits), LightClass::ALL.len());
+                light_hits(&predicted, &light_labels(batch.lights()))
+            });
             sums.add(
                 &batch,
                 &head,
                 hazards.as_deref(),
                 [outputs.occupancy.map(cells), outputs.motion.map(cells)],
+                lights,
                 p,
                 float_values(terms.total)[0],
             );
@@ -647,6 +662,7 @@ fn step_metrics(terms: &Losses, step: u64, lr: f64) -> StepMetrics {
         hazard: terms.hazard.as_ref().map(value),
         occupancy: terms.occupancy.as_ref().map(value),
         motion: terms.motion.as_ref().map(value),
+        light: terms.light.as_ref().map(value),
         samples_per_s: 0.0,
     }
 }

@@ -62,6 +62,13 @@ pub struct ValidationMetrics {
     /// The same for the motion head, against the future frame's actors; empty without it.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub motion_accuracy: BTreeMap<String, f32>,
+    /// The share of the samples recording a light ahead whose state the light head names;
+    /// `None` without the head or such samples.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_accuracy: Option<f32>,
+    /// The share of the samples with a red light ahead that it calls red.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_red_recall: Option<f32>,
 }
 
 impl ValidationMetrics {
@@ -95,6 +102,14 @@ impl ValidationMetrics {
                 self.motion_accuracy
                     .iter()
                     .map(|(channel, a)| format!("; {channel} motion {:.0} %", 100.0 * a)),
+            )
+            .chain(
+                self.light_accuracy
+                    .map(|a| format!("; light state right on {:.0} %", 100.0 * a)),
+            )
+            .chain(
+                self.light_red_recall
+                    .map(|r| format!(" ({:.0} % of red lights)", 100.0 * r)),
             )
             .collect();
         format!(
@@ -206,6 +221,8 @@ pub struct ValidationSums {
     /// Per occupancy channel: how the occupancy head's cells (then the motion head's) compare
     /// with the labels.
     cells: [[Confusion; OCCUPANCY_CHANNELS.len()]; 2],
+    /// The light head's hits: right, labelled, red called red, red.
+    light: Option<[usize; 4]>,
 }
 
 impl ValidationSums {
@@ -218,9 +235,16 @@ impl ValidationSums {
         head: &HeadOutput,
         hazards: Option<&[Hazard]>,
         cells: [Option<[Confusion; OCCUPANCY_CHANNELS.len()]>; 2],
+        light: Option<[usize; 4]>,
         p: usize,
         loss: f32,
     ) {
+        if let Some(hits) = light {
+            let sum = self.light.get_or_insert([0; 4]);
+            for (s, h) in sum.iter_mut().zip(hits) {
+                *s += h;
+            }
+        }
         for (sums, batch) in self.cells.iter_mut().zip(cells) {
             for (sum, batch) in sums.iter_mut().zip(batch.unwrap_or_default()) {
                 sum.add(&batch);
@@ -276,6 +300,14 @@ impl ValidationSums {
                 .collect(),
             occupancy_accuracy: accuracies(&self.cells[0]),
             motion_accuracy: accuracies(&self.cells[1]),
+            light_accuracy: self
+                .light
+                .filter(|h| h[1] > 0)
+                .map(|h| h[0] as f32 / h[1] as f32),
+            light_red_recall: self
+                .light
+                .filter(|h| h[3] > 0)
+                .map(|h| h[2] as f32 / h[3] as f32),
         }
     }
 }
