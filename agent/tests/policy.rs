@@ -4,10 +4,11 @@
 mod common;
 
 use common::{policy_of, rig, step_input, tiny_config};
-use ssr_agent::control::{ControlConfig, History, SafetyStop, Unstick};
+use ssr_agent::control::{ControlConfig, ControlDecision, History, SafetyStop, Unstick};
 use ssr_agent::model::bev::HISTORY_TICKS;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::policy::{InputError, SsrPolicy, StepError, StepInput, StepOutput};
+use ssrdrive_proto::camera::Rig;
 
 fn policy() -> SsrPolicy {
     policy_of(tiny_config())
@@ -326,6 +327,15 @@ fn bad_inputs_are_named_and_change_nothing() {
     assert_eq!(other.ticks(), 0);
 }
 
+/// The decision of a new episode's first step under `control`.
+fn first_decision(policy: &SsrPolicy, rig: &Rig, control: ControlConfig) -> ControlDecision {
+    let mut episode = policy.new_episode_with(control);
+    policy
+        .step(&mut episode, &step_input(rig, 0, 1))
+        .unwrap()
+        .decision
+}
+
 #[test]
 fn the_safety_stop_reads_the_occupancy_head_at_its_threshold() {
     let policy = policy();
@@ -340,13 +350,7 @@ fn the_safety_stop_reads_the_occupancy_head_at_its_threshold() {
         },
         ..ControlConfig::default()
     };
-    let decide = |policy: &SsrPolicy, control: ControlConfig| {
-        let mut episode = policy.new_episode_with(control);
-        policy
-            .step(&mut episode, &step_input(&rig, 0, 1))
-            .unwrap()
-            .decision
-    };
+    let decide = |policy: &SsrPolicy, control: ControlConfig| first_decision(policy, &rig, control);
     // Every cell counts at threshold 0, none at 1 (the random head is far from certain).
     let stop = decide(&policy, safety(0.0));
     assert!(stop.safety_stop && stop.control.brake == 1.0 && stop.control.throttle == 0.0);
@@ -383,13 +387,7 @@ fn the_safety_stops_motion_rule_reads_the_motion_head_at_its_threshold() {
         },
         ..ControlConfig::default()
     };
-    let decide = |policy: &SsrPolicy, control: ControlConfig| {
-        let mut episode = policy.new_episode_with(control);
-        policy
-            .step(&mut episode, &step_input(&rig, 0, 1))
-            .unwrap()
-            .decision
-    };
+    let decide = |policy: &SsrPolicy, control: ControlConfig| first_decision(policy, &rig, control);
     assert!(decide(&with_motion, safety(true, 0.0)).safety_stop);
     assert!(!decide(&with_motion, safety(true, 1.0)).safety_stop);
     assert!(

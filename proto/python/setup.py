@@ -3,6 +3,7 @@
 goes to a temporary folder, so that a read-only checkout installs and the source tree stays
 clean."""
 
+import importlib.util
 import tempfile
 from pathlib import Path
 
@@ -14,28 +15,20 @@ PROTO_ROOT = HERE.parent
 PROTO_FILE = PROTO_ROOT / "ssrdrive" / "v1" / "agent.proto"
 
 
+def _run_protoc():
+    """``ssrdrive/_protoc.py``'s ``run_protoc``, loaded by path (the package is not built yet)."""
+    spec = importlib.util.spec_from_file_location("_protoc", HERE / "ssrdrive" / "_protoc.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.run_protoc
+
+
 class BuildWithStubs(build_py):
     """The ordinary build, then the stubs into ``<build_lib>/ssrdrive/v1``."""
 
     def run(self):
         super().run()
-        from grpc_tools import protoc
-
-        if not PROTO_FILE.exists():
-            raise FileNotFoundError(f"{PROTO_FILE} is missing: build from the ssrdrive repository")
-        include = str(Path(protoc.__file__).parent / "_proto")
-        status = protoc.main(
-            [
-                "protoc",
-                f"-I{PROTO_ROOT}",
-                f"-I{include}",
-                f"--python_out={self.build_lib}",
-                f"--grpc_python_out={self.build_lib}",
-                str(PROTO_FILE),
-            ]
-        )
-        if status != 0:
-            raise RuntimeError(f"protoc failed on {PROTO_FILE} (exit {status})")
+        _run_protoc()(PROTO_ROOT, PROTO_FILE, Path(self.build_lib))
 
 
 SCRATCH = tempfile.mkdtemp(prefix="ssrdrive-build-")

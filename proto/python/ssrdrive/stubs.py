@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import ssrdrive
+from ssrdrive._protoc import run_protoc
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 PROTO_ROOT = PACKAGE_DIR.parents[1]
@@ -29,31 +30,6 @@ def cache_root() -> Path:
     return Path(base) / "ssrdrive" / "stubs"
 
 
-def generate(out: Path) -> None:
-    """Runs protoc (from grpcio-tools) on agent.proto into ``out`` (as ``out/ssrdrive/v1``)."""
-    try:
-        from grpc_tools import protoc
-    except ImportError as error:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            "ssrdrive from a source checkout generates its stubs with grpcio-tools: "
-            "pip install -r proto/python/requirements.txt, or pip install ./proto/python"
-        ) from error
-    out.mkdir(parents=True, exist_ok=True)
-    include = str(Path(protoc.__file__).parent / "_proto")
-    status = protoc.main(
-        [
-            "protoc",
-            f"-I{PROTO_ROOT}",
-            f"-I{include}",
-            f"--python_out={out}",
-            f"--grpc_python_out={out}",
-            str(PROTO_FILE),
-        ]
-    )
-    if status != 0:
-        raise RuntimeError(f"protoc failed on {PROTO_FILE} (exit {status})")
-
-
 def _source_stubs() -> Path:
     """The cache folder holding stubs for this checkout's agent.proto, generated if missing."""
     digest = hashlib.sha256(PROTO_FILE.read_bytes()).hexdigest()[:16]
@@ -61,7 +37,7 @@ def _source_stubs() -> Path:
     if not (folder / "ssrdrive" / "v1" / "agent_pb2_grpc.py").exists():
         # Generate beside, then rename: a concurrent import never sees half a folder.
         partial = folder.with_name(f".{digest}.{os.getpid()}")
-        generate(partial)
+        run_protoc(PROTO_ROOT, PROTO_FILE, partial)
         try:
             partial.rename(folder)
         except OSError:

@@ -28,6 +28,16 @@ fn load(style: TownStyle) -> &'static (RoadNetwork, Provenance) {
     &towns[index]
 }
 
+/// The importer's warnings that are faults (not the ones it marks as ignorable).
+fn faults(provenance: &Provenance) -> Vec<String> {
+    provenance
+        .warnings
+        .iter()
+        .filter(|w| !w.is_ignored())
+        .map(ToString::to_string)
+        .collect()
+}
+
 /// Where traffic leaves a lane, and where it enters one.
 fn exit(net: &RoadNetwork, id: LaneId) -> Point {
     let lane = net.lane(id).expect("a lane");
@@ -134,12 +144,7 @@ fn bundled_files_are_current() {
 fn towns_load_without_faults() {
     for style in TownStyle::ALL {
         let (net, provenance) = load(style);
-        let faults: Vec<String> = provenance
-            .warnings
-            .iter()
-            .filter(|w| !w.is_ignored())
-            .map(ToString::to_string)
-            .collect();
+        let faults = faults(provenance);
         assert!(faults.is_empty(), "{}: {faults:#?}", style.name());
         assert!(net.driving_lanes().count() > 0);
     }
@@ -488,12 +493,7 @@ fn procedural_towns_load_clean_join_up_repeat_and_vary() {
         assert!(xodr.contains(&format!("name=\"{}\"", procedural::name(seed))));
         let (net, provenance) = xodr::load_str_with_provenance(&xodr)
             .unwrap_or_else(|e| panic!("seed {seed} does not load: {e}"));
-        let faults: Vec<String> = provenance
-            .warnings
-            .iter()
-            .filter(|w| !w.is_ignored())
-            .map(ToString::to_string)
-            .collect();
+        let faults = faults(&provenance);
         assert!(faults.is_empty(), "seed {seed}: {faults:#?}");
         let dead = net
             .driving_lanes()
