@@ -11,8 +11,15 @@
 //!   images in and out of PNG.
 //! - [`files`]: capped reads and atomic writes; [`error_text`]: how errors are printed;
 //!   [`logging`]: how both binaries log.
+//! - [`TICK_HZ`], [`TICK_S`]: the tick both sides step at.
 
 #![forbid(unsafe_code)]
+
+/// Simulation and control ticks per second: the CARLA leaderboard's 20 Hz, at which the
+/// simulator steps, the agent is asked for a control, and every count of ticks is kept.
+pub const TICK_HZ: u32 = 20;
+/// One tick, seconds (exactly the nearest double to 0.05).
+pub const TICK_S: f64 = 1.0 / TICK_HZ as f64;
 
 pub mod camera;
 pub mod command;
@@ -33,4 +40,17 @@ pub mod v1 {
     /// The encoded `FileDescriptorSet` of the package, for gRPC server reflection.
     pub const FILE_DESCRIPTOR_SET: &[u8] =
         include_bytes!(concat!(env!("OUT_DIR"), "/ssrdrive_descriptor.bin"));
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_tick_is_the_leaderboards() {
+        assert_eq!(
+            super::TICK_S,
+            0.05,
+            "bit for bit, as the constant it replaces"
+        );
+        assert_eq!(super::TICK_S * super::TICK_HZ as f64, 1.0);
+    }
 }

@@ -23,8 +23,8 @@ use ssrdrive_proto::control::Control;
 
 /// Below this speed (m/s) the car counts as stopped (the leaderboard's "blocked" speed).
 pub const STOPPED_SPEED: f32 = 0.1;
-/// Control ticks per second (the leaderboard's 20 Hz).
-pub const TICKS_PER_SECOND: f32 = 20.0;
+/// Control ticks per second (the contract's tick, the leaderboard's 20 Hz).
+pub const TICKS_PER_SECOND: f32 = ssrdrive_proto::TICK_HZ as f32;
 
 /// Settings of the rule.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -22,7 +22,7 @@ pub const PLAN_STEP: f64 = 0.5;
 /// Waypoints in a plan (3 s).
 pub const PLAN_POINTS: usize = 6;
 /// Integration step of the rollout, s (the simulator's tick).
-const DT: f64 = 0.05;
+const DT: f64 = crate::world::DT;
 
 /// What the rollout starts from.
 pub(crate) struct PlanStart<'a> {

@@ -29,8 +29,8 @@ use traffic::{REQUEST_DISTANCE, Traffic, standing_time};
 use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;
 
-/// Simulation step, seconds (20 Hz).
-pub const DT: f64 = 0.05;
+/// Simulation step, seconds: the contract's tick ([`ssrdrive_proto::TICK_S`], 20 Hz).
+pub const DT: f64 = ssrdrive_proto::TICK_S;
 
 /// The leaderboard's background-vehicle count for a town (Town05: 120).
 pub fn leaderboard_vehicles(map: &Map) -> usize {

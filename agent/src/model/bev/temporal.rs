@@ -25,8 +25,8 @@ const SLOTS: usize = 2;
 /// (`crate::policy`), so the history BEV, its own history and the ego motion have the age and
 /// the distribution they have in training.
 pub const HISTORY_S: f64 = 0.5;
-/// [`HISTORY_S`] in steps of the leaderboard's 20 Hz.
-pub const HISTORY_TICKS: usize = 10;
+/// [`HISTORY_S`] in ticks ([`ssrdrive_proto::TICK_HZ`], the leaderboard's 20 Hz): 10.
+pub const HISTORY_TICKS: usize = (HISTORY_S * ssrdrive_proto::TICK_HZ as f64) as usize;
 
 /// Resamples the previous BEV (`[B, Q, C]`) into the current ego frame: cell i takes the
 /// previous BEV at `previous_points[:, i]` (normalised coordinates in the previous grid,
