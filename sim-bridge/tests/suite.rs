@@ -38,20 +38,21 @@ fn carla_maps() -> Option<std::path::PathBuf> {
 fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("home");
-    let run = sim_bridge(&[
-        "eval",
-        "--suite",
-        "home",
-        "--repetitions",
-        "1",
-        "--timeout",
-        "4",
-        "--jobs",
-        "2",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let home = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "--suite",
+            "home",
+            "--repetitions",
+            "1",
+            "--timeout",
+            "4",
+        ];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--quiet", "--out", out.to_str().unwrap()]);
+        sim_bridge(&args)
+    };
+    let run = home(&["--jobs", "2"]);
     assert!(run.status.success(), "{}", stderr(&run));
     assert!(
         stderr(&run).contains("not the suite's protocol"),
@@ -90,19 +91,7 @@ fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
     );
 
     // --resume keeps every run: nothing is driven again, the summary is the same.
-    let again = sim_bridge(&[
-        "eval",
-        "--suite",
-        "home",
-        "--repetitions",
-        "1",
-        "--timeout",
-        "4",
-        "--resume",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let again = home(&["--resume"]);
     assert!(again.status.success(), "{}", stderr(&again));
     assert!(
         stderr(&again).contains("10 of 10 runs already scored"),
