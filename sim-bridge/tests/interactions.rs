@@ -8,7 +8,8 @@
 //! (a lane that begins at x = 100): the expert waits for a gap to change lanes, then noses into
 //! a slow queue; traffic holds back for an ego that waits to change into its lane. And on
 //! `maps/signal_junction.xodr` (a light whose stop line is at x = 100): red and yellow hold the
-//! ego while its tail could still cross on red. And on `maps/short_sections.xodr`: lane sections
+//! ego while its tail could still cross on red, and a head posted before the line holds it where
+//! a camera still sees the lamp. And on `maps/short_sections.xodr`: lane sections
 //! a few centimetres long do not hide a standing ego from the traffic behind them. And on the
 //! bundled town of small T-junctions: at a junction without lights the ego takes its turn, and
 //! traffic gives it, and traffic does not enter a junction it cannot leave. And on
@@ -475,6 +476,38 @@ fn lights_hold_the_ego_while_its_tail_could_still_cross_on_red() {
     world.ego = Ego::new(EgoParams::default(), DVec3::new(101.5, -1.75, 0.0), 0.0);
     let view = hazards::scan(&world, &in_junction, 0, &mut HazardMemory::default());
     assert_eq!(view.cause, Some(BrakeReason::TrafficLight), "{view:?}");
+}
+
+#[test]
+fn the_expert_stops_short_of_a_light_head_that_stands_before_the_line() {
+    let mut map = load("signal-junction", include_str!("maps/signal_junction.xodr"));
+    // The head on the kerb 8 m before the line (x = 100), as Town01 and Town02 post theirs.
+    map.lights[0].head = DVec3::new(92.0, -5.0, 3.0);
+    let through = route(&map, (50.0, -1.75), (200.0, -1.75));
+    let mut world = quiet_world(&map, &through, 0);
+    world
+        .lights
+        .force(map.lights[0].id, LightState::Red, f64::INFINITY);
+    world.lights.update(world.time);
+    let mut gap_at = |x: f64, speed: f64| {
+        world.ego = Ego::new(EgoParams::default(), DVec3::new(x, -1.75, 0.0), 0.0);
+        world.ego.speed = speed;
+        let index = ego_index(&world, &through);
+        let view = hazards::scan(&world, &through, index, &mut HazardMemory::default());
+        assert_eq!(view.cause, Some(BrakeReason::TrafficLight), "{view:?}");
+        view.obstacle.expect("the light holds it").0
+    };
+    let front = |x: f64| x + EgoParams::default().half_extent.x;
+    // Far off, the stop point keeps the front 4 m short of the head: the obstacle stands
+    // there, and the expert comes to rest its standstill gap (4 m) short of it.
+    let gap = gap_at(60.0, 6.0);
+    assert!((gap - (92.0 - front(60.0))).abs() < 0.3, "gap {gap}");
+    // Stopped there, it holds.
+    let gap = gap_at(92.0 - 4.0 - EgoParams::default().half_extent.x, 0.0);
+    assert!(gap < 4.3, "gap {gap}");
+    // Too fast to stop short of the head, it stops at the line as before.
+    let gap = gap_at(85.0, 8.0);
+    assert!((gap - (100.0 - front(85.0) - 1.0)).abs() < 0.3, "gap {gap}");
 }
 
 #[test]

@@ -258,7 +258,7 @@ pub struct ControlDecision {
 }
 
 /// What the network believes of the scene beyond its plan, read by the rules that may override
-/// the plan: the [`safety`] stop and the [`unstick`] rule's early creep. The default believes
+/// the plan: the [`safety`] stop and the [`unstick`] rule. The default believes
 /// nothing (an agent without those heads, or an oracle).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Beliefs<'a> {
@@ -269,6 +269,19 @@ pub struct Beliefs<'a> {
     pub clear: Option<f32>,
     /// The hazard head's probability that a stop sign holds it; `None` without the head.
     pub stop_sign: Option<f32>,
+    /// The hazard head's probability that a light holds it; `None` without the head.
+    pub light_hazard: Option<f32>,
+    /// What the light head sees of the light ahead; `None` without the head.
+    pub light: Option<LightBelief>,
+}
+
+/// The light head's probabilities for the light that governs the route ahead.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LightBelief {
+    /// That it is green.
+    pub green: f32,
+    /// That it is red or yellow: the car is to stop at, or stay behind, its line.
+    pub stop: f32,
 }
 
 /// Everything the control side remembers about one episode.
@@ -339,9 +352,7 @@ impl EpisodeController {
             fused,
             speed,
             trajectory.steer,
-            self.config
-                .unstick
-                .free_to_go(beliefs.clear, beliefs.stop_sign),
+            &beliefs,
             &self.config.unstick,
         );
         let safety = &self.config.safety;

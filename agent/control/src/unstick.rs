@@ -7,6 +7,15 @@
 //! creeps along its plan for [`Unstick::creep_s`] seconds at up to [`Unstick::creep_speed`],
 //! then the counts start again.
 //!
+//! A light the network sees red or yellow (the light head's [`Beliefs::light`], probability at
+//! least [`Unstick::light_hold_probability`]) holds the car: no creep starts and both waits
+//! count again from the last tick it saw one. The plain wait is for the network's inertia, not
+//! for a light: a car that did not start on green, held past [`Unstick::after_s`], would
+//! otherwise creep into the next red (seen on Town02, where the head stands beside the line in
+//! full view). The other way round, a light the light head sees green counts as nothing to
+//! wait for: the hazard head's "light" weighs in [`Unstick::free_to_go`] by the probability of
+//! green. Without the light head the rule is as before.
+//!
 //! TransFuser++'s rule creeps only when a LiDAR safety box is empty; here the [`super::safety`]
 //! stop, where it is on, plays that part from the network's own occupancy head, and overrides
 //! the creep. The plain wait is set longer than the longest red light of a four-way junction
@@ -20,6 +29,8 @@
 
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
+
+use super::Beliefs;
 
 /// Below this speed (m/s) the car counts as stopped (the leaderboard's "blocked" speed).
 pub const STOPPED_SPEED: f32 = 0.1;
@@ -48,6 +59,9 @@ pub struct Unstick {
     pub creep_speed: f32,
     /// Throttle while below the creep speed.
     pub creep_throttle: f32,
+    /// The light head's probability of a red or yellow light ahead from which the car holds
+    /// (no creep; the waits count from the last such tick).
+    pub light_hold_probability: f32,
 }
 
 impl Default for Unstick {
@@ -61,6 +75,7 @@ impl Default for Unstick {
             creep_s: 2.0,
             creep_speed: 2.0,
             creep_throttle: 0.5,
+            light_hold_probability: 0.5,
         }
     }
 }
@@ -80,16 +95,36 @@ impl Unstick {
             ("unstick.creep_s", self.creep_s, 0.05, 60.0),
             ("unstick.creep_speed", self.creep_speed, 0.1, 10.0),
             ("unstick.creep_throttle", self.creep_throttle, 0.0, 1.0),
+            (
+                "unstick.light_hold_probability",
+                self.light_hold_probability,
+                0.0,
+                1.0,
+            ),
         ];
         super::check_ranges(&fields)
     }
 
     /// The probability, for a stopped car, that nothing holds it: the hazard head's "clear",
-    /// plus its "stop sign" where [`Unstick::served_stop_signs`] says so; `None` without the
-    /// head.
-    pub fn free_to_go(&self, clear: Option<f32>, stop_sign: Option<f32>) -> Option<f32> {
-        let served = stop_sign.filter(|_| self.served_stop_signs).unwrap_or(0.0);
-        clear.map(|p| p + served)
+    /// plus its "stop sign" where [`Unstick::served_stop_signs`] says so, plus its "light"
+    /// times the light head's "green"; `None` without the hazard head.
+    pub fn free_to_go(&self, beliefs: &Beliefs) -> Option<f32> {
+        let served = beliefs
+            .stop_sign
+            .filter(|_| self.served_stop_signs)
+            .unwrap_or(0.0);
+        let green = beliefs
+            .light_hazard
+            .zip(beliefs.light)
+            .map_or(0.0, |(hazard, light)| hazard * light.green);
+        beliefs.clear.map(|p| p + served + green)
+    }
+
+    /// Whether the light head sees a light ahead that the car must stop at or stay behind.
+    pub fn light_holds(&self, beliefs: &Beliefs) -> bool {
+        beliefs
+            .light
+            .is_some_and(|light| light.stop >= self.light_hold_probability)
     }
 }
 
@@ -103,22 +138,29 @@ pub struct UnstickState {
 
 impl UnstickState {
     /// The control to apply given the controller's `control` this tick, the speed (m/s), the
-    /// steer that follows the plan and the hazard head's probability of "clear" (`None`
-    /// without the head); and whether the rule overrode it.
+    /// steer that follows the plan and what the network believes of the scene; and whether
+    /// the rule overrode it.
     pub fn apply(
         &mut self,
         control: Control,
         speed: f32,
         plan_steer: f32,
-        clear: Option<f32>,
+        beliefs: &Beliefs,
         rule: &Unstick,
     ) -> (Control, bool) {
         if !rule.enabled {
             return (control, false);
         }
+        if rule.light_holds(beliefs) {
+            *self = Self::default();
+            return (control, false);
+        }
         if self.creep_ticks_left == 0 {
             let stopped = speed < STOPPED_SPEED;
-            let clear = stopped && clear.is_some_and(|p| p >= rule.clear_probability);
+            let clear = stopped
+                && rule
+                    .free_to_go(beliefs)
+                    .is_some_and(|p| p >= rule.clear_probability);
             self.stopped_ticks = if stopped { self.stopped_ticks + 1 } else { 0 };
             self.clear_ticks = if clear { self.clear_ticks + 1 } else { 0 };
             let waited = |ticks: u32, seconds: f32| ticks as f32 >= seconds * TICKS_PER_SECOND;

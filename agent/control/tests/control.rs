@@ -7,7 +7,7 @@ use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
 use ssr_control::unstick::TICKS_PER_SECOND;
 use ssr_control::{
-    Beliefs, ControlConfig, EpisodeController, History, SafetyStop, Unstick, Vehicle,
+    Beliefs, ControlConfig, EpisodeController, History, LightBelief, SafetyStop, Unstick, Vehicle,
 };
 use ssrdrive_proto::control::Control;
 
@@ -570,11 +570,76 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
     assert!(creeps_early(true), "on by default");
     assert!(!creeps_early(false));
     let rule = Unstick::default();
-    assert_eq!(rule.free_to_go(Some(0.3), None), Some(0.3));
+    let clear_only = Beliefs {
+        clear: Some(0.3),
+        ..Beliefs::default()
+    };
+    assert_eq!(rule.free_to_go(&clear_only), Some(0.3));
+    let sign_only = Beliefs {
+        stop_sign: Some(0.65),
+        ..Beliefs::default()
+    };
+    assert_eq!(rule.free_to_go(&sign_only), None, "no head, no early creep");
+}
+
+#[test]
+fn a_light_seen_red_holds_the_car_and_one_seen_green_is_nothing_to_wait_for() {
+    let config = ControlConfig::default();
+    let rule = config.unstick.clone();
+    let hold = [[0.0, 0.0]; 4];
+    // The hazard head is sure a light holds the car.
+    let light = |green: f32, stop: f32| Beliefs {
+        clear: Some(0.02),
+        light_hazard: Some(0.95),
+        light: Some(LightBelief { green, stop }),
+        ..Beliefs::default()
+    };
+    // The first tick that creeps within `ticks`, with the beliefs given by the tick.
+    let first_creep = |ticks: usize, beliefs: &dyn Fn(usize) -> Beliefs<'static>| {
+        let mut controller = EpisodeController::new(config.clone());
+        (0..ticks).find(|&tick| {
+            controller
+                .act_with_branch(&hold, [10.0, 0.0], 0.0, None, beliefs(tick))
+                .unsticking
+        })
+    };
+    let plain = ticks(rule.after_s);
+    let early = ticks(rule.clear_after_s);
+    // Seen red all along: no creep, not even after the plain wait.
+    assert_eq!(first_creep(plain * 2, &|_| light(0.01, 0.98)), None);
+    // Seen green: the light counts as served and the early creep comes.
+    assert_eq!(first_creep(plain, &|_| light(0.98, 0.01)), Some(early - 1));
+    // Red until a tick, then unsure of the colour: the plain wait counts from that tick.
+    let seen_until = plain / 2;
+    let red_then_unsure = |tick| {
+        if tick < seen_until {
+            light(0.01, 0.98)
+        } else {
+            light(0.4, 0.4)
+        }
+    };
     assert_eq!(
-        rule.free_to_go(None, Some(0.65)),
-        None,
-        "no head, no early creep"
+        first_creep(plain * 2, &red_then_unsure),
+        Some(seen_until + plain - 1)
+    );
+    // Without the light head, the hazard head's "light" never counts as served.
+    let no_light_head = Beliefs {
+        light: None,
+        ..light(0.98, 0.01)
+    };
+    assert_eq!(
+        first_creep(plain, &|_| no_light_head),
+        Some(plain - 1),
+        "only the plain wait"
+    );
+    let bad = Unstick {
+        light_hold_probability: 1.5,
+        ..Unstick::default()
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .contains("unstick.light_hold_probability")
     );
 }
 

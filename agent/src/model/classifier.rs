@@ -52,6 +52,32 @@ impl TokenClassifier {
     }
 }
 
+/// The probability of each class (softmax) in each row of `logits` (`[B, K]` values,
+/// row-major), in logit order.
+pub fn class_probabilities<const K: usize>(logits: &[f32]) -> Vec<[f32; K]> {
+    logits
+        .chunks_exact(K)
+        .map(|row| {
+            let max = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            let weights: [f32; K] = std::array::from_fn(|k| (row[k] - max).exp());
+            let total: f32 = weights.iter().sum();
+            weights.map(|w| w / total)
+        })
+        .collect()
+}
+
+/// The index of the largest logit in each row of `logits` (`[B, k]` values, row-major).
+pub fn predicted_classes(logits: &[f32], k: usize) -> Vec<usize> {
+    logits
+        .chunks_exact(k)
+        .map(|row| {
+            (0..row.len())
+                .max_by(|&a, &b| row[a].total_cmp(&row[b]))
+                .unwrap_or(0)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,6 +107,25 @@ mod tests {
                 .iter()
                 .zip(&values[5..])
                 .any(|(a, b)| (a - b).abs() > 1e-6)
+        );
+    }
+
+    #[test]
+    fn probabilities_are_the_softmax_of_each_row_and_the_prediction_its_largest_logit() {
+        let mut logits = vec![0.0; 10];
+        logits[2] = 10.0;
+        let rows = class_probabilities::<5>(&logits);
+        assert!(rows[0][2] > 0.99, "{rows:?}");
+        assert!(rows[1].iter().all(|p| (p - 0.2).abs() < 1e-6), "{rows:?}");
+        assert!(
+            rows.iter()
+                .all(|row| (row.iter().sum::<f32>() - 1.0).abs() < 1e-6)
+        );
+        logits[5] = 4.0;
+        assert_eq!(predicted_classes(&logits, 5), vec![2, 0]);
+        assert_eq!(
+            predicted_classes(&[0.0, 2.0, 1.0, 0.0, 5.0, 0.0, 0.0, 1.0], 4),
+            vec![1, 0]
         );
     }
 }

@@ -73,35 +73,6 @@ impl Hazard {
     }
 }
 
-/// The probability of each class (softmax) in each row of `logits` (`[B, 5]` values,
-/// row-major), in [`Hazard::ALL`] order.
-pub fn probabilities(logits: &[f32]) -> Vec<[f32; 5]> {
-    logits
-        .chunks(Hazard::ALL.len())
-        .map(|row| {
-            let max = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-            let weights = Hazard::ALL.map(|class| (row[class.index()] - max).exp());
-            let total: f32 = weights.iter().sum();
-            weights.map(|w| w / total)
-        })
-        .collect()
-}
-
-/// The most likely class of each row of `logits` (`[B, 5]` values, row-major).
-pub fn predicted(logits: &[f32]) -> Vec<Hazard> {
-    logits
-        .chunks(Hazard::ALL.len())
-        .map(|row| {
-            let best = row
-                .iter()
-                .enumerate()
-                .max_by(|a, b| a.1.total_cmp(b.1))
-                .map_or(0, |(i, _)| i);
-            Hazard::ALL[best]
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -127,26 +98,5 @@ mod tests {
         for (i, hazard) in Hazard::ALL.iter().enumerate() {
             assert_eq!(hazard.index(), i);
         }
-    }
-
-    #[test]
-    fn probabilities_are_the_softmax_of_each_row() {
-        let mut logits = vec![0.0; 10];
-        logits[Hazard::Sign.index()] = 10.0;
-        let rows = probabilities(&logits);
-        assert!(rows[0][Hazard::Sign.index()] > 0.99, "{rows:?}");
-        assert!(rows[1].iter().all(|p| (p - 0.2).abs() < 1e-6), "{rows:?}");
-        assert!(
-            rows.iter()
-                .all(|row| (row.iter().sum::<f32>() - 1.0).abs() < 1e-6)
-        );
-    }
-
-    #[test]
-    fn predicted_is_the_largest_logit_of_each_row() {
-        let mut logits = vec![0.0; 10];
-        logits[Hazard::Light.index()] = 4.0;
-        logits[5 + Hazard::Clear.index()] = 4.0;
-        assert_eq!(predicted(&logits), vec![Hazard::Light, Hazard::Clear]);
     }
 }

@@ -552,6 +552,8 @@ impl SsrPolicy {
             occupied: &occupied,
             clear: out.hazard(Hazard::Clear),
             stop_sign: out.hazard(Hazard::Sign),
+            light_hazard: out.hazard(Hazard::Light),
+            light: out.light(),
         };
         let decision = state.controller.act(
             &out.path,

@@ -1,16 +1,19 @@
 //! What one forward pass of a group of episodes produced, read back from the device once, and a
 //! typed view of each episode's share: its planned path, control-branch parameters, predicted
 //! speed, and the optional heads' beliefs (token attention, occupancy and motion probabilities,
-//! hazard probabilities), each present only where the group asked for it.
+//! hazard and light probabilities), each present only where the group asked for it.
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::sigmoid;
 
 use crate::model::bev::BevGrid;
-use crate::model::hazard::{Hazard, probabilities};
+use crate::model::classifier::{TokenClassifier, class_probabilities};
+use crate::model::hazard::Hazard;
+use crate::model::light::LightClass;
 use crate::model::occupancy::OCCUPANCY_CHANNELS;
 use crate::model::stl::SceneTokens;
 use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
+use crate::control::LightBelief;
 use crate::model::{SsrModel, float_values};
 
 /// Which optional outputs a group needs (a head runs only when some episode reads it).
@@ -22,7 +25,7 @@ pub(super) struct Needs {
     pub occupancy: bool,
     /// Motion for the safety stop's motion rule.
     pub motion: bool,
-    /// Hazard probabilities for the unstick rule.
+    /// Hazard and light probabilities for the unstick rule.
     pub hazard: bool,
 }
 
@@ -45,10 +48,14 @@ pub(super) struct GroupOutputs {
     motion: Option<Vec<f32>>,
     /// Per episode, the hazard classes' probabilities.
     hazards: Option<Vec<[f32; HAZARDS]>>,
+    /// Per episode, the light classes' probabilities.
+    lights: Option<Vec<[f32; LIGHTS]>>,
 }
 
 /// The hazard head's classes.
 const HAZARDS: usize = Hazard::ALL.len();
+/// The light head's classes.
+const LIGHTS: usize = LightClass::ALL.len();
 
 /// One episode's share of a [`GroupOutputs`].
 pub(super) struct EpisodeOutputs<'a> {
@@ -66,6 +73,8 @@ pub(super) struct EpisodeOutputs<'a> {
     pub motion: Option<&'a [f32]>,
     /// The hazard classes' probabilities.
     pub hazards: Option<&'a [f32; HAZARDS]>,
+    /// The light classes' probabilities.
+    pub lights: Option<&'a [f32; LIGHTS]>,
 }
 
 impl GroupOutputs {
@@ -83,6 +92,7 @@ impl GroupOutputs {
             float_values(sigmoid(head.forward(bev.clone())))
         };
         let attention = scene.attention.clone().filter(|_| needs.debug);
+
         Self {
             pred_len: head.waypoints.dims()[1],
             tokens: attention.as_ref().map_or(0, |a| a.dims()[1]),
@@ -98,11 +108,8 @@ impl GroupOutputs {
                 .filter(|_| needs.debug || needs.occupancy)
                 .map(cells_of),
             motion: model.motion.as_ref().filter(|_| needs.motion).map(cells_of),
-            hazards: model
-                .hazard
-                .as_ref()
-                .filter(|_| needs.hazard)
-                .map(|head| probabilities(&float_values(head.forward(scene.tokens.clone())))),
+            hazards: classes(model.hazard.as_ref(), needs.hazard, scene),
+            lights: classes(model.light.as_ref(), needs.hazard, scene),
         }
     }
 
@@ -130,6 +137,7 @@ impl GroupOutputs {
                 .map(|p| &p[i * q * k..(i + 1) * q * k]),
             motion: self.motion.as_ref().map(|p| &p[i * q * k..(i + 1) * q * k]),
             hazards: self.hazards.as_ref().map(|h| &h[i]),
+            lights: self.lights.as_ref().map(|l| &l[i]),
         }
     }
 }
@@ -138,6 +146,14 @@ impl EpisodeOutputs<'_> {
     /// The hazard head's probability of `hazard`, where it ran.
     pub fn hazard(&self, hazard: Hazard) -> Option<f32> {
         self.hazards.map(|p| p[hazard.index()])
+    }
+
+    /// The light head's belief, where it ran.
+    pub fn light(&self) -> Option<LightBelief> {
+        self.lights.map(|p| LightBelief {
+            green: p[LightClass::Green.index()],
+            stop: p[LightClass::Red.index()] + p[LightClass::Yellow.index()],
+        })
     }
 
     /// `[channels][Q]` occupancy probabilities for debug outputs (empty without them).
@@ -149,6 +165,17 @@ impl EpisodeOutputs<'_> {
                 .collect()
         })
     }
+}
+
+/// Each episode's class probabilities from a token classifier `head`, where the network has
+/// it and the group needs it.
+fn classes<const K: usize>(
+    head: Option<&TokenClassifier>,
+    needed: bool,
+    scene: &SceneTokens,
+) -> Option<Vec<[f32; K]>> {
+    head.filter(|_| needed)
+        .map(|head| class_probabilities(&float_values(head.forward(scene.tokens.clone()))))
 }
 
 /// The ego-frame centres of the cells of `grid` where some channel of `probabilities`

@@ -37,18 +37,6 @@ pub fn light_loss(logits: Tensor<2>, labels: &[Option<LightClass>]) -> Tensor<1>
         .reshape([1])
 }
 
-/// The index of the largest logit in each row of `logits` (`[B, k]` values, row-major).
-pub fn predicted_classes(logits: &[f32], k: usize) -> Vec<usize> {
-    logits
-        .chunks(k)
-        .map(|row| {
-            (0..row.len())
-                .max_by(|&a, &b| row[a].total_cmp(&row[b]))
-                .unwrap_or(0)
-        })
-        .collect()
-}
-
 /// How many labelled samples the head classed right, and how many red lights it called red:
 /// (right, labelled, red called red, red).
 pub fn light_hits(predicted: &[usize], labels: &[Option<LightClass>]) -> [usize; 4] {
@@ -90,10 +78,6 @@ mod tests {
         ))[0];
         assert_eq!(none, 0.0);
         assert_eq!(light_hits(&[3, 0, 1], &labels), [1, 2, 1, 1]);
-        assert_eq!(
-            predicted_classes(&[0.0, 2.0, 1.0, 0.0, 5.0, 0.0, 0.0, 1.0], 4),
-            vec![1, 0]
-        );
         let light = LightAhead::Red { distance: 10.0 };
         assert_eq!(
             light_labels(&[Some(light), None]),

@@ -32,7 +32,7 @@ use ssrdrive_proto::dataset::DatasetError;
 use super::auxiliary::AuxiliaryOutputs;
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
-use super::light::{light_hits, light_labels, predicted_classes};
+use super::light::{light_hits, light_labels};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::occupancy::confusion;
@@ -41,7 +41,8 @@ use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::{ControlConfig, History};
 use crate::model::config::SsrConfig;
-use crate::model::hazard::predicted;
+use crate::model::classifier::predicted_classes;
+use crate::model::hazard::Hazard;
 use crate::model::light::LightClass;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
@@ -497,7 +498,12 @@ impl Trainer {
                 batch_losses(&model, &model, &batch, config, device, device);
             let hazards = outputs
                 .hazard
-                .map(|logits| predicted(&float_values(logits)));
+                .map(|logits| {
+                    predicted_classes(&float_values(logits), Hazard::ALL.len())
+                        .into_iter()
+                        .map(|i| Hazard::ALL[i])
+                        .collect::<Vec<_>>()
+                });
             let cells = |(logits, targets, recorded): (Tensor<3>, Tensor<3>, Tensor<1>)| {
                 confusion(
                     &float_values(logits),

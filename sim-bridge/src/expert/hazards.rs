@@ -20,6 +20,17 @@ const SCAN_AHEAD: f64 = 50.0;
 const CORRIDOR_MARGIN: f64 = 0.6;
 /// Stop this far before a stop line, m.
 const STOP_LINE_MARGIN: f64 = 1.0;
+/// The expert stops for a red or yellow light with its front at least this far short of the
+/// light's head, m, where the head stands before the stop line (CARLA's Town01 and Town02
+/// post theirs at the kerb a few metres before the line): a camera agent stopped there still
+/// sees the lamp that tells it when to go. TCP's camera (1.5 m behind the centre, 2 m up, 100
+/// degrees across a 320x96 frame, so about 20 degrees above its axis) loses a 3 m head when
+/// the front is about 1 m from it; 4 m keeps the lamp in view for a learner that stops a metre
+/// or two late. A head beside or past the line leaves the stop point where the line puts it.
+const HEAD_IN_VIEW: f64 = 4.0;
+/// How far past its [`HEAD_IN_VIEW`] point a stopping ego still holds there rather than going
+/// on to the line, m (the IDM may come to rest a little past it).
+const HEAD_SLACK: f64 = 1.5;
 /// The firmest braking the expert plans on to stop for a yellow light, a red light under it or
 /// its turn at a junction, m/s^2 (beyond that it goes on).
 const STOP_DECEL: f64 = 6.0;
@@ -307,11 +318,12 @@ fn stop_lines(
             if !front_past && view.light_ahead.is_none_or(|(nearest, _)| gap < nearest) {
                 view.light_ahead = Some((gap.max(0.0), state));
             }
+            let stop_gap = head_in_view_gap(world, light).map_or(gap, |g| g.min(gap));
             match state {
                 LightState::Red if front_past => {}
-                LightState::Red => view.obstacle(gap, 0.0, BrakeReason::TrafficLight),
+                LightState::Red => view.obstacle(stop_gap, 0.0, BrakeReason::TrafficLight),
                 LightState::Yellow if stops_at_yellow(world, light, lane) => {
-                    view.obstacle(gap.max(0.0), 0.0, BrakeReason::TrafficLight)
+                    view.obstacle(stop_gap.max(0.0), 0.0, BrakeReason::TrafficLight)
                 }
                 _ => {}
             }
@@ -331,6 +343,19 @@ fn stop_lines(
             }
         }
     }
+}
+
+/// The obstacle gap (as for a stop line) that stops the ego [`HEAD_IN_VIEW`] short of
+/// `light`'s head, while it can still stop there comfortably ([`STOP_DECEL`], give or take
+/// [`HEAD_SLACK`]); `None` past that point (the line decides).
+fn head_in_view_gap(world: &World<'_>, light: &TrafficLight) -> Option<f64> {
+    let ego = world.ego_state();
+    let head_ahead = (light.head.truncate() - ego.position.truncate()).dot(ego.forward())
+        - ego.half_extent.x;
+    // The IDM holds the ego its standstill gap short of an obstacle.
+    let gap = head_ahead - HEAD_IN_VIEW + super::IDM.min_gap;
+    let stopping = ego.speed * ego.speed / (2.0 * STOP_DECEL);
+    (head_ahead - HEAD_IN_VIEW + HEAD_SLACK >= stopping).then_some(gap.max(0.0))
 }
 
 /// Before a junction without a light on its approach, the ego takes its turn as traffic does:
