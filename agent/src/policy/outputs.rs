@@ -6,6 +6,7 @@
 use burn::tensor::Tensor;
 use burn::tensor::activation::sigmoid;
 
+use crate::control::LightBelief;
 use crate::model::bev::BevGrid;
 use crate::model::classifier::{TokenClassifier, class_probabilities};
 use crate::model::hazard::Hazard;
@@ -13,7 +14,6 @@ use crate::model::light::LightClass;
 use crate::model::occupancy::OCCUPANCY_CHANNELS;
 use crate::model::stl::SceneTokens;
 use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
-use crate::control::LightBelief;
 use crate::model::{SsrModel, float_values};
 
 /// Which optional outputs a group needs (a head runs only when some episode reads it).

@@ -40,8 +40,8 @@ use super::resume::{Progress, load_model, read_progress, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint::{self, CheckpointError};
 use crate::control::{ControlConfig, History};
-use crate::model::config::SsrConfig;
 use crate::model::classifier::predicted_classes;
+use crate::model::config::SsrConfig;
 use crate::model::hazard::Hazard;
 use crate::model::light::LightClass;
 use crate::model::tcp_head::HeadOutput;
@@ -496,14 +496,12 @@ impl Trainer {
             })?;
             let (terms, head, outputs) =
                 batch_losses(&model, &model, &batch, config, device, device);
-            let hazards = outputs
-                .hazard
-                .map(|logits| {
-                    predicted_classes(&float_values(logits), Hazard::ALL.len())
-                        .into_iter()
-                        .map(|i| Hazard::ALL[i])
-                        .collect::<Vec<_>>()
-                });
+            let hazards = outputs.hazard.map(|logits| {
+                predicted_classes(&float_values(logits), Hazard::ALL.len())
+                    .into_iter()
+                    .map(|i| Hazard::ALL[i])
+                    .collect::<Vec<_>>()
+            });
             let cells = |(logits, targets, recorded): (Tensor<3>, Tensor<3>, Tensor<1>)| {
                 confusion(
                     &float_values(logits),

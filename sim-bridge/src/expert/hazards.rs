@@ -350,8 +350,8 @@ fn stop_lines(
 /// [`HEAD_SLACK`]); `None` past that point (the line decides).
 fn head_in_view_gap(world: &World<'_>, light: &TrafficLight) -> Option<f64> {
     let ego = world.ego_state();
-    let head_ahead = (light.head.truncate() - ego.position.truncate()).dot(ego.forward())
-        - ego.half_extent.x;
+    let head_ahead =
+        (light.head.truncate() - ego.position.truncate()).dot(ego.forward()) - ego.half_extent.x;
     // The IDM holds the ego its standstill gap short of an obstacle.
     let gap = head_ahead - HEAD_IN_VIEW + super::IDM.min_gap;
     let stopping = ego.speed * ego.speed / (2.0 * STOP_DECEL);
