@@ -15,6 +15,7 @@ use sim_bridge::client::local::LocalServer;
 use sim_bridge::eval::campaign::{
     Campaign, CampaignObserver, CampaignReport, RunDone, run_campaign,
 };
+use sim_bridge::eval::shard::Shard;
 use sim_bridge::eval::suite::{Figures, PartSummary, Suite, SuiteSummary, part_town, suite_table};
 use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
@@ -70,6 +71,12 @@ pub struct EvalArgs {
     /// diverge)
     #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = parse_count)]
     jobs: usize,
+    /// Drive only share K of N of the campaign's runs (K from 0, e.g. `--shard
+    /// $JOB_COMPLETION_INDEX/4`): a fixed split, balanced by route length, that N processes
+    /// compute alike; `sim-bridge results merge` joins their results files into the one a
+    /// single process writes.
+    #[arg(long, conflicts_with = "suite")]
+    shard: Option<Shard>,
     /// End every route after this many simulated seconds (a timeout without penalty) instead
     /// of the leaderboard's length-based timeout: for quick smoke runs.
     #[arg(long, value_parser = parse_positive)]
@@ -245,6 +252,8 @@ fn drive(
         out: out.to_path_buf(),
         resume: args.resume,
         jobs: args.jobs,
+        shard: args.shard,
+        label: route.routes.clone(),
     };
     let display = EvalDisplay {
         bars: MultiProgress::new(),
@@ -271,11 +280,12 @@ fn check_report(report: &CampaignReport, repetitions: usize) -> anyhow::Result<(
         );
     }
     if report.unplannable > 0 {
+        let runs = report.results.plan.as_ref().map_or(total, |p| p.runs);
         bail!(
             "{} of {} routes could not be planned; they count as failed runs with zero scores \
              (see above)",
             report.unplannable,
-            total / repetitions.max(1)
+            runs / repetitions.max(1)
         );
     }
     Ok(())

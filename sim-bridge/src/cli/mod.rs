@@ -7,6 +7,7 @@ mod eval;
 mod load;
 mod render;
 mod replay;
+mod results;
 mod routes;
 mod towns;
 
@@ -57,6 +58,9 @@ enum Command {
     /// Re-feed step logs (from `eval --record`) to an agent server: latency, drift from the
     /// recorded answers, open-loop L2 and collision rate at 1, 2, 3 s.
     Replay(replay::ReplayArgs),
+    /// Work on leaderboard results files: merge the shares of a campaign.
+    #[command(subcommand)]
+    Results(results::ResultsCommand),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -78,6 +82,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Load(args) => load::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Results(command) => results::run(command),
         Command::Render(args) => render::run(args),
         Command::Collect(args) => collect::run(args),
         Command::Routes(cmd) => routes::run(cmd),

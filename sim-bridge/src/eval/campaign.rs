@@ -8,7 +8,8 @@
 //! previous one), so an interrupted campaign keeps what it scored; with `resume` a campaign
 //! keeps the runs that file already holds for the same plan and drives only the rest, and any
 //! run whose agent crashed. A route that cannot be planned is a failed record, as the
-//! leaderboard counts it.
+//! leaderboard counts it. With a [`Shard`] it drives only that share of the runs, and its file
+//! says so in its [`CampaignPlan`], for `results merge`.
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -17,11 +18,13 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use ssrdrive_proto::files::{CappedReadError, read_capped_text, write_atomic};
 use thiserror::Error;
 
+use super::shard::Shard;
 use super::{RouteRun, run_route};
 use crate::agent::AgentFactory;
 use crate::map::Map;
 use crate::route::xml::RouteSpec;
 use crate::route::{DenseRoute, RoutePlan};
+use crate::scoring::record::CampaignPlan;
 use crate::scoring::{Results, ResultsError, RouteEnd, RouteRecord, ScoringConfig};
 use crate::world::WorldConfig;
 
@@ -46,6 +49,55 @@ pub struct Campaign<'a> {
     pub resume: bool,
     /// Runs at once, each worker with its own agent.
     pub jobs: usize,
+    /// Drive only this share of the runs (all of them without).
+    pub shard: Option<Shard>,
+    /// The route set or file as the user gave it (for the results file's plan).
+    pub label: String,
+}
+
+impl Campaign<'_> {
+    /// Runs of the whole campaign (routes x repetitions).
+    pub fn runs(&self) -> usize {
+        self.routes.len() * self.repetitions
+    }
+
+    /// The results file's plan, before an agent has a name.
+    pub fn plan(&self) -> CampaignPlan {
+        let specs: Vec<&RouteSpec> = self.routes.iter().map(|(spec, _)| spec).collect();
+        let driven = format!(
+            "{specs:?} {:?} {:?} {}",
+            self.world, self.scoring, self.repetitions
+        );
+        CampaignPlan {
+            routes: self.label.clone(),
+            town: self.map.name.clone(),
+            fingerprint: format!("{:016x}", fnv1a(driven.as_bytes())),
+            repetitions: self.repetitions,
+            seed: self.world.seed,
+            runs: self.runs(),
+            agent: String::new(),
+            simulator: format!("sim-bridge {}", env!("CARGO_PKG_VERSION")),
+            shard: self.shard.map(|s| s.to_string()),
+        }
+    }
+
+    /// The route lengths the dispatch and the shares go by, m.
+    fn lengths(&self) -> Vec<f64> {
+        self.routes
+            .iter()
+            .map(|(spec, dense)| match dense {
+                Ok(dense) => dense.length(),
+                Err(_) => spec.keypoint_length(),
+            })
+            .collect()
+    }
+}
+
+/// The 64-bit FNV-1a hash (stable across builds and platforms, unlike std's hasher).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
+        (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 /// One finished run, as the observer hears of it.
@@ -153,30 +205,35 @@ pub fn run_campaign<O: CampaignObserver>(
     if campaign.routes.is_empty() || campaign.repetitions == 0 || campaign.jobs == 0 {
         return Err(CampaignError::Empty);
     }
-    let total = campaign.routes.len() * campaign.repetitions;
+    let total = campaign.runs();
+    let lengths = campaign.lengths();
+    let mut selected = vec![campaign.shard.is_none(); total];
+    if let Some(shard) = campaign.shard {
+        for run in shard.runs(&lengths, campaign.repetitions) {
+            selected[run] = true;
+        }
+    }
+    let share = selected.iter().filter(|&&s| s).count();
     let records = if campaign.resume {
-        earlier_records(campaign, total)?
+        earlier_records(campaign, &selected)?
     } else {
         vec![None; total]
     };
     let kept = records.iter().flatten().count();
     if campaign.resume {
-        observer.resuming(kept, total, &campaign.out);
+        observer.resuming(kept, share, &campaign.out);
     }
-    let jobs = campaign.jobs.min(total - kept).max(1);
+    let jobs = campaign.jobs.min(share - kept).max(1);
     let scored = Mutex::new(Scored {
         records,
         crashes: 0,
+        plan: campaign.plan(),
+        share,
     });
-    let lengths: Vec<f64> = campaign
-        .routes
-        .iter()
-        .map(|(spec, dense)| match dense {
-            Ok(dense) => dense.length(),
-            Err(_) => spec.keypoint_length(),
-        })
+    let order: Vec<usize> = dispatch_order(&lengths, campaign.repetitions, jobs)
+        .into_iter()
+        .filter(|&run| selected[run])
         .collect();
-    let order = dispatch_order(&lengths, campaign.repetitions, jobs);
     let next_run = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);
     let worker = |job: usize| -> Result<(), CampaignError> {
@@ -184,6 +241,11 @@ pub fn run_campaign<O: CampaignObserver>(
         if job == 0 {
             observer.agent_ready(&agent.name(), jobs);
         }
+        scored
+            .lock()
+            .expect("no worker panics holding it")
+            .plan
+            .agent = agent.name();
         while !failed.load(Ordering::Relaxed) {
             let Some(&index) = order.get(next_run.fetch_add(1, Ordering::Relaxed)) else {
                 break;
@@ -236,7 +298,12 @@ pub fn run_campaign<O: CampaignObserver>(
                 scored.crashes += 1;
             }
             scored.records[index] = Some(record.clone());
-            save(&campaign.out, &scored.done(), total)?;
+            write_atomic(&campaign.out, scored.results().to_json().as_bytes()).map_err(
+                |source| CampaignError::Write {
+                    path: campaign.out.clone(),
+                    source,
+                },
+            )?;
             drop(scored);
             observer
                 .run_finished(run, &done)
@@ -263,7 +330,7 @@ pub fn run_campaign<O: CampaignObserver>(
     })?;
     let scored = scored.into_inner().expect("workers are done");
     Ok(CampaignReport {
-        results: Results::new(scored.done(), total, Vec::new()),
+        results: scored.results(),
         kept,
         crashes: scored.crashes,
         unplannable: campaign.routes.iter().filter(|(_, d)| d.is_err()).count(),
@@ -285,37 +352,37 @@ fn dispatch_order(lengths: &[f64], repetitions: usize, jobs: usize) -> Vec<usize
     order
 }
 
-/// Runs scored so far, by index.
+/// Runs scored so far, by index, and the file's plan.
 struct Scored {
     records: Vec<Option<RouteRecord>>,
     crashes: usize,
+    plan: CampaignPlan,
+    /// Runs this process drives (the whole campaign's, or its share's).
+    share: usize,
 }
 
 impl Scored {
-    /// The scored runs in leaderboard order.
-    fn done(&self) -> Vec<RouteRecord> {
-        self.records.iter().flatten().cloned().collect()
+    /// The results file so far: the scored runs in leaderboard order, and the plan.
+    fn results(&self) -> Results {
+        let done = self.records.iter().flatten().cloned().collect();
+        Results {
+            plan: Some(self.plan.clone()),
+            ..Results::new(done, self.share, Vec::new())
+        }
     }
-}
-
-/// Writes the results so far to `path` whole or not at all.
-fn save(path: &Path, records: &[RouteRecord], total: usize) -> Result<(), CampaignError> {
-    let results = Results::new(records.to_vec(), total, Vec::new());
-    write_atomic(path, results.to_json().as_bytes()).map_err(|source| CampaignError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
 }
 
 /// The records an earlier campaign of the same plan wrote to `campaign.out`, by run index
 /// (none if there is no file yet). Runs whose agent crashed are dropped so they run again. A
-/// record of another route, repetition or seed at its index means another plan: an error, as
-/// the file would otherwise mix two evaluations.
+/// record of another route, repetition or seed at its index, one outside the `selected` runs,
+/// or a file whose plan has other runs or another share means another plan: an error, as the
+/// file would otherwise mix two evaluations.
 fn earlier_records(
     campaign: &Campaign,
-    total: usize,
+    selected: &[bool],
 ) -> Result<Vec<Option<RouteRecord>>, CampaignError> {
     let path = &campaign.out;
+    let total = selected.len();
     let mut records = vec![None; total];
     let text = match read_capped_text(path, MAX_RESULTS_BYTES) {
         Ok(text) => text,
@@ -333,6 +400,27 @@ fn earlier_records(
         path: path.clone(),
         source,
     })?;
+    let other_plan = |reason: String| CampaignError::OtherPlan {
+        path: path.clone(),
+        reason,
+    };
+    if let Some(earlier) = &results.plan {
+        let planned = campaign.plan();
+        if earlier.fingerprint != planned.fingerprint {
+            return Err(other_plan(format!(
+                "it holds runs of other routes or settings ({} on {}, {} repetitions, seed {})",
+                earlier.routes, earlier.town, earlier.repetitions, earlier.seed
+            )));
+        }
+        if earlier.shard != planned.shard {
+            let share = |s: &Option<String>| s.clone().unwrap_or_else(|| "all runs".into());
+            return Err(other_plan(format!(
+                "it holds share {} and this evaluation drives {}",
+                share(&earlier.shard),
+                share(&planned.shard)
+            )));
+        }
+    }
     let routes = campaign.routes;
     for record in results.checkpoint.records {
         let index = record.index;
@@ -340,11 +428,14 @@ fn earlier_records(
         let spec = &routes[index % routes.len()].0;
         let expected_seed = campaign.world.seed.wrapping_add(repetition as u64);
         if index >= total
+            || !selected[index]
             || record.route_id != spec.id
             || record.meta.repetition != Some(repetition)
             || record.meta.seed != Some(expected_seed)
         {
-            let planned = if index < total {
+            let planned = if index < total && !selected[index] {
+                "no run of its share".to_string()
+            } else if index < total {
                 format!(
                     "route {} repetition {repetition} seed {expected_seed}",
                     spec.id
@@ -352,14 +443,11 @@ fn earlier_records(
             } else {
                 format!("only {total} runs")
             };
-            return Err(CampaignError::OtherPlan {
-                path: path.clone(),
-                reason: format!(
-                    "its run {index} is route {} repetition {:?} seed {:?}, but this \
-                     evaluation plans {planned} there",
-                    record.route_id, record.meta.repetition, record.meta.seed
-                ),
-            });
+            return Err(other_plan(format!(
+                "its run {index} is route {} repetition {:?} seed {:?}, but this evaluation \
+                 plans {planned} there",
+                record.route_id, record.meta.repetition, record.meta.seed
+            )));
         }
         if record.status != RouteEnd::AgentCrashed.status() {
             records[index] = Some(record);

@@ -6,6 +6,8 @@
 //! criteria (with the contacts of the previous world step), then step the world.
 
 pub mod campaign;
+pub mod merge;
+pub mod shard;
 pub mod suite;
 
 use std::time::Instant;

@@ -12,7 +12,8 @@
 //! `score_route` = RC) and `status`. Our additions are optional keys that LB1.0 readers ignore:
 //! `meta.repetition` and `meta.seed` on records, and `meta.records`, `meta.scores_std`,
 //! `meta.total_length`, `meta.duration_game`, `meta.duration_system`, `meta.infraction_counts`
-//! on the global record.
+//! on the global record, and a top-level `plan` ([`CampaignPlan`]: which campaign the records
+//! belong to, so that shards of one campaign can be merged and those of others refused).
 
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -362,6 +363,33 @@ pub struct Checkpoint {
     pub records: Vec<RouteRecord>,
 }
 
+/// Which campaign a results file's records belong to: what was driven, how, by whom and with
+/// which simulator, and which share of its runs this file holds.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CampaignPlan {
+    /// The route set or file as given (`--routes`), for people; `fingerprint` decides.
+    pub routes: String,
+    /// The town.
+    pub town: String,
+    /// A hash of the selected routes (ids, towns, keypoints) and the world and scoring
+    /// settings: two campaigns with the same fingerprint drive the same runs.
+    pub fingerprint: String,
+    /// Runs of each route.
+    pub repetitions: usize,
+    /// The seed of repetition 0.
+    pub seed: u64,
+    /// Runs of the whole campaign (routes x repetitions).
+    pub runs: usize,
+    /// Who drove (the agent's name; a served agent's names its model and checkpoint).
+    #[serde(default)]
+    pub agent: String,
+    /// The simulator, `sim-bridge VERSION`.
+    pub simulator: String,
+    /// The share this file holds, `K/N` (`eval --shard`); absent for the whole campaign.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<String>,
+}
+
 /// A leaderboard 1.0 results file.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Results {
@@ -383,6 +411,9 @@ pub struct Results {
     /// The global DS, RC, IS and the infraction rates per km, as "{:.3f}" strings.
     #[serde(default, deserialize_with = "strings_or_numbers")]
     pub values: Vec<String>,
+    /// The campaign these records belong to (absent in the leaderboard's own files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<CampaignPlan>,
 }
 
 /// Why a results file could not be read.
@@ -433,6 +464,7 @@ impl Results {
             labels: LABELS.iter().map(|s| s.to_string()).collect(),
             sensors,
             values,
+            plan: None,
         }
     }
 
