@@ -149,6 +149,12 @@ pub struct AgentError(pub String);
 pub trait Agent {
     /// A short name for results and logs.
     fn name(&self) -> String;
+    /// What drives, wherever it is served (a served agent's model, config, checkpoint and
+    /// version, not its address): results files of one campaign agree on it
+    /// (`sim-bridge results merge`).
+    fn identity(&self) -> String {
+        self.name()
+    }
     /// Called once before the first tick of a route.
     fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError>;
     /// Called once after the last tick of a route (CARLA's `destroy`), crashed or not.

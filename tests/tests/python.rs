@@ -1,6 +1,6 @@
 //! The Python client and the CARLA leaderboard adapter (proto/python) against a real server:
 //! runs their unittest suites with `python3`. Needs grpcio and grpcio-tools
-//! (`pip install -r proto/python/requirements.txt`, part of the README's test command); set
+//! (`pip install -r tests/requirements.txt`, part of the README's test command); set
 //! SSRDRIVE_SKIP_PYTHON=1 to skip on a machine without them.
 
 use std::path::Path;
@@ -21,7 +21,7 @@ fn python_client_and_carla_adapter_pass_their_suites() {
         .expect("python3 runs (set SSRDRIVE_SKIP_PYTHON=1 on a machine without it)");
     assert!(
         probe.status.success(),
-        "grpcio is missing: pip install -r proto/python/requirements.txt \
+        "grpcio is missing: pip install -r tests/requirements.txt \
          (or set SSRDRIVE_SKIP_PYTHON=1)\n{}",
         String::from_utf8_lossy(&probe.stderr)
     );

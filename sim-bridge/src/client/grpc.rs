@@ -183,6 +183,14 @@ impl Agent for GrpcAgent {
         )
     }
 
+    fn identity(&self) -> String {
+        let info = &self.info;
+        format!(
+            "{} ({}) {}, ssr-agent {}",
+            info.model, info.config_name, info.checkpoint, info.version
+        )
+    }
+
     fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.end_episode();
         self.trajectory.clear();

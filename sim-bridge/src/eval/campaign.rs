@@ -245,7 +245,7 @@ pub fn run_campaign<O: CampaignObserver>(
             .lock()
             .expect("no worker panics holding it")
             .plan
-            .agent = agent.name();
+            .agent = agent.identity();
         while !failed.load(Ordering::Relaxed) {
             let Some(&index) = order.get(next_run.fetch_add(1, Ordering::Relaxed)) else {
                 break;

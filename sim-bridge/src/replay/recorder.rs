@@ -73,6 +73,10 @@ impl Agent for LoggingAgent {
         self.inner.name()
     }
 
+    fn identity(&self) -> String {
+        self.inner.identity()
+    }
+
     fn start_route(&mut self, ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.inner.start_route(ctx)?;
         let name = format!(

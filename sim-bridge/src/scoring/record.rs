@@ -380,7 +380,7 @@ pub struct CampaignPlan {
     pub seed: u64,
     /// Runs of the whole campaign (routes x repetitions).
     pub runs: usize,
-    /// Who drove (the agent's name; a served agent's names its model and checkpoint).
+    /// What drove (a served agent: its model, config, checkpoint and version, not its address).
     #[serde(default)]
     pub agent: String,
     /// The simulator, `sim-bridge VERSION`.
