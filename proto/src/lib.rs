@@ -11,7 +11,8 @@
 //!   images in and out of PNG.
 //! - [`files`]: capped reads and atomic writes; [`error_text`]: how errors are printed;
 //!   [`logging`]: how both binaries log.
-//! - [`TICK_HZ`], [`TICK_S`]: the tick both sides step at.
+//! - [`TICK_HZ`], [`TICK_S`]: the tick both sides step at; [`EPISODE_KEY_HEADER`],
+//!   [`REPLICA_HEADER`]: the metadata that keeps an episode on one replica behind a balancer.
 
 #![forbid(unsafe_code)]
 
@@ -20,6 +21,15 @@
 pub const TICK_HZ: u32 = 20;
 /// One tick, seconds (exactly the nearest double to 0.05).
 pub const TICK_S: f64 = 1.0 / TICK_HZ as f64;
+
+/// gRPC metadata a client sends with `StartEpisode`, every `Step` and `EndEpisode` of an
+/// episode: a key of its choosing, the same for the whole episode, that a load balancer in front
+/// of several servers hashes so that every call of the episode reaches the replica holding its
+/// temporal state (`docker/envoy/`). A `Drive` stream stays on one replica by itself.
+pub const EPISODE_KEY_HEADER: &str = "x-ssrdrive-episode-key";
+/// gRPC metadata a server sends with every answer and error: its replica id
+/// (`ssr-agent serve --replica-id`).
+pub const REPLICA_HEADER: &str = "x-ssrdrive-replica";
 
 pub mod camera;
 pub mod command;

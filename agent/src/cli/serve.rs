@@ -103,6 +103,10 @@ pub struct ServeArgs {
     /// checkpoints from before the chain].
     #[arg(long, env = "SSR_AGENT_HISTORY")]
     history: Option<History>,
+    /// This server's name among replicas behind a load balancer, sent with every answer as
+    /// `x-ssrdrive-replica` metadata [default: HOSTNAME:PORT].
+    #[arg(long, env = "SSR_AGENT_REPLICA_ID")]
+    replica_id: Option<String>,
     /// Also shut down (draining as on SIGTERM) when standard input reaches its end: a parent
     /// that keeps a pipe to it open (sim-bridge's local server does) takes the server with it
     /// when it ends, even when it is killed.
@@ -161,6 +165,9 @@ impl ServeArgs {
         config.safety_stop = self.safety_stop.or(config.safety_stop);
         config.safety_motion = self.safety_motion.or(config.safety_motion);
         config.history = self.history.or(config.history);
+        if self.replica_id.is_some() {
+            config.replica_id = self.replica_id.clone();
+        }
         config.validate()?;
         Ok(config)
     }

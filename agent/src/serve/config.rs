@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
+use ssrdrive_proto::error_text::clipped;
 use ssrdrive_proto::files::{CappedReadError, read_capped_text};
 
 use crate::control::History;
@@ -99,6 +100,9 @@ pub struct ServeConfig {
     /// recursion of checkpoints validated before it) for every episode; `None` keeps the
     /// checkpoint's setting.
     pub history: Option<History>,
+    /// This server's name among replicas, sent with every answer as `x-ssrdrive-replica`
+    /// metadata; `None`: `HOSTNAME:PORT`.
+    pub replica_id: Option<String>,
 }
 
 impl Default for ServeConfig {
@@ -128,6 +132,7 @@ impl Default for ServeConfig {
             safety_stop: None,
             safety_motion: None,
             history: None,
+            replica_id: None,
         }
     }
 }
@@ -142,6 +147,8 @@ const TIMEOUT_RULE: &str = "must be in (0, 604800] seconds";
 /// Longest drain grace or drain timeout, seconds (an hour).
 pub const MAX_DRAIN_S: f64 = 3_600.0;
 const DRAIN_RULE: &str = "must be in [0, 3600] seconds";
+/// Longest replica id, characters.
+const MAX_REPLICA_ID_LEN: usize = 128;
 
 /// Why a config cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -209,6 +216,16 @@ impl ServeConfig {
         // Durations stay far below what `Duration` and the clock can hold (1e308 s panics).
         let timeout = |v: f64| v > 0.0 && v <= MAX_TIMEOUT_S;
         let drain = |v: f64| (0.0..=MAX_DRAIN_S).contains(&v);
+        if let Some(id) = &self.replica_id {
+            let printable = id.bytes().all(|b| b.is_ascii_graphic());
+            if id.is_empty() || id.len() > MAX_REPLICA_ID_LEN || !printable {
+                return invalid(
+                    "replica_id",
+                    clipped(id),
+                    "must be 1 to 128 printable ASCII characters without spaces",
+                );
+            }
+        }
         if !(1..=100_000).contains(&self.max_episodes) {
             return invalid("max_episodes", self.max_episodes, "must be in 1..=100000");
         }

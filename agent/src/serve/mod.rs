@@ -181,6 +181,26 @@ async fn set_health(reporter: &tonic_health::server::HealthReporter, status: Ser
         .await;
 }
 
+/// This machine's name (`HOSTNAME`, else the kernel's), for the default replica id; printable
+/// ASCII only.
+fn host_name() -> String {
+    let name = std::env::var("HOSTNAME")
+        .ok()
+        .or_else(|| std::fs::read_to_string("/proc/sys/kernel/hostname").ok())
+        .unwrap_or_default();
+    let name: String = name
+        .trim()
+        .chars()
+        .filter(|c| c.is_ascii_graphic())
+        .take(100)
+        .collect();
+    if name.is_empty() {
+        "localhost".into()
+    } else {
+        name
+    }
+}
+
 /// Serves on `listeners` until `shutdown` resolves, then drains and returns.
 pub async fn run(
     listeners: Listeners,
@@ -208,8 +228,16 @@ pub async fn run(
     let reflection_v1alpha = reflection().build_v1alpha()?;
     // Drive streams end (UNAVAILABLE) when this flips, so a drain does not wait on them.
     let (draining, drain_signal) = tokio::sync::watch::channel(false);
-    let agent = AgentServiceServer::new(AgentServiceImpl::new(Arc::clone(&engine), drain_signal))
-        .max_decoding_message_size(config.max_message_bytes());
+    let replica = config
+        .replica_id
+        .clone()
+        .unwrap_or_else(|| format!("{}:{}", host_name(), address.port()));
+    let agent = AgentServiceServer::new(AgentServiceImpl::new(
+        Arc::clone(&engine),
+        drain_signal,
+        &replica,
+    ))
+    .max_decoding_message_size(config.max_message_bytes());
 
     // Small answers must not wait for Nagle's algorithm.
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));

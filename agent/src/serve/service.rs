@@ -5,6 +5,10 @@
 //! a `step` (its `episode_id` may be empty). The episode belongs to the stream (unary calls on
 //! it get FAILED_PRECONDITION). A failed step ends the stream with its status; the episode is
 //! closed whenever the stream ends.
+//!
+//! Every answer and error carries the server's replica id as `x-ssrdrive-replica` metadata
+//! ([`ssrdrive_proto::REPLICA_HEADER`]), so a client behind a load balancer sees which replica
+//! served it.
 
 use std::pin::Pin;
 use std::sync::Arc;
@@ -16,6 +20,7 @@ use ssrdrive_proto::v1::drive_request::Message;
 use tokio::sync::watch;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
+use tonic::metadata::{Ascii, MetadataValue};
 use tonic::{Request, Response, Status, Streaming};
 
 use super::engine::{Engine, ServeError};
@@ -26,12 +31,41 @@ pub struct AgentServiceImpl {
     engine: Arc<Engine>,
     /// Flips to `true` when the server starts draining; open Drive streams then end.
     draining: watch::Receiver<bool>,
+    /// This server's replica id, sent with every answer.
+    replica: MetadataValue<Ascii>,
 }
 
 impl AgentServiceImpl {
-    /// Serves `engine`; Drive streams end once `draining` turns `true`.
-    pub fn new(engine: Arc<Engine>, draining: watch::Receiver<bool>) -> Self {
-        Self { engine, draining }
+    /// Serves `engine` as replica `replica` (printable ASCII, checked by the config); Drive
+    /// streams end once `draining` turns `true`.
+    pub fn new(engine: Arc<Engine>, draining: watch::Receiver<bool>, replica: &str) -> Self {
+        let replica = replica
+            .parse()
+            .unwrap_or_else(|_| MetadataValue::from_static("invalid-replica-id"));
+        Self {
+            engine,
+            draining,
+            replica,
+        }
+    }
+
+    /// `result` as the RPC's answer, with the replica id in its metadata.
+    fn reply<T>(&self, result: Result<T, Status>) -> Result<Response<T>, Status> {
+        match result {
+            Ok(message) => {
+                let mut response = Response::new(message);
+                response
+                    .metadata_mut()
+                    .insert(ssrdrive_proto::REPLICA_HEADER, self.replica.clone());
+                Ok(response)
+            }
+            Err(mut status) => {
+                status
+                    .metadata_mut()
+                    .insert(ssrdrive_proto::REPLICA_HEADER, self.replica.clone());
+                Err(status)
+            }
+        }
     }
 }
 
@@ -61,7 +95,11 @@ impl AgentService for AgentServiceImpl {
         &self,
         _request: Request<v1::GetAgentInfoRequest>,
     ) -> Result<Response<v1::AgentInfo>, Status> {
-        answer(&self.engine, "GetAgentInfo", Ok(self.engine.agent_info())).map(Response::new)
+        self.reply(answer(
+            &self.engine,
+            "GetAgentInfo",
+            Ok(self.engine.agent_info()),
+        ))
     }
 
     async fn start_episode(
@@ -69,7 +107,7 @@ impl AgentService for AgentServiceImpl {
         request: Request<v1::StartEpisodeRequest>,
     ) -> Result<Response<v1::StartEpisodeResponse>, Status> {
         let result = self.engine.start_episode(request.get_ref(), Driver::Unary);
-        answer(&self.engine, "StartEpisode", result).map(Response::new)
+        self.reply(answer(&self.engine, "StartEpisode", result))
     }
 
     async fn step(
@@ -77,7 +115,7 @@ impl AgentService for AgentServiceImpl {
         request: Request<v1::StepRequest>,
     ) -> Result<Response<v1::StepResponse>, Status> {
         let result = self.engine.step(request.into_inner(), Driver::Unary).await;
-        answer(&self.engine, "Step", result).map(Response::new)
+        self.reply(answer(&self.engine, "Step", result))
     }
 
     type DriveStream = StepStream;
@@ -92,7 +130,7 @@ impl AgentService for AgentServiceImpl {
         let first = tokio::select! {
             first = inbound.message() => first,
             _ = draining.wait_for(|draining| *draining) => {
-                return Err(Status::unavailable("the server is shutting down"));
+                return self.reply(Err(Status::unavailable("the server is shutting down")));
             }
         };
         let start = match first {
@@ -102,14 +140,17 @@ impl AgentService for AgentServiceImpl {
             Ok(_) => Err(ServeError::BadRequest(
                 "the first message of a Drive stream must be `start`".into(),
             )),
-            Err(status) => return Err(status),
+            Err(status) => return self.reply(Err(status)),
         };
-        let id = answer(
+        let started = answer(
             &self.engine,
             "Drive",
             start.and_then(|start| self.engine.start_episode(&start, Driver::Stream)),
-        )?
-        .episode_id;
+        );
+        let id = match started {
+            Ok(started) => started.episode_id,
+            Err(status) => return self.reply(Err(status)),
+        };
         let (sender, receiver) = tokio::sync::mpsc::channel(4);
         let engine = Arc::clone(&self.engine);
         tokio::spawn(async move {
@@ -143,7 +184,7 @@ impl AgentService for AgentServiceImpl {
             }
             let _ = engine.end_episode(&id, Driver::Stream);
         });
-        Ok(Response::new(Box::pin(ReceiverStream::new(receiver))))
+        self.reply(Ok(Box::pin(ReceiverStream::new(receiver)) as StepStream))
     }
 
     async fn end_episode(
@@ -153,7 +194,7 @@ impl AgentService for AgentServiceImpl {
         let result = self
             .engine
             .end_episode(&request.get_ref().episode_id, Driver::Unary);
-        answer(&self.engine, "EndEpisode", result).map(Response::new)
+        self.reply(answer(&self.engine, "EndEpisode", result))
     }
 }
 

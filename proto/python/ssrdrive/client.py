@@ -13,7 +13,9 @@ message (which names the field or camera at fault).
 
 from __future__ import annotations
 
+import os
 import time
+import uuid
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -41,9 +43,18 @@ class AgentError(Exception):
         self.message = message
 
 
-def _call(function, request, timeout):
+# Metadata every call of an episode carries: a key chosen here, which a load balancer in front
+# of several servers hashes to keep the episode on the replica holding its temporal state
+# (ssrdrive_proto::EPISODE_KEY_HEADER; docker/envoy/).
+EPISODE_KEY_HEADER = "x-ssrdrive-episode-key"
+# Metadata the server answers with: its replica id.
+REPLICA_HEADER = "x-ssrdrive-replica"
+
+
+def _call(function, request, timeout, key: Optional[str] = None):
+    metadata = ((EPISODE_KEY_HEADER, key),) if key else None
     try:
-        return function(request, timeout=timeout)
+        return function(request, timeout=timeout, metadata=metadata)
     except grpc.RpcError as error:
         raise AgentError(error.code().name, error.details() or "") from error
 
@@ -122,6 +133,7 @@ class Episode:
     id: str
     rig: list
     idle_timeout_s: float
+    key: str = ""
     _frame: int = field(default=0)
 
     def step(
@@ -152,7 +164,7 @@ class Episode:
             target_point=pb.EgoPoint(x=target_point[0], y=target_point[1]),
             debug=debug,
         )
-        answer = _call(self.client.stub.Step, request, self.client.timeout)
+        answer = _call(self.client.stub.Step, request, self.client.timeout, self.key)
         self._frame = frame + 1
         t = answer.timings
         return StepResult(
@@ -172,7 +184,10 @@ class Episode:
     def end(self) -> int:
         """Closes the episode; returns the steps it ran."""
         answer = _call(
-            self.client.stub.EndEpisode, pb.EndEpisodeRequest(episode_id=self.id), self.client.timeout
+            self.client.stub.EndEpisode,
+            pb.EndEpisodeRequest(episode_id=self.id),
+            self.client.timeout,
+            self.key,
         )
         return answer.steps
 
@@ -246,8 +261,9 @@ class AgentClient:
         )
         if seed is not None:
             request.seed = seed
-        answer = _call(self.stub.StartEpisode, request, self.timeout)
-        return Episode(self, answer.episode_id, rig, answer.idle_timeout_s)
+        key = f"py-{os.getpid():x}-{uuid.uuid4().hex}"
+        answer = _call(self.stub.StartEpisode, request, self.timeout, key)
+        return Episode(self, answer.episode_id, rig, answer.idle_timeout_s, key)
 
     def close(self) -> None:
         self.channel.close()

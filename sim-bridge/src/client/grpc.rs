@@ -1,8 +1,12 @@
 //! [`GrpcAgent`]: an [`Agent`] that drives through a remote `ssrdrive.v1.AgentService`. One
 //! episode per route: `StartEpisode` with the rig in `start_route`, one `Step` per tick with the
 //! rendered frames, `EndEpisode` in `end_route`. Any refused or failed call crashes the route
-//! (the leaderboard's "Failed - Agent crashed") with the server's status in the message.
+//! (the leaderboard's "Failed - Agent crashed") with the server's status in the message. Every
+//! call of an episode carries the same key of this client's choosing as
+//! `x-ssrdrive-episode-key` metadata ([`ssrdrive_proto::EPISODE_KEY_HEADER`]), which a load
+//! balancer in front of several servers hashes to keep the episode on one replica.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use glam::DVec2;
@@ -10,6 +14,7 @@ use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use ssrdrive_proto::{v1, wire};
+use tonic::metadata::{Ascii, MetadataValue};
 use tonic::transport::{Channel, Endpoint};
 use tonic_health::pb::health_check_response::ServingStatus;
 use tonic_health::pb::health_client::HealthClient;
@@ -53,7 +58,22 @@ pub struct GrpcAgent {
     rig: Rig,
     options: GrpcOptions,
     episode: Option<String>,
+    /// The current episode's balancer key (see the module doc).
+    episode_key: Option<MetadataValue<Ascii>>,
     trajectory: Vec<DVec2>,
+}
+
+/// A key no other episode of any client is likely to choose: this process, a count of its
+/// episodes and the clock.
+pub fn new_episode_key() -> MetadataValue<Ascii> {
+    static EPISODES: AtomicU64 = AtomicU64::new(0);
+    let count = EPISODES.fetch_add(1, Ordering::Relaxed);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    format!("{:x}-{count:x}-{nanos:x}", std::process::id())
+        .parse()
+        .expect("hex digits and dashes are valid metadata")
 }
 
 /// A failed call as an agent error: `what: CODE: message`.
@@ -101,12 +121,17 @@ impl GrpcAgent {
             rig,
             options,
             episode: None,
+            episode_key: None,
             trajectory: Vec::new(),
         })
     }
 
+    /// A call with the deadline and, within an episode, its balancer key.
     fn timed<T>(&self, message: T) -> tonic::Request<T> {
-        let mut request = tonic::Request::new(message);
+        let mut request = match &self.episode_key {
+            Some(key) => keyed(message, key),
+            None => tonic::Request::new(message),
+        };
         request.set_timeout(self.options.call_timeout);
         request
     }
@@ -121,6 +146,15 @@ impl GrpcAgent {
             }
         }
     }
+}
+
+/// `message` as a call of the episode whose balancer key is `key`.
+pub fn keyed<T>(message: T, key: &MetadataValue<Ascii>) -> tonic::Request<T> {
+    let mut request = tonic::Request::new(message);
+    request
+        .metadata_mut()
+        .insert(ssrdrive_proto::EPISODE_KEY_HEADER, key.clone());
+    request
 }
 
 /// How long [`connect_when_serving`] waits before it says that it is waiting.
@@ -194,6 +228,7 @@ impl Agent for GrpcAgent {
     fn start_route(&mut self, _ctx: &RouteContext<'_>) -> Result<(), AgentError> {
         self.end_episode();
         self.trajectory.clear();
+        self.episode_key = Some(new_episode_key());
         let request = self.timed(v1::StartEpisodeRequest {
             rig: Some(wire::rig_to_proto(&self.rig)),
             client: self.options.client.clone(),

@@ -17,7 +17,7 @@ use std::time::Duration;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 
-use super::grpc::{connect_when_serving, status_error};
+use super::grpc::{connect_when_serving, keyed, new_episode_key, status_error};
 use crate::agent::AgentError;
 
 /// What to run.
@@ -140,22 +140,24 @@ pub async fn run_load(
     for episode in 0..config.episodes {
         let channel = connect_when_serving(&config.target, Duration::from_secs(60)).await?;
         let mut client = AgentServiceClient::new(channel);
+        let key = new_episode_key();
+        let start = v1::StartEpisodeRequest {
+            rig: Some(config.rig.clone()),
+            client: format!("sim-bridge load episode {episode}"),
+            ..Default::default()
+        };
         let id = client
-            .start_episode(v1::StartEpisodeRequest {
-                rig: Some(config.rig.clone()),
-                client: format!("sim-bridge load episode {episode}"),
-                ..Default::default()
-            })
+            .start_episode(keyed(start, &key))
             .await
             .map_err(|s| status_error("StartEpisode", &s))?
             .into_inner()
             .episode_id;
-        clients.push((client, id));
+        clients.push((client, id, key));
     }
     let start = tokio::time::Instant::now() + Duration::from_millis(100);
     let end = start + config.duration;
     let mut tasks = Vec::with_capacity(config.episodes);
-    for (episode, (mut client, id)) in clients.into_iter().enumerate() {
+    for (episode, (mut client, id, key)) in clients.into_iter().enumerate() {
         // Episodes tick spread over one period, as independent simulators would.
         let offset = period.mul_f64(episode as f64 / config.episodes as f64);
         let (templates, progress) = (Arc::clone(&templates), Arc::clone(&progress));
@@ -188,7 +190,7 @@ pub async fn run_load(
                 let mut request = templates[(episode + k as usize) % templates.len()].clone();
                 request.episode_id = id.clone();
                 request.frame_index = k;
-                let mut request = tonic::Request::new(request);
+                let mut request = keyed(request, &key);
                 request.set_timeout(call_timeout);
                 let code = match client.step(request).await {
                     Ok(_) => "Ok".to_string(),
@@ -206,7 +208,7 @@ pub async fn run_load(
             }
             result.finished = tokio::time::Instant::now();
             let _ = client
-                .end_episode(v1::EndEpisodeRequest { episode_id: id })
+                .end_episode(keyed(v1::EndEpisodeRequest { episode_id: id }, &key))
                 .await;
             result
         }));
