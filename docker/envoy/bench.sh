@@ -32,7 +32,6 @@ config = yaml.safe_load(open("docker/envoy/envoy.yaml"))
 config["static_resources"]["listeners"][0]["address"]["socket_address"] = {"address": "127.0.0.1", "port_value": envoy}
 config["admin"]["address"]["socket_address"] = {"address": "127.0.0.1", "port_value": admin}
 cluster = config["static_resources"]["clusters"][0]
-cluster["type"] = "STATIC"
 cluster["load_assignment"]["endpoints"][0]["lb_endpoints"] = [
     {"endpoint": {"address": {"socket_address": {"address": "127.0.0.1", "port_value": replica}}}}]
 print(json.dumps(config))

@@ -52,7 +52,6 @@ fn envoy_config(port: u16, admin: u16, replicas: &[&Server]) -> Value {
         socket("127.0.0.1", port);
     config["admin"]["address"]["socket_address"] = socket("127.0.0.1", admin);
     let cluster = &mut config["static_resources"]["clusters"][0];
-    cluster["type"] = json!("STATIC");
     let endpoints: Vec<Value> = replicas
         .iter()
         .map(|server| {
