@@ -320,3 +320,71 @@ fn random_routes_have_the_asked_lengths_and_follow_their_seed() {
     );
     assert_ne!(xml::write(&routes), xml::write(&other));
 }
+
+#[test]
+fn a_keypoint_too_close_to_the_junction_for_a_full_lane_change_still_plans() {
+    // The first keypoint on the inner lane 5 m before the junction, the second 7 m into the
+    // road after the right turn, which leaves from the outer lane only: CARLA's planner joins
+    // them with a lane change over the 5 m left, and so does ours.
+    let map = Map::from_str(
+        "outer-lane-turn",
+        include_str!("maps/outer_lane_turn.xodr"),
+        MapOptions::default(),
+    )
+    .unwrap();
+    let spec = RouteSpec {
+        id: "0".into(),
+        town: "outer-lane-turn".into(),
+        keypoints: vec![
+            Keypoint {
+                position: DVec3::new(45.0, -1.75, 0.0),
+                yaw: 0.0,
+            },
+            Keypoint {
+                position: DVec3::new(58.25, -20.5, 0.0),
+                yaw: -std::f64::consts::FRAC_PI_2,
+            },
+        ],
+    };
+    let route = plan_route(&map, &spec).expect("the pair plans");
+    let first = route.points.first().unwrap().position;
+    let last = route.points.last().unwrap().position;
+    assert!(
+        (first - DVec3::new(45.0, -1.75, 0.0)).length() < 0.5,
+        "{first}"
+    );
+    assert!(
+        (last - DVec3::new(58.25, -20.5, 0.0)).length() < 0.5,
+        "{last}"
+    );
+    assert!(
+        route
+            .points
+            .iter()
+            .any(|p| p.option == RoadOption::ChangeLaneRight),
+        "the change is labelled"
+    );
+    assert!(
+        route.points.iter().any(|p| p.option == RoadOption::Right),
+        "the turn is labelled"
+    );
+    // The change happens before the junction, within the 5 m left.
+    let change = route
+        .points
+        .iter()
+        .find(|p| p.option == RoadOption::ChangeLaneRight)
+        .unwrap();
+    assert!(
+        (45.0..=50.5).contains(&change.position.x),
+        "{}",
+        change.position
+    );
+    // Consecutive points stay close: the jump is drawn, not skipped.
+    assert!(
+        route
+            .points
+            .windows(2)
+            .all(|w| (w[1].position - w[0].position).length() < 1.6),
+        "a continuous route"
+    );
+}

@@ -6,19 +6,22 @@
 //! kinds of edge: driving on into a successor lane, and a lane change into a same-direction
 //! neighbour outside junctions (costed [`LANE_CHANGE_LENGTH`] + [`LANE_CHANGE_PENALTY`] so that
 //! routes change lanes only when they must; shorter, and costlier, to land on a goal a full
-//! change would overshoot). A keypoint's goal is every lane it matches equally well: CARLA's
+//! change would overshoot; and where nothing else joins a keypoint pair, a second search allows
+//! changes squeezed into the room left before a lane ends, down to [`SQUEEZED_CHANGE_MIN`]:
+//! CARLA's lane-change edges have no minimum length). A keypoint's goal is every lane it matches equally well: CARLA's
 //! junctions hold connectors that overlap for tens of metres, and a route that reached the
 //! keypoint on the neighbouring connector must not be sent around the block to reach the other.
 //! The next search starts where the previous one arrived. Labels: points on junction connectors get LEFT,
 //! RIGHT or STRAIGHT from the heading change over the whole junction (|change| < 33 degrees is
 //! STRAIGHT, as CARLA's `_turn_decision`); points of a lane change get CHANGELANELEFT/RIGHT;
 //! everything else is LANEFOLLOW. A lane change is drawn as a smooth lateral transition over
-//! [`LANE_CHANGE_LENGTH`] metres rather than CARLA's jump, so a follower sees a drivable path.
+//! [`LANE_CHANGE_LENGTH`] metres (or the room there is) rather than CARLA's jump, so a follower
+//! sees a drivable path where there is one.
 
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use ssrdrive_proto::command::RoadOption;
 
 use super::xml::{Keypoint, RouteSpec};
@@ -33,6 +36,8 @@ pub const LANE_CHANGE_LENGTH: f64 = 12.0;
 pub const LANE_CHANGE_PENALTY: f64 = 20.0;
 /// Shortest lane change the planner draws to land on a goal, metres.
 const SHORT_CHANGE_MIN: f64 = 3.0;
+/// Least forward travel of a change squeezed in before a lane ends, metres.
+const SQUEEZED_CHANGE_MIN: f64 = 1.0;
 /// Search effort cap per keypoint pair (states expanded).
 const MAX_EXPANSIONS: usize = 200_000;
 /// Lanes whose centre lines pass this close to a keypoint (and agree with its heading and
@@ -81,7 +86,7 @@ enum Leg {
     /// Drive along `lane` from `from` to `to`.
     Drive { lane: LaneIdx, from: f64, to: f64 },
     /// Move from `from` at `s0` to `to` at `s1` over `length` metres ([`LANE_CHANGE_LENGTH`],
-    /// or less to land on a goal).
+    /// or less to land on a goal or where the lane ends first).
     Change {
         from: LaneIdx,
         s0: f64,
@@ -110,7 +115,10 @@ pub fn plan_route(map: &Map, spec: &RouteSpec) -> Result<DenseRoute, PlanError> 
     let mut legs: Vec<Leg> = Vec::new();
     let mut from = spots[0][0];
     for (i, goals) in spots.iter().enumerate().skip(1) {
-        let (found, reached) = search(map, from, goals).ok_or(PlanError::NoPath {
+        // Squeezed lane changes only where nothing else joins the pair: they reach export
+        // artefacts (links to a lane that starts beside the neighbour's end) on CARLA's towns.
+        let found = search(map, from, goals, false).or_else(|| search(map, from, goals, true));
+        let (found, reached) = found.ok_or(PlanError::NoPath {
             route: spec.id.clone(),
             from: i - 1,
             to: i,
@@ -171,7 +179,12 @@ impl Ord for Open {
 }
 
 /// A* from `start` to the first of `goals` reached; returns the legs and the goal reached.
-fn search(map: &Map, start: LaneSpot, goals: &[LaneSpot]) -> Option<(Vec<Leg>, LaneSpot)> {
+fn search(
+    map: &Map,
+    start: LaneSpot,
+    goals: &[LaneSpot],
+    squeeze: bool,
+) -> Option<(Vec<Leg>, LaneSpot)> {
     let goal_pos = map.lane(goals[0].lane).pose_at(goals[0].s).position;
     let h = |spot: LaneSpot| (map.lane(spot.lane).pose_at(spot.s).position - goal_pos).length();
     // Arena of visited states: (spot, parent, leg that reached it).
@@ -277,6 +290,35 @@ fn search(map: &Map, start: LaneSpot, goals: &[LaneSpot]) -> Option<(Vec<Leg>, L
             // Change as soon as there is room, and only where the target lane goes on after it.
             let s_end = spot.s + LANE_CHANGE_LENGTH;
             if s_end > lane.length() {
+                // Only when the pair has no path without it ([`plan_route`]'s second search):
+                // no room left for a full change before the lane ends (a keypoint a few metres
+                // before a junction whose turn leaves from the neighbour only), so as CARLA's
+                // planner, whose lane-change edges have no minimum length, change over what is
+                // left, onto a neighbour that goes on (its successors count), as long as the
+                // route still moves forward across it (a step back is a route no car can
+                // follow).
+                if !squeeze {
+                    continue;
+                }
+                let target = map.lane(n);
+                let end = lane.pose_at(lane.length());
+                let proj = target.project(end.position.truncate());
+                let land = target.pose_at(proj.s).position - end.position;
+                let forward = rest + land.truncate().dot(DVec2::from_angle(end.yaw));
+                let goes_on = !target.successors.is_empty() || proj.s < target.length() - 1.0;
+                if forward < SQUEEZED_CHANGE_MIN || !goes_on {
+                    continue;
+                }
+                let leg = Leg::Change {
+                    from: spot.lane,
+                    s0: spot.s,
+                    to: n,
+                    s1: proj.s,
+                    length: rest.max(0.0),
+                    left,
+                };
+                let cost = LANE_CHANGE_LENGTH + 3.0 * LANE_CHANGE_PENALTY;
+                push(LaneSpot { lane: n, s: proj.s }, cost, leg, &mut arena);
                 continue;
             }
             let end = lane.pose_at(s_end).position.truncate();
