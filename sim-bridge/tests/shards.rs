@@ -29,8 +29,8 @@ fn fails_saying(run: Output, says: &str) {
     assert!(stderr.contains(says), "{stderr}");
 }
 
-/// The expert on six short routes twice, into `out` (share `shard` of them, if given).
-fn eval(out: &Path, shard: Option<&str>, seed: &str) -> Output {
+/// The expert on six short routes twice, into `out`, with `extra` flags (`--shard K/N`, ...).
+fn eval(out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![
         "eval",
         "--routes",
@@ -39,15 +39,11 @@ fn eval(out: &Path, shard: Option<&str>, seed: &str) -> Output {
         "6",
         "--repetitions",
         "2",
-        "--seed",
-        seed,
         "--quiet",
         "--out",
         out.to_str().unwrap(),
     ];
-    if let Some(shard) = shard {
-        args.extend(["--shard", shard]);
-    }
+    args.extend(extra);
     sim_bridge(&args)
 }
 
@@ -80,10 +76,10 @@ fn four_shards_merge_into_the_single_process_file() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let single = dir.join("single.json");
-    ok(eval(&single, None, "0"));
+    ok(eval(&single, &[]));
     let parts: Vec<PathBuf> = (0..4).map(|k| dir.join(format!("part{k}.json"))).collect();
     for (k, part) in parts.iter().enumerate() {
-        ok(eval(part, Some(&format!("{k}/4")), "0"));
+        ok(eval(part, &["--shard", &format!("{k}/4")]));
         let json = without_wall_time(part);
         assert_eq!(json["plan"]["shard"], format!("{k}/4"));
         assert_eq!(json["_checkpoint"]["progress"], serde_json::json!([3, 3]));
@@ -96,14 +92,18 @@ fn four_shards_merge_into_the_single_process_file() {
     // A run in two parts.
     let twice = [parts[0].clone(), parts[1].clone(), parts[0].clone()];
     fails_saying(merge(&twice, &dir.join("x.json"), &[]), "is in both");
-    // A part of another campaign (another seed).
-    let other = dir.join("other.json");
-    ok(eval(&other, Some("3/4"), "7"));
-    let mixed = [parts[0].clone(), parts[1].clone(), parts[2].clone(), other];
-    fails_saying(
-        merge(&mixed, &dir.join("x.json"), &[]),
-        "come from different campaigns",
-    );
+    // A part of another campaign: another seed, another route timeout.
+    for (flags, says) in [
+        (&["--seed", "7"][..], "from seed 7"),
+        (&["--timeout", "30"][..], "route timeout"),
+    ] {
+        let other = dir.join("other.json");
+        ok(eval(&other, &[&["--shard", "3/4"][..], flags].concat()));
+        let mixed = [parts[0].clone(), parts[1].clone(), parts[2].clone(), other];
+        let run = merge(&mixed, &dir.join("x.json"), &[]);
+        fails_saying(run, "come from different campaigns");
+        fails_saying(merge(&mixed, &dir.join("x.json"), &[]), says);
+    }
     // A share missing: refused, or written as a partial file that says what is missing.
     let three = &parts[..3];
     fails_saying(
@@ -130,26 +130,12 @@ fn four_shards_merge_into_the_single_process_file() {
     );
     // Resuming a share into another share's file is refused.
     fails_saying(
-        sim_bridge(&[
-            "eval",
-            "--routes",
-            "train-small",
-            "--limit",
-            "6",
-            "--repetitions",
-            "2",
-            "--quiet",
-            "--shard",
-            "1/4",
-            "--resume",
-            "--out",
-            parts[0].to_str().unwrap(),
-        ]),
+        eval(&parts[0], &["--shard", "1/4", "--resume"]),
         "it holds share 0/4",
     );
     // A malformed share.
     fails_saying(
-        eval(&dir.join("x.json"), Some("4/4"), "0"),
+        eval(&dir.join("x.json"), &["--shard", "4/4"]),
         "shares count from 0 to 3",
     );
 }

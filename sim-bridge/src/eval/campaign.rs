@@ -64,10 +64,13 @@ impl Campaign<'_> {
     /// The results file's plan, before an agent has a name.
     pub fn plan(&self) -> CampaignPlan {
         let specs: Vec<&RouteSpec> = self.routes.iter().map(|(spec, _)| spec).collect();
-        let driven = format!(
-            "{specs:?} {:?} {:?} {}",
-            self.world, self.scoring, self.repetitions
-        );
+        // The timeout is not part of it: a resume may drive the rest shorter or longer (the
+        // plan names it apart, and a merge compares it).
+        let scoring = ScoringConfig {
+            timeout: None,
+            ..self.scoring.clone()
+        };
+        let driven = format!("{specs:?} {:?} {scoring:?}", self.world);
         CampaignPlan {
             routes: self.label.clone(),
             town: self.map.name.clone(),
@@ -75,6 +78,7 @@ impl Campaign<'_> {
             repetitions: self.repetitions,
             seed: self.world.seed,
             runs: self.runs(),
+            timeout_s: self.scoring.timeout,
             agent: String::new(),
             simulator: format!("sim-bridge {}", env!("CARGO_PKG_VERSION")),
             shard: self.shard.map(|s| s.to_string()),
@@ -408,8 +412,14 @@ fn earlier_records(
         let planned = campaign.plan();
         if earlier.fingerprint != planned.fingerprint {
             return Err(other_plan(format!(
-                "it holds runs of other routes or settings ({} on {}, {} repetitions, seed {})",
-                earlier.routes, earlier.town, earlier.repetitions, earlier.seed
+                "it holds runs of {} on {} from seed {} and this evaluation drives {} on {} \
+                 from seed {}, or other routes or world or scoring settings",
+                earlier.routes,
+                earlier.town,
+                earlier.seed,
+                planned.routes,
+                planned.town,
+                planned.seed
             )));
         }
         if earlier.shard != planned.shard {

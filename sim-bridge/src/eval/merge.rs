@@ -1,7 +1,8 @@
 //! Merging the results files of one campaign's shares (`eval --shard K/N`, [`super::shard`])
 //! into the file one process would have written, under the leaderboard's
 //! `merge_statistics.py` rules: every part must come from the same campaign (routes, settings,
-//! seed, repetitions, agent and simulator: their [`CampaignPlan`]s agree but for the share), no
+//! timeout, seed, repetitions, agent and simulator: their [`CampaignPlan`]s agree but for the
+//! share), no
 //! run may appear twice, and every run must be there unless missing runs are allowed, when the
 //! file says which are missing (entry status "Finished with missing data", each missing run
 //! listed in the global record's `meta.exceptions`). The global record is computed again from
@@ -171,39 +172,37 @@ pub fn merge(parts: &[Part], allow_missing: bool) -> Result<Merged, MergeError> 
     Ok(Merged { results, missing })
 }
 
-/// What differs between two plans but for the share, if anything.
+/// What differs between two plans but for the share, if anything (the plainest difference
+/// first: the fingerprint also covers the seed).
 fn difference(a: &CampaignPlan, b: &CampaignPlan) -> Option<String> {
-    let fields = [
-        (
-            "routes",
-            a.fingerprint != b.fingerprint,
-            &a.routes,
-            &b.routes,
-        ),
-        ("town", a.town != b.town, &a.town, &b.town),
-        ("agent", a.agent != b.agent, &a.agent, &b.agent),
-        (
-            "simulator",
-            a.simulator != b.simulator,
-            &a.simulator,
-            &b.simulator,
-        ),
-    ];
-    if let Some((name, _, x, y)) = fields.iter().find(|f| f.1) {
-        let detail = if *name == "routes" {
-            " (the routes, world or scoring settings differ)"
-        } else {
-            ""
-        };
-        return Some(format!("{name} `{x}` against `{y}`{detail}"));
-    }
     if (a.repetitions, a.seed, a.runs) != (b.repetitions, b.seed, b.runs) {
         return Some(format!(
             "{} repetitions from seed {} ({} runs) against {} from seed {} ({} runs)",
             a.repetitions, a.seed, a.runs, b.repetitions, b.seed, b.runs
         ));
     }
-    None
+    if a.timeout_s != b.timeout_s {
+        let timeout = |t: Option<f64>| t.map_or("the leaderboard's".into(), |t| format!("{t} s"));
+        return Some(format!(
+            "route timeout {} against {}",
+            timeout(a.timeout_s),
+            timeout(b.timeout_s)
+        ));
+    }
+    let fields = [
+        ("town", &a.town, &b.town),
+        ("agent", &a.agent, &b.agent),
+        ("simulator", &a.simulator, &b.simulator),
+    ];
+    if let Some((name, x, y)) = fields.iter().find(|(_, x, y)| x != y) {
+        return Some(format!("{name} `{x}` against `{y}`"));
+    }
+    (a.fingerprint != b.fingerprint).then(|| {
+        format!(
+            "routes `{}` against `{}`: the routes, world or scoring settings differ",
+            a.routes, b.routes
+        )
+    })
 }
 
 /// A run no part holds.

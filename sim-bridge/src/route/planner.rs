@@ -288,8 +288,15 @@ fn search(
                 }
             }
             // Change as soon as there is room, and only where the target lane goes on after it.
+            let target = map.lane(n);
             let s_end = spot.s + LANE_CHANGE_LENGTH;
-            if s_end > lane.length() {
+            let (s1, length, penalties) = if s_end <= lane.length() {
+                let proj = target.project(lane.pose_at(s_end).position.truncate());
+                if proj.s >= target.length() - 1.0 {
+                    continue;
+                }
+                (proj.s, LANE_CHANGE_LENGTH, 1.0)
+            } else if squeeze {
                 // Only when the pair has no path without it ([`plan_route`]'s second search):
                 // no room left for a full change before the lane ends (a keypoint a few metres
                 // before a junction whose turn leaves from the neighbour only), so as CARLA's
@@ -297,10 +304,6 @@ fn search(
                 // left, onto a neighbour that goes on (its successors count), as long as the
                 // route still moves forward across it (a step back is a route no car can
                 // follow).
-                if !squeeze {
-                    continue;
-                }
-                let target = map.lane(n);
                 let end = lane.pose_at(lane.length());
                 let proj = target.project(end.position.truncate());
                 let land = target.pose_at(proj.s).position - end.position;
@@ -309,38 +312,20 @@ fn search(
                 if forward < SQUEEZED_CHANGE_MIN || !goes_on {
                     continue;
                 }
-                let leg = Leg::Change {
-                    from: spot.lane,
-                    s0: spot.s,
-                    to: n,
-                    s1: proj.s,
-                    length: rest.max(0.0),
-                    left,
-                };
-                let cost = LANE_CHANGE_LENGTH + 3.0 * LANE_CHANGE_PENALTY;
-                push(LaneSpot { lane: n, s: proj.s }, cost, leg, &mut arena);
+                (proj.s, rest.max(0.0), 3.0)
+            } else {
                 continue;
-            }
-            let end = lane.pose_at(s_end).position.truncate();
-            let proj = map.lane(n).project(end);
-            if proj.s >= map.lane(n).length() - 1.0 {
-                continue;
-            }
+            };
             let leg = Leg::Change {
                 from: spot.lane,
                 s0: spot.s,
                 to: n,
-                s1: proj.s,
-                length: LANE_CHANGE_LENGTH,
+                s1,
+                length,
                 left,
             };
-            let next = LaneSpot { lane: n, s: proj.s };
-            push(
-                next,
-                LANE_CHANGE_LENGTH + LANE_CHANGE_PENALTY,
-                leg,
-                &mut arena,
-            );
+            let cost = LANE_CHANGE_LENGTH + penalties * LANE_CHANGE_PENALTY;
+            push(LaneSpot { lane: n, s: s1 }, cost, leg, &mut arena);
         }
     }
     None

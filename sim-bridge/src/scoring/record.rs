@@ -372,7 +372,8 @@ pub struct CampaignPlan {
     /// The town.
     pub town: String,
     /// A hash of the selected routes (ids, towns, keypoints) and the world and scoring
-    /// settings: two campaigns with the same fingerprint drive the same runs.
+    /// settings but `timeout_s`: two campaigns with the same fingerprint, seed and timeout
+    /// drive the same runs (a resume may add repetitions or change the timeout).
     pub fingerprint: String,
     /// Runs of each route.
     pub repetitions: usize,
@@ -380,6 +381,9 @@ pub struct CampaignPlan {
     pub seed: u64,
     /// Runs of the whole campaign (routes x repetitions).
     pub runs: usize,
+    /// A fixed route timeout, seconds (`eval --timeout`); absent: the leaderboard's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeout_s: Option<f64>,
     /// What drove (a served agent: its model, config, checkpoint and version, not its address).
     #[serde(default)]
     pub agent: String,
