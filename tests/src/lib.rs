@@ -1,6 +1,7 @@
 //! Helpers for the end-to-end tests in tests/tests/: the workspace's built binaries and a real
 //! `ssr-agent serve` process on an ephemeral loopback port, killed when dropped, or one
-//! [`SharedServer`] for every test of a test binary, killed when the binary exits.
+//! [`SharedServer`] for every test of a test binary, killed when the binary exits; a valid
+//! synthetic step; whether the Python-backed tests are skipped, and YAML read through Python.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -10,10 +11,58 @@ use std::sync::{Mutex, Once, OnceLock};
 use std::time::{Duration, Instant};
 
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
+use ssrdrive_proto::{v1, wire};
 use tonic::transport::Channel;
 use tonic_health::pb::HealthCheckRequest;
 use tonic_health::pb::health_check_response::ServingStatus;
 use tonic_health::pb::health_client::HealthClient;
+
+/// A valid step with flat grey frames for `rig`, the ego driving east at 5 m/s.
+pub fn synthetic_step(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRequest {
+    v1::StepRequest {
+        episode_id: episode_id.into(),
+        frame_index,
+        timestamp_s: frame_index as f64 * 0.05,
+        images: wire::rgb_images(rig, |c| vec![100; (c.width * c.height * 3) as usize]),
+        speed_mps: 5.0,
+        pose: Some(v1::Pose {
+            x: frame_index as f64 * 0.25,
+            ..Default::default()
+        }),
+        command: 4,
+        target_point: Some(v1::EgoPoint { x: 20.0, y: 0.0 }),
+        debug: false,
+    }
+}
+
+/// Whether SSRDRIVE_SKIP_PYTHON asks to skip the tests that need Python and its packages (from
+/// tests/requirements.txt); says so for `what`.
+pub fn python_skipped(what: &str) -> bool {
+    let skipped = std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some();
+    if skipped {
+        eprintln!("SSRDRIVE_SKIP_PYTHON is set: {what} is skipped");
+    }
+    skipped
+}
+
+/// The YAML document at `path` as JSON, read with Python's yaml (from tests/requirements.txt).
+pub fn yaml_as_json(path: &std::path::Path) -> serde_json::Value {
+    let run = Command::new("python3")
+        .args([
+            "-c",
+            "import json, sys, yaml; print(json.dumps(yaml.safe_load(open(sys.argv[1]))))",
+        ])
+        .arg(path)
+        .output()
+        .expect("python3 runs");
+    assert!(
+        run.status.success(),
+        "{}: {}",
+        path.display(),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&run.stdout).expect("JSON from json.dumps")
+}
 
 /// A binary of this workspace, built by `cargo test --workspace` into the same profile folder
 /// as this test (target/<profile>/).

@@ -6,30 +6,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use serde_json::Value;
-use ssrdrive_tests::binary;
+use ssrdrive_tests::{binary, python_skipped, yaml_as_json};
 
 fn docker_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../docker")
-}
-
-/// The YAML document at `path`, as JSON.
-fn yaml(path: &Path) -> Value {
-    let run = Command::new("python3")
-        .args([
-            "-c",
-            "import json, sys, yaml; print(json.dumps(yaml.safe_load(open(sys.argv[1]))))",
-        ])
-        .arg(path)
-        .output()
-        .expect("python3 runs");
-    assert!(
-        run.status.success(),
-        "{}: {}",
-        path.display(),
-        String::from_utf8_lossy(&run.stderr)
-    );
-    serde_json::from_slice(&run.stdout).unwrap()
 }
 
 /// Every `--flag` of `sim-bridge eval --help`.
@@ -55,11 +35,10 @@ fn flags<'a>(args: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
 
 #[test]
 fn the_indexed_job_splits_by_the_completion_index_and_the_merge_reads_every_part() {
-    if std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some() {
-        eprintln!("SSRDRIVE_SKIP_PYTHON is set: the manifest check is skipped");
+    if python_skipped("the manifest check") {
         return;
     }
-    let job = yaml(&docker_dir().join("k8s/eval-indexed-job.yaml"));
+    let job = yaml_as_json(&docker_dir().join("k8s/eval-indexed-job.yaml"));
     assert_eq!(job["kind"], "Job");
     assert_eq!(job["spec"]["completionMode"], "Indexed");
     let shares = job["spec"]["completions"].as_u64().unwrap();
@@ -86,7 +65,7 @@ fn the_indexed_job_splits_by_the_completion_index_and_the_merge_reads_every_part
     for flag in flags(args[1..].iter().copied()) {
         assert!(known.iter().any(|k| k == flag), "eval has no {flag}");
     }
-    let merge = yaml(&docker_dir().join("k8s/merge-job.yaml"));
+    let merge = yaml_as_json(&docker_dir().join("k8s/merge-job.yaml"));
     let script = merge["spec"]["template"]["spec"]["containers"][0]["args"][0]
         .as_str()
         .unwrap();

@@ -8,7 +8,7 @@ use std::time::Duration;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use ssrdrive_proto::v1::drive_request::Message;
-use ssrdrive_proto::wire;
+use ssrdrive_tests::synthetic_step as step;
 use ssrdrive_tests::{Server, SharedServer, runtime};
 use tonic::Code;
 use tonic::transport::Channel;
@@ -36,24 +36,6 @@ async fn start(client: &mut Client, rig: &v1::Rig) -> String {
         .unwrap()
         .into_inner()
         .episode_id
-}
-
-/// A valid step with flat grey frames, the ego driving east at 5 m/s.
-fn step(episode_id: &str, frame_index: u64, rig: &v1::Rig) -> v1::StepRequest {
-    v1::StepRequest {
-        episode_id: episode_id.into(),
-        frame_index,
-        timestamp_s: frame_index as f64 * 0.05,
-        images: wire::rgb_images(rig, |c| vec![100; (c.width * c.height * 3) as usize]),
-        speed_mps: 5.0,
-        pose: Some(v1::Pose {
-            x: frame_index as f64 * 0.25,
-            ..Default::default()
-        }),
-        command: 4,
-        target_point: Some(v1::EgoPoint { x: 20.0, y: 0.0 }),
-        debug: false,
-    }
 }
 
 async fn code_of<T>(call: impl Future<Output = Result<T, tonic::Status>>) -> Code {

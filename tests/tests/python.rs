@@ -6,12 +6,11 @@
 use std::path::Path;
 use std::process::Command;
 
-use ssrdrive_tests::Server;
+use ssrdrive_tests::{Server, python_skipped};
 
 #[test]
 fn python_client_and_carla_adapter_pass_their_suites() {
-    if std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some() {
-        eprintln!("SSRDRIVE_SKIP_PYTHON is set: the Python client suite is skipped");
+    if python_skipped("the Python client suite") {
         return;
     }
     let python_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../proto/python");
@@ -94,8 +93,7 @@ fn stub_file(cwd: &Path, env: &[(&str, &Path)]) -> String {
 
 #[test]
 fn the_client_installs_with_pip_and_writes_nothing_into_its_source() {
-    if std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some() {
-        eprintln!("SSRDRIVE_SKIP_PYTHON is set: the Python packaging test is skipped");
+    if python_skipped("the Python packaging test") {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -153,8 +151,7 @@ fn the_client_installs_with_pip_and_writes_nothing_into_its_source() {
 
 #[test]
 fn the_example_sends_a_synthetic_frame_to_a_server() {
-    if std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some() {
-        eprintln!("SSRDRIVE_SKIP_PYTHON is set: the Python example is skipped");
+    if python_skipped("the Python example") {
         return;
     }
     let python_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../proto/python");

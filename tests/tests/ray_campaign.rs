@@ -10,7 +10,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use ssrdrive_tests::binary;
+use ssrdrive_tests::{binary, python_skipped};
 
 fn driver() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim-bridge/campaign/ray_campaign.py")
@@ -106,8 +106,7 @@ fn parent_of(pid: u32) -> u32 {
 
 #[test]
 fn a_ray_campaign_merges_into_the_single_process_file_even_when_a_worker_dies() {
-    if std::env::var_os("SSRDRIVE_SKIP_PYTHON").is_some() {
-        eprintln!("SSRDRIVE_SKIP_PYTHON is set: the Ray campaign test is skipped");
+    if python_skipped("the Ray campaign test") {
         return;
     }
     let probe = Command::new("python3")
