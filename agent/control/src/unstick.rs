@@ -9,7 +9,9 @@
 //!
 //! A light the network sees red or yellow (the light head's [`Beliefs::light`], probability at
 //! least [`Unstick::light_hold_probability`]) holds the car: no creep starts and both waits
-//! count again from the last tick it saw one. The plain wait is for the network's inertia, not
+//! count again from the last tick it saw one, for at most [`Unstick::after_s`] of seeing it
+//! without a break (no light stays red that long; on Town02 a green lamp cut by the top of the
+//! frame held a car for good). The plain wait is for the network's inertia, not
 //! for a light: a car that did not start on green, held past [`Unstick::after_s`], would
 //! otherwise creep into the next red (seen on Town02, where the head stands beside the line in
 //! full view). The other way round, a light the light head sees green counts as nothing to
@@ -60,7 +62,8 @@ pub struct Unstick {
     /// Throttle while below the creep speed.
     pub creep_throttle: f32,
     /// The light head's probability of a red or yellow light ahead from which the car holds
-    /// (no creep; the waits count from the last such tick).
+    /// (no creep; the waits count from the last such tick), for at most [`Unstick::after_s`]
+    /// of seeing it without a break.
     pub light_hold_probability: f32,
 }
 
@@ -134,6 +137,8 @@ pub struct UnstickState {
     stopped_ticks: u32,
     clear_ticks: u32,
     creep_ticks_left: u32,
+    /// Consecutive ticks the light head has seen a light to stop for.
+    light_ticks: u32,
 }
 
 impl UnstickState {
@@ -151,8 +156,18 @@ impl UnstickState {
         if !rule.enabled {
             return (control, false);
         }
-        if rule.light_holds(beliefs) {
-            *self = Self::default();
+        // A light seen red for longer than the plain wait is longer than any light stays red:
+        // a lamp half out of the frame, or another approach's; the waits then go on.
+        self.light_ticks = if rule.light_holds(beliefs) {
+            self.light_ticks + 1
+        } else {
+            0
+        };
+        if self.light_ticks > 0 && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
+            *self = Self {
+                light_ticks: self.light_ticks,
+                ..Self::default()
+            };
             return (control, false);
         }
         if self.creep_ticks_left == 0 {
