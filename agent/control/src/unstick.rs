@@ -9,8 +9,8 @@
 //!
 //! A light the network sees red or yellow (the light head's [`Beliefs::light`], probability at
 //! least [`Unstick::light_hold_probability`]) holds the car: no creep starts and both waits
-//! count again from the last tick it saw one, for at most [`Unstick::after_s`] of seeing it
-//! without a break (no light stays red that long; on Town02 a green lamp cut by the top of the
+//! count again from the last tick it saw one, for at most [`Unstick::after_s`] of seeing it in
+//! one standstill (no light stays red that long; on Town02 a green lamp cut by the top of the
 //! frame held a car for good). The plain wait is for the network's inertia, not
 //! for a light: a car that did not start on green, held past [`Unstick::after_s`], would
 //! otherwise creep into the next red (seen on Town02, where the head stands beside the line in
@@ -63,7 +63,7 @@ pub struct Unstick {
     pub creep_throttle: f32,
     /// The light head's probability of a red or yellow light ahead from which the car holds
     /// (no creep; the waits count from the last such tick), for at most [`Unstick::after_s`]
-    /// of seeing it without a break.
+    /// of seeing it in one standstill.
     pub light_hold_probability: f32,
 }
 
@@ -137,7 +137,7 @@ pub struct UnstickState {
     stopped_ticks: u32,
     clear_ticks: u32,
     creep_ticks_left: u32,
-    /// Consecutive ticks the light head has seen a light to stop for.
+    /// Ticks of this standstill in which the light head saw a light to stop for.
     light_ticks: u32,
 }
 
@@ -156,14 +156,16 @@ impl UnstickState {
         if !rule.enabled {
             return (control, false);
         }
-        // A light seen red for longer than the plain wait is longer than any light stays red:
-        // a lamp half out of the frame, or another approach's; the waits then go on.
-        self.light_ticks = if rule.light_holds(beliefs) {
-            self.light_ticks + 1
-        } else {
+        // A light seen red for longer than the plain wait in one standstill (flicker or not)
+        // is longer than any light stays red: a lamp half out of the frame, or another
+        // approach's; the waits then go on.
+        let holds = rule.light_holds(beliefs);
+        self.light_ticks = if speed >= STOPPED_SPEED {
             0
+        } else {
+            self.light_ticks + u32::from(holds)
         };
-        if self.light_ticks > 0 && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
+        if holds && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
             *self = Self {
                 light_ticks: self.light_ticks,
                 ..Self::default()

@@ -605,13 +605,22 @@ fn a_light_seen_red_holds_the_car_and_one_seen_green_is_nothing_to_wait_for() {
     };
     let plain = ticks(rule.after_s);
     let early = ticks(rule.clear_after_s);
-    // Seen red: no creep while a light can stay red; seen red without a break for longer
-    // than the plain wait, the hold lifts and the plain wait runs from there.
+    // Seen red: no creep while a light can stay red; seen red for longer than the plain wait
+    // in one standstill, flickering or not, the hold lifts and the plain wait runs from there.
     assert_eq!(first_creep(plain, &|_| light(0.01, 0.98)), None);
     assert_eq!(
         first_creep(plain * 3, &|_| light(0.01, 0.98)),
         Some(2 * plain - 2)
     );
+    let flicker = |tick: usize| {
+        if tick % 10 == 0 {
+            light(0.4, 0.4)
+        } else {
+            light(0.01, 0.98)
+        }
+    };
+    let lifted = first_creep(plain * 4, &flicker).expect("the hold lifts");
+    assert!(lifted < 3 * plain, "{lifted}");
     // Seen green: the light counts as served and the early creep comes.
     assert_eq!(first_creep(plain, &|_| light(0.98, 0.01)), Some(early - 1));
     // Red until a tick, then unsure of the colour: the plain wait counts from that tick.
