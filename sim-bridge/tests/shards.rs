@@ -133,6 +133,14 @@ fn four_shards_merge_into_the_single_process_file() {
         eval(&parts[0], &["--shard", "1/4", "--resume"]),
         "it holds share 0/4",
     );
+    // Resuming with another agent is refused.
+    fails_saying(
+        eval(
+            &parts[0],
+            &["--shard", "0/4", "--resume", "--agent", "oracle-plan"],
+        ),
+        "were driven by expert",
+    );
     // A malformed share.
     fails_saying(
         eval(&dir.join("x.json"), &["--shard", "4/4"]),

@@ -218,10 +218,10 @@ pub fn run_campaign<O: CampaignObserver>(
         }
     }
     let share = selected.iter().filter(|&&s| s).count();
-    let records = if campaign.resume {
+    let (records, earlier_agent) = if campaign.resume {
         earlier_records(campaign, &selected)?
     } else {
-        vec![None; total]
+        (vec![None; total], None)
     };
     let kept = records.iter().flatten().count();
     if campaign.resume {
@@ -245,11 +245,21 @@ pub fn run_campaign<O: CampaignObserver>(
         if job == 0 {
             observer.agent_ready(&agent.name(), jobs);
         }
+        let identity = agent.identity();
+        // Resumed runs of another agent would mix two evaluations in one file.
+        if let Some(earlier) = earlier_agent.as_ref().filter(|a| **a != identity) {
+            return Err(CampaignError::OtherPlan {
+                path: campaign.out.clone(),
+                reason: format!(
+                    "its runs were driven by {earlier} and this evaluation's agent is {identity}"
+                ),
+            });
+        }
         scored
             .lock()
             .expect("no worker panics holding it")
             .plan
-            .agent = agent.identity();
+            .agent = identity;
         while !failed.load(Ordering::Relaxed) {
             let Some(&index) = order.get(next_run.fetch_add(1, Ordering::Relaxed)) else {
                 break;
@@ -376,22 +386,23 @@ impl Scored {
     }
 }
 
+/// The runs kept from an earlier results file, by run index, and the agent that drove them
+/// (where the file names it).
+type EarlierRuns = (Vec<Option<RouteRecord>>, Option<String>);
+
 /// The records an earlier campaign of the same plan wrote to `campaign.out`, by run index
 /// (none if there is no file yet). Runs whose agent crashed are dropped so they run again. A
 /// record of another route, repetition or seed at its index, one outside the `selected` runs,
 /// or a file whose plan has other runs or another share means another plan: an error, as the
 /// file would otherwise mix two evaluations.
-fn earlier_records(
-    campaign: &Campaign,
-    selected: &[bool],
-) -> Result<Vec<Option<RouteRecord>>, CampaignError> {
+fn earlier_records(campaign: &Campaign, selected: &[bool]) -> Result<EarlierRuns, CampaignError> {
     let path = &campaign.out;
     let total = selected.len();
     let mut records = vec![None; total];
     let text = match read_capped_text(path, MAX_RESULTS_BYTES) {
         Ok(text) => text,
         Err(CappedReadError::Io(e)) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Ok(records);
+            return Ok((records, None));
         }
         Err(source) => {
             return Err(CampaignError::Read {
@@ -463,7 +474,11 @@ fn earlier_records(
             records[index] = Some(record);
         }
     }
-    Ok(records)
+    let agent = results
+        .plan
+        .map(|plan| plan.agent)
+        .filter(|a| !a.is_empty());
+    Ok((records, agent))
 }
 
 #[cfg(test)]
