@@ -2,7 +2,8 @@
 # What Envoy adds to a step: one ssr-agent replica on loopback, Envoy (envoy.yaml, its addresses
 # rewritten for loopback) in front of it, and `sim-bridge load` alternating between the replica
 # directly and through Envoy, ROUNDS times each, in one run. Prints every load's p50, p99 and
-# steps/s, then the medians and Envoy's added p50 and p99 (ms) and its steps/s ratio.
+# steps/s, then the medians and Envoy's added p50 and p99 (ms) and its steps/s ratio, and the
+# median of the rounds' own differences (robust to the machine's drift between rounds).
 #
 #   docker/envoy/bench.sh                   # 3 rounds of 20 s, 4 episodes at 10 Hz
 #   ROUNDS=5 SECONDS_EACH=30 EPISODES=8 ENVOY_THREADS=2 docker/envoy/bench.sh
@@ -44,9 +45,12 @@ load() {  # $1: port, $2: output JSON
         --duration "$SECONDS_EACH" --quiet --out "$2" > /dev/null
 }
 load "$replica_port" "$work/warmup.json"          # waits until SERVING, warms the caches
-for round in $(seq 1 "$ROUNDS"); do
-    load "$replica_port" "$work/direct-$round.json"
-    load "$envoy_port" "$work/envoy-$round.json"
+for round in $(seq 1 "$ROUNDS"); do  # the first of the pair alternates
+    if (( round % 2 )); then
+        load "$replica_port" "$work/direct-$round.json"; load "$envoy_port" "$work/envoy-$round.json"
+    else
+        load "$envoy_port" "$work/envoy-$round.json"; load "$replica_port" "$work/direct-$round.json"
+    fi
 done
 python3 - "$work" "$ROUNDS" <<'EOF'
 import json, statistics, sys
@@ -60,10 +64,15 @@ def figures(kind):
         rows.append((latency["p50"], latency["p99"], report["rps"], errors))
         print(f"{kind:6} round {r}: p50 {latency['p50']:.2f} ms  p99 {latency['p99']:.2f} ms  "
               f"{report['rps']:.1f} steps/s  {errors} errors")
-    return [statistics.median(column) for column in zip(*rows)]
-direct, envoy = figures("direct"), figures("envoy")
+    return rows
+direct_rows, envoy_rows = figures("direct"), figures("envoy")
+direct, envoy = ([statistics.median(column) for column in zip(*rows)] for rows in (direct_rows, envoy_rows))
+# A round's two loads run back to back: the machine's drift between rounds cancels in the
+# round's difference.
+paired = [statistics.median(e[i] - d[i] for d, e in zip(direct_rows, envoy_rows)) for i in (0, 1)]
 print(f"median direct: p50 {direct[0]:.2f} ms, p99 {direct[1]:.2f} ms, {direct[2]:.1f} steps/s")
 print(f"median envoy:  p50 {envoy[0]:.2f} ms, p99 {envoy[1]:.2f} ms, {envoy[2]:.1f} steps/s")
 print(f"Envoy adds {envoy[0] - direct[0]:+.2f} ms at p50 and {envoy[1] - direct[1]:+.2f} ms at p99; "
       f"steps/s ratio {envoy[2] / direct[2]:.3f}")
+print(f"median of the rounds' differences: {paired[0]:+.2f} ms at p50, {paired[1]:+.2f} ms at p99")
 EOF
