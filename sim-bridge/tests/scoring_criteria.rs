@@ -158,6 +158,8 @@ mod scoring {
         scorer: RouteScorer<'a>,
         t: f64,
         end: Option<RouteEnd>,
+        /// The background vehicles' mean speed every tick.
+        traffic_speed: Option<f64>,
     }
 
     impl<'a> Drive<'a> {
@@ -170,6 +172,7 @@ mod scoring {
                 scorer: RouteScorer::new(map, route, config),
                 t: 0.0,
                 end: None,
+                traffic_speed: None,
             }
         }
 
@@ -181,7 +184,9 @@ mod scoring {
             lights: &[LightState],
         ) -> Option<RouteEnd> {
             assert!(self.end.is_none(), "ticked after the route ended");
-            self.end = self.scorer.tick(self.t, &ego, collisions, lights);
+            self.end = self
+                .scorer
+                .tick(self.t, &ego, collisions, lights, self.traffic_speed);
             self.t += DT;
             self.end
         }
@@ -306,6 +311,28 @@ mod scoring {
         assert_eq!(r.scores.score_composed, 100.0);
         assert!(r.infractions.outside_route_lanes.is_empty());
         assert!(close(r.meta.route_length, 200.0, 1e-6));
+    }
+
+    #[test]
+    fn bench2drive_figures_of_a_clean_drive_behind_faster_traffic() {
+        let map = straight_map();
+        let route = straight_route(&map);
+        let mut d = Drive::new(&map, &route);
+        d.traffic_speed = Some(10.0);
+        d.cruise(0.0, 260.0, 8.0, |_| -1.75, no_lights);
+        let figures = d.finish().meta.bench2drive.expect("figures");
+        assert!(figures.success);
+        // Every checkpoint: 8 m/s against the traffic's 10.
+        assert!(
+            close(figures.efficiency.unwrap(), 80.0, 1e-9),
+            "{figures:?}"
+        );
+        assert_eq!(figures.comfort, Some(100.0));
+        // Without background traffic every checkpoint is 100 %.
+        let mut alone = Drive::new(&map, &route);
+        alone.cruise(0.0, 260.0, 8.0, |_| -1.75, no_lights);
+        let figures = alone.finish().meta.bench2drive.expect("figures");
+        assert_eq!(figures.efficiency, Some(100.0));
     }
 
     #[test]
@@ -745,6 +772,10 @@ mod scoring {
             100.0 * r.scores.score_penalty,
             1e-9
         ));
+        assert!(
+            !r.meta.bench2drive.unwrap().success,
+            "an off-lane stretch is an infraction: no Bench2Drive success"
+        );
     }
 
     #[test]

@@ -21,6 +21,7 @@ mod scoring {
                 seed: Some(7),
                 stopped_at_s: None,
                 events: Vec::new(),
+                bench2drive: None,
             },
             route_id: format!("RouteScenario_{index}"),
             scores: Scores {
@@ -267,10 +268,10 @@ mod scoring {
         let table = summary_table(&results);
         println!("{table}");
         let lines: Vec<&str> = table.lines().collect();
-        assert_eq!(lines.len(), 2 + 3 + 2);
+        assert_eq!(lines.len(), 2 + 3 + 2 + 1);
         assert!(lines[0].starts_with("route"));
         assert!(lines[0].contains("DS") && lines[0].contains("ped") && lines[0].contains("blk"));
-        let widths: Vec<usize> = lines.iter().map(|l| l.len()).collect();
+        let widths: Vec<usize> = lines[..7].iter().map(|l| l.len()).collect();
         assert!(
             widths.iter().all(|w| *w == widths[0]),
             "fixed width: {widths:?}"
@@ -281,6 +282,11 @@ mod scoring {
         assert!(lines[6].starts_with("mean of 3"));
         assert!(
             lines[6].contains("33.33") && lines[6].contains("50.00") && lines[6].contains("0.700")
+        );
+        // Records written without Bench2Drive figures count as failures and add none.
+        assert_eq!(
+            lines[7],
+            "Bench2Drive: success rate 0.00 %, efficiency -, comfort -"
         );
     }
 }

@@ -121,7 +121,14 @@ pub fn run_route(
                 continue;
             }
         };
-        if let Some(end) = scorer.tick(world.time, &ego, &contacts, world.light_states()) {
+        let traffic_speed = world.background_speed();
+        if let Some(end) = scorer.tick(
+            world.time,
+            &ego,
+            &contacts,
+            world.light_states(),
+            traffic_speed,
+        ) {
             break end;
         }
         if frame.is_multiple_of(TRACE_EVERY) {

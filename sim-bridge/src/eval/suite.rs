@@ -16,7 +16,8 @@
 //!
 //! Failure classes: each part and the whole suite also count the records' `meta.events` by
 //! class ([`event_class`]: how vehicle collisions happened, whose red lights were run), per km
-//! driven.
+//! driven. Bench2Drive's success rate, efficiency and comfort sit beside the leaderboard's
+//! figures.
 //!
 //! Collection refuses the towns of every suite ([`evaluation_towns`]), so that no training data
 //! is recorded on them.
@@ -27,6 +28,7 @@ use serde::Serialize;
 
 use crate::route::sets::{CarlaRouteFile, RouteSet};
 use crate::scoring::InfractionKind;
+use crate::scoring::bench2drive::CampaignFigures;
 use crate::scoring::record::{Infractions, RouteEvent, RouteRecord, Scores};
 
 /// A named suite.
@@ -105,6 +107,8 @@ pub struct Figures {
     pub per_km: Infractions<f64>,
     /// Events with a detail, by [`event_class`]: count and count per km driven.
     pub classes: BTreeMap<String, ClassCount>,
+    /// Bench2Drive's success rate, efficiency and comfort over the runs.
+    pub bench2drive: CampaignFigures,
 }
 
 /// How often one failure class happened.
@@ -173,6 +177,7 @@ impl Figures {
             counts,
             per_km,
             classes,
+            bench2drive: CampaignFigures::of(records),
         }
     }
 }
@@ -217,8 +222,8 @@ const TABLE_KINDS: [(InfractionKind, &str); 6] = [
 /// A plain-text table of `summary`: one line per part and one for the whole suite.
 pub fn suite_table(summary: &SuiteSummary) -> String {
     let mut out = format!(
-        "{:<20} {:>5} {:>5} {:>7} {:>7} {:>7} {:>6}",
-        "part", "runs", "done", "km", "DS", "RC", "IS"
+        "{:<20} {:>5} {:>5} {:>7} {:>7} {:>7} {:>6} {:>6}",
+        "part", "runs", "done", "km", "DS", "RC", "IS", "succ%"
     );
     for (_, head) in TABLE_KINDS {
         out.push_str(&format!(" {head:>7}"));
@@ -226,14 +231,15 @@ pub fn suite_table(summary: &SuiteSummary) -> String {
     out.push('\n');
     let line = |name: &str, f: &Figures| {
         let mut l = format!(
-            "{:<20} {:>5} {:>5} {:>7.2} {:>7.2} {:>7.2} {:>6.3}",
+            "{:<20} {:>5} {:>5} {:>7.2} {:>7.2} {:>7.2} {:>6.3} {:>6.1}",
             name,
             f.runs,
             f.completed,
             f.km_driven,
             f.scores.score_composed,
             f.scores.score_route,
-            f.scores.score_penalty
+            f.scores.score_penalty,
+            f.bench2drive.success_rate
         );
         for (kind, _) in TABLE_KINDS {
             l.push_str(&format!(" {:>7.2}", f.per_km.get(kind)));

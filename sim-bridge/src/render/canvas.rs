@@ -246,7 +246,7 @@ mod tests {
         let end = canvas.text_px(4, 4, "A", 2, [200, 0, 0]);
         assert_eq!(end, 4 + 16);
         let lit = count(canvas.pixels(), [200, 0, 0]);
-        assert!(lit > 0 && lit % 4 == 0 && lit <= 16 * 16, "{lit}");
+        assert!(lit > 0 && lit.is_multiple_of(4) && lit <= 16 * 16, "{lit}");
         let mut rgb = vec![0u8; 40 * 20 * 3];
         label(&mut rgb, 40, 0, 0, "hi there, past the edge");
         assert!(count(&rgb, [240, 240, 240]) > 0 && count(&rgb, [20, 20, 24]) > 0);

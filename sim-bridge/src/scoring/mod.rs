@@ -5,7 +5,8 @@
 //! One file per concern: [`completion`] (route completion, RC), [`lanes`] (outside route lanes,
 //! the "off-road" row), [`collisions`], [`lights`] (red lights and stop signs), [`progress`]
 //! (route deviation, agent blocked, route timeout), [`record`] (route and global records, the
-//! results JSON) and [`summary`] (a readable table). [`RouteScorer`] ties the criteria together
+//! results JSON), [`summary`] (a readable table), and Bench2Drive's figures beside the
+//! leaderboard's: [`bench2drive`] (success, efficiency) and [`comfort`]. [`RouteScorer`] ties the criteria together
 //! for one route; the world calls [`RouteScorer::tick`] once per 20 Hz tick.
 //!
 //! Scores: RC is the route-completion percentage, IS the product of the infraction coefficients
@@ -29,7 +30,9 @@
 //! - The global record averages over the records given and lists only the records that are not
 //!   "Completed" as exceptions (see [`global_record`]).
 
+pub mod bench2drive;
 pub mod collisions;
+pub mod comfort;
 pub mod completion;
 pub mod lanes;
 pub mod lights;
@@ -303,6 +306,9 @@ pub struct RouteScorer<'a> {
     stops: lights::StopSigns,
     in_route: progress::InRoute,
     blocked: progress::Blocked,
+    efficiency: bench2drive::SpeedRatio,
+    comfort: comfort::ComfortTrace,
+    ticks: u64,
     infractions: Vec<Infraction>,
     end: Option<RouteEnd>,
     last_time: f64,
@@ -331,6 +337,12 @@ impl<'a> RouteScorer<'a> {
             stops: lights::StopSigns::new(map, &config),
             in_route: progress::InRoute::default(),
             blocked: progress::Blocked::default(),
+            efficiency: bench2drive::SpeedRatio::new(
+                route.length(),
+                bench2drive::EFFICIENCY_CHECKPOINTS,
+            ),
+            comfort: comfort::ComfortTrace::default(),
+            ticks: 0,
             config,
             infractions: Vec::new(),
             end: None,
@@ -342,7 +354,8 @@ impl<'a> RouteScorer<'a> {
     /// Evaluate every criterion on the state at sim time `t` (seconds since the route started).
     /// Called once per 20 Hz tick, after the agent acted and before the world integrates;
     /// `collisions` are the contacts the world detected since the last call, `lights` the light
-    /// states indexed like `map.lights`. Returns why the route ended, if it did (then and on
+    /// states indexed like `map.lights`, `traffic_speed` the mean speed of the background
+    /// vehicles (m/s; `None` when there are none), for the efficiency figure. Returns why the route ended, if it did (then and on
     /// every later call, which evaluates nothing more).
     ///
     /// Criteria run in the order LB1.0 builds them: collision, in-route, completion, outside
@@ -355,10 +368,18 @@ impl<'a> RouteScorer<'a> {
         ego: &EgoState,
         collisions: &[CollisionEvent],
         lights: &[LightState],
+        traffic_speed: Option<f64>,
     ) -> Option<RouteEnd> {
         if self.end.is_some() {
             return self.end;
         }
+        if self.ticks.is_multiple_of(comfort::TICKS_PER_SAMPLE) {
+            self.comfort.push(comfort::MotionSample {
+                velocity: ego.forward() * ego.speed,
+                yaw: ego.yaw,
+            });
+        }
+        self.ticks += 1;
         self.last_time = t;
         self.last_location = ego.position;
         let cfg = &self.config;
@@ -389,6 +410,8 @@ impl<'a> RouteScorer<'a> {
         }
 
         let completed = self.completion.update(self.route, ego.position, cfg);
+        self.efficiency
+            .update(self.progress_m(), ego.speed, traffic_speed);
 
         self.lanes
             .update(self.map, self.route, ego, driving.as_ref(), cfg);
@@ -447,6 +470,11 @@ impl<'a> RouteScorer<'a> {
             factor: 1.0,
             detail: None,
         });
+    }
+
+    /// Metres of the route behind the ego (RC of the dense route's length).
+    fn progress_m(&self) -> f64 {
+        self.completion.percentage / 100.0 * self.route.length()
     }
 
     /// Route completion in percent (RC), live; 100 once the route is completed.
@@ -552,7 +580,13 @@ impl<'a> RouteScorer<'a> {
         for i in &self.infractions {
             infractions.get_mut(i.kind).push(i.text.clone());
         }
-        let record = RouteRecord {
+        let progress_m = self.progress_m();
+        let efficiency = bench2drive::efficiency(&self.efficiency.finish(progress_m));
+        let comfort = self
+            .comfort
+            .comfort(&comfort::ComfortBounds::default())
+            .map(|share| 100.0 * share);
+        let mut record = RouteRecord {
             index,
             infractions,
             meta: RouteMeta {
@@ -574,6 +608,7 @@ impl<'a> RouteScorer<'a> {
                         })
                     })
                     .collect(),
+                bench2drive: None,
             },
             route_id: route_id.to_string(),
             scores: Scores {
@@ -583,6 +618,11 @@ impl<'a> RouteScorer<'a> {
             },
             status,
         };
+        record.meta.bench2drive = Some(bench2drive::RouteFigures {
+            success: bench2drive::success(&record),
+            efficiency,
+            comfort,
+        });
         (record, self.infractions)
     }
 }

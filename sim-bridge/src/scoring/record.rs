@@ -10,16 +10,18 @@
 //! `infractions` (one message list per key), `meta` (`duration_game`, `duration_system`,
 //! `route_length`), `route_id`, `scores` (`score_composed` = DS, `score_penalty` = IS,
 //! `score_route` = RC) and `status`. Our additions are optional keys that LB1.0 readers ignore:
-//! `meta.repetition` and `meta.seed` on records, and `meta.records`, `meta.scores_std`,
-//! `meta.total_length`, `meta.duration_game`, `meta.duration_system`, `meta.infraction_counts`
-//! on the global record, and a top-level `plan` ([`CampaignPlan`]: which campaign the records
-//! belong to, so that shards of one campaign can be merged and those of others refused).
+//! `meta.repetition`, `meta.seed` and `meta.bench2drive` on records, and `meta.records`,
+//! `meta.scores_std`, `meta.total_length`, `meta.duration_game`, `meta.duration_system`,
+//! `meta.infraction_counts` and `meta.bench2drive` on the global record, and a top-level `plan`
+//! ([`CampaignPlan`]: which campaign the records belong to, so that shards of one campaign can
+//! be merged and those of others refused).
 
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use serde_json::Value;
 
 use super::InfractionKind;
+use super::bench2drive::{CampaignFigures, RouteFigures};
 
 /// One value per LB1.0 infraction key: message lists on a route record, rates per km on the
 /// global record.
@@ -121,6 +123,9 @@ pub struct RouteMeta {
     /// failure analysis): how a vehicle collision happened, where a red light was run from.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub events: Vec<RouteEvent>,
+    /// Bench2Drive's success, efficiency and comfort (ours; see [`super::bench2drive`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bench2drive: Option<RouteFigures>,
 }
 
 /// One infraction with its detail (ours; see [`RouteMeta::events`]).
@@ -222,6 +227,9 @@ pub struct GlobalMeta {
     /// Total events per key over the records (ours).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub infraction_counts: Option<Infractions<usize>>,
+    /// Bench2Drive's success rate, efficiency and comfort over the records (ours).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bench2drive: Option<CampaignFigures>,
 }
 
 /// The global record (LB1.0 `compute_global_statistics`): route id and index -1, mean scores,
@@ -326,6 +334,7 @@ pub fn global_record(records: &[RouteRecord]) -> GlobalRecord {
             duration_game: Some(records.iter().map(|r| r.meta.duration_game).sum()),
             duration_system: Some(records.iter().map(|r| r.meta.duration_system).sum()),
             infraction_counts: Some(counts),
+            bench2drive: Some(CampaignFigures::of(records)),
         },
         route_id: -1,
         scores,

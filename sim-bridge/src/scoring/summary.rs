@@ -1,9 +1,11 @@
 //! A readable fixed-width table of a results file: one row per record (route id, repetition,
-//! status, DS, RC, IS and the event count per infraction kind) and a mean row (means of DS, RC
-//! and IS each taken separately, as the leaderboard does, and mean counts per record).
+//! status, DS, RC, IS and the event count per infraction kind), a mean row (means of DS, RC
+//! and IS each taken separately, as the leaderboard does, and mean counts per record) and
+//! Bench2Drive's success rate, efficiency and comfort.
 
 use std::fmt::Write as _;
 
+use super::bench2drive::CampaignFigures;
 use super::{InfractionKind, Results};
 
 /// The table for `results`, one line per record plus a header, a rule and the mean row.
@@ -69,5 +71,14 @@ pub fn summary_table(results: &Results) -> String {
         let _ = write!(out, " {:>5.2}", mean(&|r| r.infractions.count(kind) as f64));
     }
     out.push('\n');
+    let b2d = CampaignFigures::of(records);
+    let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2} %"));
+    let _ = writeln!(
+        out,
+        "Bench2Drive: success rate {:.2} %, efficiency {}, comfort {}",
+        b2d.success_rate,
+        percent(b2d.efficiency),
+        percent(b2d.comfort)
+    );
     out
 }

@@ -187,6 +187,19 @@ impl<'m> World<'m> {
         self.lights.states()
     }
 
+    /// The mean speed of the background vehicles (scenario vehicles, which run red lights on
+    /// purpose, left out), m/s; `None` when there are none.
+    pub fn background_speed(&self) -> Option<f64> {
+        let speeds: Vec<f64> = self
+            .traffic
+            .vehicles
+            .iter()
+            .filter(|v| !v.ignores_lights)
+            .map(|v| v.speed)
+            .collect();
+        (!speeds.is_empty()).then(|| speeds.iter().sum::<f64>() / speeds.len() as f64)
+    }
+
     /// Every other actor.
     pub fn actors(&self) -> Vec<ActorView> {
         let mut out = Vec::with_capacity(
