@@ -10,10 +10,10 @@ use common::{model_input, tiny_config};
 use ssr_agent::model::hazard::Hazard;
 use ssr_agent::model::tcp_head::SPEED_SCALE;
 use ssr_agent::model::{SsrModel, float_values};
+use ssr_agent::train::gamma::{digamma, ln_gamma, ln_gamma_f64};
 use ssr_agent::train::hazard::hazard_loss;
 use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
 use ssr_agent::train::occupancy::{batch_targets, occupancy_loss};
-use ssr_agent::train::special::{digamma, ln_gamma, ln_gamma_f64};
 use ssrdrive_proto::dataset::{ActorClass, ActorRecord};
 
 struct MissingGradients<'a> {

@@ -4,7 +4,7 @@
 //! Parts, one module each: [`map`] (OpenDRIVE through the `xodr` crate, lane graph, traffic
 //! lights and stop signs), [`towngen`] (the deterministic generator of the bundled towns),
 //! [`route`] (route files, dense routes, global plan, route follower), [`world`] (the 20 Hz
-//! lockstep world), [`render`] (cameras and top-down pictures), [`agent`] (what drives the
+//! lockstep world), [`render`] (cameras and top-down pictures), [`driver`] (what drives the
 //! ego), [`expert`] (the privileged driver), [`scoring`] (the leaderboard criteria and results),
 //! [`eval`] (route runs), [`dataset`] (recording), [`replay`] (step logs), [`client`] (agent
 //! servers over gRPC). What it shares with the agent (rigs, controls, commands, the dataset
@@ -12,9 +12,9 @@
 
 #![forbid(unsafe_code)]
 
-pub mod agent;
 pub mod client;
 pub mod dataset;
+pub mod driver;
 pub mod eval;
 pub mod expert;
 pub mod map;

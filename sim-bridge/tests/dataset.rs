@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use sim_bridge::agent::{Agent, AgentError, CameraFrame, Observation, RouteContext};
 use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect};
+use sim_bridge::driver::{Agent, AgentError, CameraFrame, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{Map, MapOptions};

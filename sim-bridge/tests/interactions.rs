@@ -163,7 +163,7 @@ fn a_follower_held_by_a_standing_ego_creeps_past_when_there_is_room() {
 
 #[test]
 fn the_expert_does_not_speed_up_while_its_heading_is_off_its_route() {
-    use sim_bridge::agent::{Agent, Observation, RouteContext};
+    use sim_bridge::driver::{Agent, Observation, RouteContext};
     use sim_bridge::expert::Expert;
     use sim_bridge::route::plan::{RouteFollower, global_plan};
     let map = road();

@@ -3,7 +3,7 @@
 //! expert does (the controller's own tests check the geometry on a simulated car).
 
 use glam::DVec2;
-use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
+use sim_bridge::driver::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};

@@ -1,7 +1,7 @@
 //! Closed loop through the public API: agents drive bundled routes in the simulator and the
 //! scorer judges them, the way `sim-bridge eval` does.
 
-use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
+use sim_bridge::driver::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{Map, MapOptions};

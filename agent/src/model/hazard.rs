@@ -76,7 +76,6 @@ impl Hazard {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{float_tensor, float_values};
 
     #[test]
     fn every_brake_reason_has_a_class_and_a_group() {

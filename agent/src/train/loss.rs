@@ -14,7 +14,7 @@
 
 use burn::tensor::{Device, Tensor};
 
-use super::special::{digamma, ln_gamma, ln_gamma_f64};
+use super::gamma::{digamma, ln_gamma, ln_gamma_f64};
 use crate::model::float_tensor;
 use crate::model::tcp_head::{HeadOutput, SPEED_SCALE};
 

@@ -3,7 +3,7 @@
 use std::time::Instant;
 
 use clap::Subcommand;
-use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
+use sim_bridge::driver::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::MapOptions;

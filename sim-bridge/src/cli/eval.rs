@@ -9,9 +9,9 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use sim_bridge::agent::Agent;
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::local::LocalServer;
+use sim_bridge::driver::Agent;
 use sim_bridge::eval::campaign::{
     Campaign, CampaignObserver, CampaignReport, RunDone, run_campaign,
 };
@@ -21,7 +21,7 @@ use sim_bridge::expert::Expert;
 use sim_bridge::expert::oracle::{OraclePlan, sim_control_config};
 use sim_bridge::map::Map;
 use sim_bridge::render::topdown::write_run_png;
-use sim_bridge::replay::recorder::LoggingAgent;
+use sim_bridge::replay::logging_agent::LoggingAgent;
 use sim_bridge::route::xml::RouteSpec;
 use sim_bridge::scoring::{ScoringConfig, summary_table};
 use ssrdrive_proto::camera::Rig;

@@ -12,9 +12,9 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use sim_bridge::agent::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::load::{LoadConfig, LoadProgress, LoadReport, run_load};
+use sim_bridge::driver::{Agent, AgentError, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::scoring::ScoringConfig;
@@ -287,7 +287,7 @@ fn dataset_templates(dataset: &Dataset, wanted: usize) -> anyhow::Result<Vec<v1:
             let frames = images
                 .into_iter()
                 .zip(&dataset.manifest.rig.cameras)
-                .map(|(image, camera)| sim_bridge::agent::CameraFrame {
+                .map(|(image, camera)| sim_bridge::driver::CameraFrame {
                     camera: camera.id.clone(),
                     width: image.width,
                     height: image.height,

@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use sim_bridge::agent::{Agent, AgentError, CameraFrame, Observation, RouteContext};
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
 use sim_bridge::client::local::LocalRole;
+use sim_bridge::driver::{Agent, AgentError, CameraFrame, Observation, RouteContext};
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::render::bev_maps::{occupancy_panel, token_panel};

@@ -19,7 +19,7 @@ use tonic::transport::{Channel, Endpoint};
 use tonic_health::pb::health_check_response::ServingStatus;
 use tonic_health::pb::health_client::HealthClient;
 
-use crate::agent::{Agent, AgentError, Observation, RouteContext};
+use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
 
 /// Connection settings.

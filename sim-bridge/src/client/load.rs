@@ -18,7 +18,7 @@ use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 
 use super::grpc::{connect_when_serving, keyed, new_episode_key, status_error};
-use crate::agent::AgentError;
+use crate::driver::AgentError;
 
 /// What to run.
 #[derive(Debug, Clone)]

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use crate::agent::AgentError;
+use crate::driver::AgentError;
 
 /// What a local server is started for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -23,7 +23,7 @@ use ssrdrive_proto::dataset::{
 use ssrdrive_proto::files::write_atomic;
 
 use super::recorder::EpisodeRecorder;
-use crate::agent::{Agent, AgentFactory};
+use crate::driver::{Agent, AgentFactory};
 use crate::eval::run_route;
 use crate::map::Map;
 use crate::route::DenseRoute;

@@ -24,7 +24,7 @@ use ssrdrive_proto::dataset::{
 };
 use ssrdrive_proto::image::encode_png;
 
-use crate::agent::{Agent, AgentError, Observation, RouteContext};
+use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::expert::Expert;
 use crate::map::angle_diff;
 use crate::route::plan::to_ego_frame;

@@ -20,7 +20,7 @@ use thiserror::Error;
 
 use super::shard::Shard;
 use super::{RouteRun, run_route};
-use crate::agent::AgentFactory;
+use crate::driver::AgentFactory;
 use crate::map::Map;
 use crate::route::xml::RouteSpec;
 use crate::route::{DenseRoute, RoutePlan};

@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use crate::agent::{Agent, AgentError, Observation, RouteContext};
+use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::map::Map;
 use crate::render::{Appearance, CameraRenderer, SceneState};
 use crate::route::DenseRoute;

@@ -20,7 +20,7 @@ use glam::DVec2;
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{BrakeReason, LightAhead};
 
-use crate::agent::{Agent, AgentError, Observation, RouteContext};
+use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::map::angle_diff;
 use crate::route::DenseRoute;
 use crate::world::World;

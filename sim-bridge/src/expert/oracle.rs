@@ -8,7 +8,7 @@ use ssr_control::{Beliefs, ControlConfig, EpisodeController, Vehicle};
 use ssrdrive_proto::control::Control;
 
 use super::Expert;
-use crate::agent::{Agent, AgentError, Observation, RouteContext};
+use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
 use crate::world::ego::EgoParams;
 

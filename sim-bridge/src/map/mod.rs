@@ -14,21 +14,21 @@
 //! heading the same way, leads into it (`stitch_link_gaps`: links through roads and lane
 //! sections too short to bake).
 
-pub mod control;
 pub mod lanes;
 pub mod spatial;
 pub mod surface;
+pub mod traffic_control;
 pub mod waypoint;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-pub use control::{Approach, Junction, StopLine, StopSign, TrafficLight};
 use glam::{DVec2, DVec3};
 pub use lanes::{JunctionIdx, Lane, LaneIdx, LaneKind, LanePose, Projection};
 use spatial::SegmentGrid;
 use ssrdrive_proto::files::{CappedReadError, read_capped_text};
 pub use surface::Surface;
+pub use traffic_control::{Approach, Junction, StopLine, StopSign, TrafficLight};
 
 /// The largest OpenDRIVE file accepted (CARLA's largest towns are under 20 MB).
 pub const MAX_MAP_BYTES: u64 = 64 * 1024 * 1024;
@@ -157,7 +157,7 @@ impl Map {
             surface: Surface::from_network(net),
             grid,
         };
-        control::derive(&mut map, net, junction_ids, options);
+        traffic_control::derive(&mut map, net, junction_ids, options);
         Ok(map)
     }
 

@@ -16,7 +16,7 @@ use super::raster::{Target, View};
 use super::scene::StaticScene;
 use super::shapes::Tri;
 use super::style::{Appearance, pack};
-use crate::agent::CameraFrame;
+use crate::driver::CameraFrame;
 use crate::map::Map;
 use crate::world::ActorView;
 use crate::world::state::{EgoState, LightState};

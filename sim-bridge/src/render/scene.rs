@@ -8,7 +8,7 @@ use glam::{Vec2, Vec3};
 use super::shapes::{Tri, UprightBox, push_quad, push_vertical_disc};
 use super::style::Appearance;
 use crate::map::Map;
-use crate::map::control::StopLine;
+use crate::map::traffic_control::StopLine;
 
 /// Longest triangle edge kept after baking, metres.
 pub const MAX_EDGE: f32 = 6.0;

@@ -1,7 +1,7 @@
 //! Recording and replaying agent steps.
 //!
 //! - [`log`]: the step log file format (`proto/ssrdrive/v1/log.proto`), writer and reader.
-//! - [`recorder`]: [`recorder::LoggingAgent`], which logs any agent's route runs.
+//! - [`logging_agent`]: [`logging_agent::LoggingAgent`], which logs any agent's route runs.
 //! - [`metrics`]: open-loop L2 and collision rate at 1, 2 and 3 s.
 //!
 //! [`replay`] re-feeds a log's requests, in order, as one episode to an agent server and
@@ -11,8 +11,8 @@
 //! the open-loop metrics of the server's trajectories against what the recorded ego did.
 
 pub mod log;
+pub mod logging_agent;
 pub mod metrics;
-pub mod recorder;
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -21,9 +21,9 @@ use glam::DVec2;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 
-use crate::agent::AgentError;
 use crate::client::grpc::{connect_when_serving, status_error};
 use crate::client::load::Percentiles;
+use crate::driver::AgentError;
 use log::StepLog;
 use metrics::{HorizonMetrics, open_loop};
 

@@ -24,8 +24,9 @@
 //!   use the plan (2-D) forward vector; CARLA's forward vector carries the road pitch, which only
 //!   matters on steep slopes.
 //! - Traffic-light stop lines come from the map (the end of each incoming lane, see
-//!   [`crate::map::control`]) instead of sampling CARLA trigger volumes, and a stop sign's trigger
-//!   area is a box we define (see [`lights`]), since our maps have no trigger volumes.
+//!   [`crate::map::traffic_control`]) instead of sampling CARLA trigger volumes, and a stop
+//!   sign's trigger area is a box we define (see [`lights`]), since our maps have no trigger
+//!   volumes.
 //! - Collision "type ids" are synthetic (`vehicle`, `walker.pedestrian`, `static.prop`).
 //! - The global record averages over the records given and lists only the records that are not
 //!   "Completed" as exceptions (see [`global_record`]).

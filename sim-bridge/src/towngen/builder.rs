@@ -7,9 +7,9 @@ use glam::DVec2;
 use super::elevation::{self, Cubic};
 use super::geometry::{Frame, Path};
 use super::junction::{LaneLink, Leg, default_links, straight_on_from_rightmost};
-use super::model::{Connection, Contact, Controller, Junction, Link, Road, SignalKind, Town};
 use super::profile::{LANE_WIDTH, Profile};
 use super::signals::{approach_signal, far_side_light};
+use super::town::{Connection, Contact, Controller, Junction, Link, Road, SignalKind, Town};
 
 /// A junction being declared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -159,7 +159,7 @@ impl TownBuilder {
 
     /// Write no traffic-light signal at all, as CARLA's old Town03 and some other CARLA towns
     /// do: the simulator then places its own lights (beside the rightmost stop line, at
-    /// junctions of four or more approaches with a multi-lane one; `map::control`).
+    /// junctions of four or more approaches with a multi-lane one; `map::traffic_control`).
     pub fn leave_lights_to_simulator(&mut self) {
         self.lights_left_to_simulator = true;
     }

@@ -9,8 +9,8 @@ use glam::DVec2;
 
 use super::builder::{JunctionId, RoadId, TownBuilder};
 use super::geometry::Frame;
-use super::model::Town;
 use super::profile::{Profile, setback};
+use super::town::Town;
 
 /// How far the grid is turned, in degrees counter-clockwise.
 const ROTATION: f64 = 20.0;

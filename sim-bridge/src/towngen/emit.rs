@@ -4,8 +4,8 @@
 
 use super::elevation::Cubic;
 use super::geometry::Shape;
-use super::model::{Controller, Junction, Link, Road, Signal, SignalKind, Town};
 use super::profile::{Mark, Side};
+use super::town::{Controller, Junction, Link, Road, Signal, SignalKind, Town};
 use super::xml::{Xml, ang, attr, coef, curve, len};
 use crate::map::wrap_angle;
 

@@ -12,8 +12,8 @@ use glam::DVec2;
 
 use super::builder::{JunctionId, ManualLink, RoadId, TownBuilder};
 use super::geometry::{Frame, Path, Pose};
-use super::model::Town;
 use super::profile::{Profile, setback};
+use super::town::Town;
 
 /// The loop's centre line: x = ±LOOP_X, y = ±LOOP_Y.
 const LOOP_X: f64 = 290.0;

@@ -5,8 +5,8 @@
 use std::f64::consts::PI;
 
 use super::geometry::Pose;
-use super::model::Contact;
 use super::profile::{Profile, Side};
+use super::town::Contact;
 use crate::map::wrap_angle;
 
 /// One road end in a junction.

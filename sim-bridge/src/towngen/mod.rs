@@ -20,12 +20,12 @@ mod emit;
 mod geometry;
 mod highway;
 mod junction;
-mod model;
 pub mod procedural;
 mod profile;
 mod radial;
 mod signals;
 mod small;
+mod town;
 mod town05;
 mod xml;
 

@@ -25,8 +25,8 @@ use rand_chacha::ChaCha8Rng;
 
 use super::builder::{JunctionId, RoadId, TownBuilder};
 use super::geometry::Frame;
-use super::model::Town;
 use super::profile::{Profile, Side, setback};
+use super::town::Town;
 
 /// Straight road kept beyond a junction's setback before a bend begins, metres.
 const STRAIGHT: f64 = 3.0;

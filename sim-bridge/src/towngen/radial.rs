@@ -17,8 +17,8 @@ use glam::DVec2;
 
 use super::builder::{JunctionId, TownBuilder};
 use super::geometry::Frame;
-use super::model::Town;
 use super::profile::{Profile, setback};
+use super::town::Town;
 
 /// Junctions on each ring, evenly spaced.
 const SPOKES: usize = 6;

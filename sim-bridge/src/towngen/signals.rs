@@ -11,8 +11,8 @@
 //! just before the junction on the right edge of the incoming road.
 
 use super::junction::Leg;
-use super::model::{Contact, Signal, SignalKind};
 use super::profile::Side;
+use super::town::{Contact, Signal, SignalKind};
 
 /// How far before the junction a signal stands, in metres.
 const BEFORE_JUNCTION: f64 = 1.0;

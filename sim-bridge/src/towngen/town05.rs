@@ -12,8 +12,8 @@ use glam::DVec2;
 use super::builder::{JunctionId, RoadId, TownBuilder};
 use super::elevation;
 use super::geometry::Frame;
-use super::model::Town;
 use super::profile::{Profile, setback};
+use super::town::Town;
 
 /// Grid column x, west to east.
 const COLS: [f64; 5] = [-150.0, -75.0, 0.0, 75.0, 150.0];

@@ -7,7 +7,7 @@
 //! Accuracy: `exp` within 2 ulp, `erf` within 3e-7 (Abramowitz and Stegun 7.1.26), so GELU
 //! and sigmoid differ from Flex's by a few float32 roundings.
 
-use super::output::filled_in_chunks;
+use super::parallel_output::filled_in_chunks;
 
 /// Elements per parallel task.
 const CHUNK: usize = 16 * 1024;

@@ -7,7 +7,7 @@
 
 use rayon::prelude::*;
 
-use super::output::filled_in_chunks;
+use super::parallel_output::filled_in_chunks;
 
 /// An activation `[batch, channels, plane]` (the plane: every axis after the channels).
 #[derive(Debug, Clone, Copy)]

@@ -15,7 +15,7 @@ use gemm::Parallelism;
 use rayon::prelude::*;
 
 use super::matrix::{Matrix, add_into, matmul};
-use super::output::{filled_in_chunks, zeros};
+use super::parallel_output::{filled_in_chunks, zeros};
 
 /// A convolution's geometry: one group, no dilation, symmetric zero padding.
 #[derive(Debug, Clone, Copy)]

@@ -9,7 +9,7 @@
 
 use rayon::prelude::*;
 
-use super::output::{filled_in_chunks, zeros};
+use super::parallel_output::{filled_in_chunks, zeros};
 
 /// Shapes of one aggregation: `values` `[n, height * width, channels]`, `locations`
 /// `[n, queries, points, 2]` (normalised (x, y)), `weights` `[n, queries, points]`.

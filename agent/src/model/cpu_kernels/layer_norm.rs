@@ -11,7 +11,7 @@
 //! ([`crate::model::norm::single_group_norm`]).
 
 use super::matrix::add_into;
-use super::output::{filled_in_chunks, filled_in_chunks_with};
+use super::parallel_output::{filled_in_chunks, filled_in_chunks_with};
 
 /// Values per parallel task in the forward pass (whole rows, at least one).
 const VALUES_PER_TASK: usize = 16 * 1024;

@@ -11,7 +11,7 @@ use gemm::Parallelism;
 use rayon::prelude::*;
 
 use super::matrix::{Matrix, add_into, matmul};
-use super::output::{filled_in_chunks, zeros};
+use super::parallel_output::{filled_in_chunks, zeros};
 
 /// Products of at least this many multiply-adds run on all threads.
 const PARALLEL_WORK: usize = 1 << 20;

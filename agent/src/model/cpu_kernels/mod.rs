@@ -20,7 +20,7 @@ mod layer_norm;
 mod linear;
 mod matrix;
 mod max_pool;
-mod output;
+mod parallel_output;
 mod softmax;
 
 use burn::backend::Dispatch;

@@ -5,7 +5,7 @@
 //! Here rows run in parallel, with the vectorised `exp` of [`super::activation`].
 
 use super::activation::exp;
-use super::output::filled_in_chunks;
+use super::parallel_output::filled_in_chunks;
 
 /// Values per parallel task (whole rows, at least one).
 const VALUES_PER_TASK: usize = 16 * 1024;

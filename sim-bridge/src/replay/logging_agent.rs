@@ -12,7 +12,7 @@ use ssrdrive_proto::control::Control;
 use ssrdrive_proto::{v1, wire};
 
 use super::log::{LOG_FORMAT, LOG_VERSION, LogWriter};
-use crate::agent::{Agent, AgentError, Observation, RouteContext};
+use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
 use crate::world::state::ActorKind;
 
