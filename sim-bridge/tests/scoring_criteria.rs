@@ -8,7 +8,7 @@ mod scoring {
     use sim_bridge::map::{LaneIdx, LaneKind, Map, MapOptions};
     use sim_bridge::route::{DenseRoute, RoutePoint};
     use sim_bridge::scoring::{
-        InfractionKind, RouteEnd, RouteRecord, RouteScorer, ScoringConfig, route_timeout,
+        InfractionKind, RouteEnd, RouteRecord, RouteScorer, Rules, ScoringConfig, route_timeout,
     };
     use sim_bridge::world::state::{CollisionClass, CollisionEvent, EgoState, LightState};
     use ssrdrive_proto::command::RoadOption;
@@ -333,6 +333,53 @@ mod scoring {
         alone.cruise(0.0, 260.0, 8.0, |_| -1.75, no_lights);
         let figures = alone.finish().meta.bench2drive.expect("figures");
         assert_eq!(figures.efficiency, Some(100.0));
+    }
+
+    #[test]
+    fn leaderboard_2_rules_call_a_clean_drive_perfect_and_penalise_a_slow_one() {
+        let map = straight_map();
+        let route = straight_route(&map);
+        let lb2 = || ScoringConfig {
+            rules: Rules::Lb2,
+            ..ScoringConfig::default()
+        };
+        let mut clean = Drive::with(&map, &route, lb2());
+        clean.traffic_speed = Some(8.0);
+        clean.cruise(0.0, 260.0, 8.0, |_| -1.75, no_lights);
+        let r = clean.finish();
+        assert_eq!(r.status, "Perfect");
+        assert!(r.completed());
+        assert_eq!(r.scores.score_composed, 100.0);
+        assert!(r.infractions.min_speed_infractions.is_empty());
+
+        // Half the traffic's speed: each of the 4 checkpoints (3 on the way, 1 at the end)
+        // multiplies IS by 1 - 0.3 * (1 - 0.5).
+        let mut slow = Drive::with(&map, &route, lb2());
+        slow.traffic_speed = Some(8.0);
+        slow.cruise(0.0, 260.0, 4.0, |_| -1.75, no_lights);
+        assert_eq!(slow.count(InfractionKind::MinSpeed), 3);
+        let r = slow.finish();
+        assert_eq!(r.status, "Completed");
+        assert_eq!(r.infractions.min_speed_infractions.len(), 4);
+        assert_eq!(
+            r.infractions.min_speed_infractions[0],
+            "Average speed is 50.0% of the surrounding traffic's one"
+        );
+        assert!(close(r.scores.score_penalty, 0.85f64.powi(4), 1e-12));
+        assert!(
+            r.meta.bench2drive.unwrap().success,
+            "Bench2Drive excuses minimum speed"
+        );
+
+        // The same slow drive under 1.0's rules: no such penalty.
+        let mut lb1 = Drive::new(&map, &route);
+        lb1.traffic_speed = Some(8.0);
+        lb1.cruise(0.0, 260.0, 4.0, |_| -1.75, no_lights);
+        let r = lb1.finish();
+        assert_eq!(
+            (r.status.as_str(), r.scores.score_penalty),
+            ("Completed", 1.0)
+        );
     }
 
     #[test]

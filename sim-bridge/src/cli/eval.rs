@@ -81,6 +81,12 @@ pub struct EvalArgs {
     /// of the leaderboard's length-based timeout: for quick smoke runs.
     #[arg(long, value_parser = parse_positive)]
     timeout: Option<f64>,
+    /// The rules that score the routes: `lb1` (the CARLA leaderboard 1.0) or `lb2` (2.0's
+    /// penalty table where it applies here: 1.0's criteria plus its minimum-speed penalty and
+    /// "Perfect" status). Bench2Drive's success rate, efficiency and comfort are reported with
+    /// either.
+    #[arg(long, value_enum, default_value = "lb1")]
+    scoring: sim_bridge::scoring::Rules,
     /// Where to write the leaderboard results JSON [default: results.json; with --suite a
     /// folder, suite-NAME].
     #[arg(long)]
@@ -246,6 +252,7 @@ fn drive(
         repetitions,
         world: args.world.config(&map, args.world.seed),
         scoring: ScoringConfig {
+            rules: args.scoring,
             timeout: args.timeout,
             ..ScoringConfig::default()
         },

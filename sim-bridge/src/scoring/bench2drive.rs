@@ -19,8 +19,10 @@ use serde::{Deserialize, Serialize};
 
 use super::RouteRecord;
 
-/// Checkpoints of the efficiency test (Bench2Drive; Leaderboard 2.0 uses 4 for its penalty).
+/// Checkpoints of the efficiency test (Bench2Drive).
 pub const EFFICIENCY_CHECKPOINTS: usize = 20;
+/// Checkpoints of Leaderboard 2.0's minimum-speed penalty (`--scoring lb2`).
+pub const MIN_SPEED_CHECKPOINTS: usize = 4;
 /// Checkpoint values above this (percent) are left out of a route's efficiency.
 const EFFICIENCY_CAP: f64 = 1000.0;
 /// Progress (fraction of the route) past which the end of the route adds a last checkpoint.
@@ -76,11 +78,13 @@ impl CampaignFigures {
     }
 }
 
-/// Whether a finished record counts as a Bench2Drive success: completed, no infraction.
+/// Whether a finished record counts as a Bench2Drive success: completed, no infraction but
+/// minimum speed (Bench2Drive's rule).
 pub fn success(record: &RouteRecord) -> bool {
     record.completed()
         && super::InfractionKind::ALL
             .iter()
+            .filter(|kind| **kind != super::InfractionKind::MinSpeed)
             .all(|kind| record.infractions.count(*kind) == 0)
 }
 
@@ -112,29 +116,38 @@ impl SpeedRatio {
     }
 
     /// One tick: the ego at `progress_m` along the route at `ego_speed`, the background
-    /// vehicles' mean speed `traffic_speed` (`None` when there are none), m/s.
-    pub fn update(&mut self, progress_m: f64, ego_speed: f64, traffic_speed: Option<f64>) {
+    /// vehicles' mean speed `traffic_speed` (`None` when there are none), m/s. Returns the
+    /// value of the checkpoint this tick reached, if any.
+    pub fn update(
+        &mut self,
+        progress_m: f64,
+        ego_speed: f64,
+        traffic_speed: Option<f64>,
+    ) -> Option<f64> {
         if let Some(traffic) = traffic_speed {
             self.ego_sum += ego_speed;
             self.traffic_sum += traffic;
             self.samples += 1;
         }
-        if progress_m - self.last_checkpoint_m > self.stretch_m {
-            self.checkpoint();
+        (progress_m - self.last_checkpoint_m > self.stretch_m).then(|| {
             self.last_checkpoint_m = progress_m;
-        }
+            self.checkpoint()
+        })
     }
 
-    /// The route ended at `progress_m`: a last checkpoint when past 95 % of it; returns every
-    /// checkpoint's value, percent.
-    pub fn finish(&mut self, progress_m: f64) -> Vec<f64> {
-        if self.route_m > 0.0 && progress_m / self.route_m > LAST_CHECKPOINT_PROGRESS {
-            self.checkpoint();
-        }
-        std::mem::take(&mut self.values)
+    /// The route ended at `progress_m`: a last checkpoint when past 95 % of it; returns its
+    /// value, percent.
+    pub fn finish(&mut self, progress_m: f64) -> Option<f64> {
+        (self.route_m > 0.0 && progress_m / self.route_m > LAST_CHECKPOINT_PROGRESS)
+            .then(|| self.checkpoint())
     }
 
-    fn checkpoint(&mut self) {
+    /// Every checkpoint's value so far, percent.
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+
+    fn checkpoint(&mut self) -> f64 {
         let value = if self.samples == 0 || self.traffic_sum <= 0.0 {
             100.0
         } else {
@@ -144,6 +157,7 @@ impl SpeedRatio {
         self.ego_sum = 0.0;
         self.traffic_sum = 0.0;
         self.samples = 0;
+        value
     }
 }
 
@@ -176,19 +190,21 @@ mod tests {
             ratio.update(progress, ego, traffic);
             progress += 0.5;
         }
-        let values = ratio.finish(99.5);
+        assert_eq!(ratio.finish(99.5), Some(100.0));
+        let values = ratio.values();
         assert_eq!(values.len(), 4, "{values:?}");
         assert_eq!(&values[..2], &[50.0, 50.0]);
         // No traffic: 100; the last checkpoint is the end's (past 95 % of the route).
         assert_eq!(&values[2..], &[100.0, 100.0]);
-        assert_eq!(efficiency(&values), Some(75.0));
+        assert_eq!(efficiency(values), Some(75.0));
     }
 
     #[test]
     fn a_route_ended_early_has_no_last_checkpoint_and_outliers_are_dropped() {
         let mut ratio = SpeedRatio::new(100.0, 4);
-        ratio.update(10.0, 1.0, Some(0.05));
-        assert!(ratio.finish(10.0).is_empty());
+        assert_eq!(ratio.update(10.0, 1.0, Some(0.05)), None);
+        assert_eq!(ratio.finish(10.0), None);
+        assert!(ratio.values().is_empty());
         assert_eq!(efficiency(&[2000.0, 80.0]), Some(80.0));
         assert_eq!(efficiency(&[2000.0]), None);
     }

@@ -54,6 +54,12 @@ pub use record::{
 };
 pub use summary::summary_table;
 
+/// Leaderboard 2.0's status of a route completed with no infraction ([`Rules::Lb2`]).
+pub const PERFECT_STATUS: &str = "Perfect";
+/// Leaderboard 2.0's weight of the minimum-speed penalty: a checkpoint at p % of the traffic's
+/// speed multiplies IS by 1 - 0.3 (1 - p / 100) (PENALTY_PERC_DICT's 0.7 at 0 %).
+pub const MIN_SPEED_WEIGHT: f64 = 0.3;
+
 /// Infraction coefficients (LB1.0 `statistics_manager.py` PENALTY_*). TransFuser's Longest6
 /// sets `stop` to 1.0 (stop signs ignored); the defaults are the leaderboard's.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -82,9 +88,26 @@ impl Default for Penalties {
     }
 }
 
+/// Which leaderboard's rules score a route.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Rules {
+    /// Leaderboard 1.0, criterion by criterion (this module's doc).
+    #[default]
+    Lb1,
+    /// Leaderboard 2.0's penalty table where it applies here: LB1.0's criteria and coefficients,
+    /// plus the minimum-speed test (4 checkpoints; each value p < 100 % multiplies IS by
+    /// 1 - 0.3 (1 - p / 100), "min_speed_infractions") and the status "Perfect" for a route
+    /// completed with no infraction. Not applied: 2.0's progress-based route timeout (our maps
+    /// carry no speed limits; LB1.0's timeout stays), scenario timeouts (no scenario placed
+    /// here blocks the route) and yielding to emergency vehicles (none drive here).
+    Lb2,
+}
+
 /// Every threshold of the criteria; [`Default`] gives the leaderboard 1.0 values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScoringConfig {
+    /// The rules (leaderboard 1.0 unless asked).
+    pub rules: Rules,
     /// Infraction coefficients.
     pub penalties: Penalties,
     /// RouteCompletionTest WINDOWS_SIZE: route points tested past the current one (2).
@@ -142,6 +165,7 @@ pub struct ScoringConfig {
 impl Default for ScoringConfig {
     fn default() -> Self {
         Self {
+            rules: Rules::default(),
             penalties: Penalties::default(),
             completion_window: 2,
             completion_percentage: 99.0,
@@ -225,11 +249,27 @@ pub enum InfractionKind {
     VehicleBlocked,
     /// `route_timeout`, ends the route.
     RouteTimeout,
+    /// `min_speed_infractions` (Leaderboard 2.0's MIN_SPEED_INFRACTION; [`Rules::Lb2`] only).
+    MinSpeed,
 }
 
 impl InfractionKind {
-    /// Every kind, in the order of the leaderboard's `labels`/`values` rows.
-    pub const ALL: [InfractionKind; 9] = [
+    /// Every kind: the leaderboard 1.0 ones ([`InfractionKind::LB1`]) and 2.0's minimum speed.
+    pub const ALL: [InfractionKind; 10] = [
+        InfractionKind::CollisionPedestrian,
+        InfractionKind::CollisionVehicle,
+        InfractionKind::CollisionLayout,
+        InfractionKind::RedLight,
+        InfractionKind::StopSign,
+        InfractionKind::OutsideRouteLanes,
+        InfractionKind::RouteDeviation,
+        InfractionKind::RouteTimeout,
+        InfractionKind::VehicleBlocked,
+        InfractionKind::MinSpeed,
+    ];
+
+    /// The leaderboard 1.0 kinds, in the order of its `labels`/`values` rows.
+    pub const LB1: [InfractionKind; 9] = [
         InfractionKind::CollisionPedestrian,
         InfractionKind::CollisionVehicle,
         InfractionKind::CollisionLayout,
@@ -253,6 +293,7 @@ impl InfractionKind {
             InfractionKind::RouteDeviation => "route_dev",
             InfractionKind::VehicleBlocked => "vehicle_blocked",
             InfractionKind::RouteTimeout => "route_timeout",
+            InfractionKind::MinSpeed => "min_speed_infractions",
         }
     }
 
@@ -268,6 +309,7 @@ impl InfractionKind {
             InfractionKind::RouteDeviation => "dev",
             InfractionKind::VehicleBlocked => "blk",
             InfractionKind::RouteTimeout => "tout",
+            InfractionKind::MinSpeed => "slow",
         }
     }
 }
@@ -308,6 +350,7 @@ pub struct RouteScorer<'a> {
     in_route: progress::InRoute,
     blocked: progress::Blocked,
     efficiency: bench2drive::SpeedRatio,
+    min_speed: Option<bench2drive::SpeedRatio>,
     comfort: comfort::ComfortTrace,
     ticks: u64,
     infractions: Vec<Infraction>,
@@ -342,6 +385,9 @@ impl<'a> RouteScorer<'a> {
                 route.length(),
                 bench2drive::EFFICIENCY_CHECKPOINTS,
             ),
+            min_speed: (config.rules == Rules::Lb2).then(|| {
+                bench2drive::SpeedRatio::new(route.length(), bench2drive::MIN_SPEED_CHECKPOINTS)
+            }),
             comfort: comfort::ComfortTrace::default(),
             ticks: 0,
             config,
@@ -411,8 +457,15 @@ impl<'a> RouteScorer<'a> {
         }
 
         let completed = self.completion.update(self.route, ego.position, cfg);
-        self.efficiency
-            .update(self.progress_m(), ego.speed, traffic_speed);
+        let progress_m = self.progress_m();
+        self.efficiency.update(progress_m, ego.speed, traffic_speed);
+        if let Some(value) = self
+            .min_speed
+            .as_mut()
+            .and_then(|test| test.update(progress_m, ego.speed, traffic_speed))
+        {
+            Self::push_min_speed(&mut self.infractions, value, t, ego.position);
+        }
 
         self.lanes
             .update(self.map, self.route, ego, driving.as_ref(), cfg);
@@ -460,6 +513,24 @@ impl<'a> RouteScorer<'a> {
             None
         };
         self.end
+    }
+
+    /// Leaderboard 2.0's minimum-speed event for a checkpoint value (percent) under 100.
+    fn push_min_speed(infractions: &mut Vec<Infraction>, value: f64, t: f64, location: DVec3) {
+        if value >= 100.0 {
+            return;
+        }
+        infractions.push(Infraction {
+            kind: InfractionKind::MinSpeed,
+            time: t,
+            location,
+            text: format!(
+                "Average speed is {}% of the surrounding traffic's one",
+                py_round(value, 2)
+            ),
+            factor: 1.0 - MIN_SPEED_WEIGHT * (1.0 - value / 100.0),
+            detail: None,
+        });
     }
 
     fn push_timeout(&mut self, t: f64, location: DVec3) {
@@ -551,6 +622,19 @@ impl<'a> RouteScorer<'a> {
         {
             self.push_timeout(self.last_time, self.last_location);
         }
+        let progress_m = self.progress_m();
+        if let Some(value) = self
+            .min_speed
+            .as_mut()
+            .and_then(|test| test.finish(progress_m))
+        {
+            Self::push_min_speed(
+                &mut self.infractions,
+                value,
+                self.last_time,
+                self.last_location,
+            );
+        }
         if let Some(off) = self.lanes.finish(self.last_time, self.last_location) {
             self.infractions.push(off);
         }
@@ -562,7 +646,10 @@ impl<'a> RouteScorer<'a> {
             self.completion.percentage
         };
         let score_penalty = self.infraction_score();
-        let status = if completed {
+        let status = if completed && self.config.rules == Rules::Lb2 && self.infractions.is_empty()
+        {
+            PERFECT_STATUS.to_string()
+        } else if completed {
             RouteEnd::Completed.status().to_string()
         } else if has(&self, InfractionKind::VehicleBlocked) {
             RouteEnd::Blocked.status().to_string()
@@ -581,8 +668,8 @@ impl<'a> RouteScorer<'a> {
         for i in &self.infractions {
             infractions.get_mut(i.kind).push(i.text.clone());
         }
-        let progress_m = self.progress_m();
-        let efficiency = bench2drive::efficiency(&self.efficiency.finish(progress_m));
+        self.efficiency.finish(progress_m);
+        let efficiency = bench2drive::efficiency(self.efficiency.values());
         let comfort = self
             .comfort
             .comfort(&comfort::ComfortBounds::default())

@@ -23,8 +23,8 @@ use serde_json::Value;
 use super::InfractionKind;
 use super::bench2drive::{CampaignFigures, RouteFigures};
 
-/// One value per LB1.0 infraction key: message lists on a route record, rates per km on the
-/// global record.
+/// One value per infraction key (LB1.0's and 2.0's minimum speed): message lists on a route
+/// record, rates per km on the global record.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Infractions<T: Default> {
@@ -46,6 +46,8 @@ pub struct Infractions<T: Default> {
     pub stop_infraction: T,
     /// Agent blocked.
     pub vehicle_blocked: T,
+    /// Leaderboard 2.0's minimum-speed events (`--scoring lb2`; empty or 0 under 1.0).
+    pub min_speed_infractions: T,
 }
 
 impl<T: Default> Infractions<T> {
@@ -61,6 +63,7 @@ impl<T: Default> Infractions<T> {
             InfractionKind::RouteDeviation => &self.route_dev,
             InfractionKind::VehicleBlocked => &self.vehicle_blocked,
             InfractionKind::RouteTimeout => &self.route_timeout,
+            InfractionKind::MinSpeed => &self.min_speed_infractions,
         }
     }
 
@@ -76,6 +79,7 @@ impl<T: Default> Infractions<T> {
             InfractionKind::RouteDeviation => &mut self.route_dev,
             InfractionKind::VehicleBlocked => &mut self.vehicle_blocked,
             InfractionKind::RouteTimeout => &mut self.route_timeout,
+            InfractionKind::MinSpeed => &mut self.min_speed_infractions,
         }
     }
 }
@@ -196,9 +200,9 @@ impl RouteRecord {
         }
     }
 
-    /// Whether the route was completed.
+    /// Whether the route was completed ("Completed", or Leaderboard 2.0's "Perfect").
     pub fn completed(&self) -> bool {
-        self.status == "Completed"
+        self.status == "Completed" || self.status == super::PERFECT_STATUS
     }
 }
 
@@ -455,7 +459,7 @@ impl Results {
             format!("{:.3}", global.scores.score_penalty),
         ];
         values.extend(
-            InfractionKind::ALL
+            InfractionKind::LB1
                 .iter()
                 .map(|k| format!("{:.3}", global.infractions.get(*k))),
         );

@@ -24,12 +24,19 @@ pub fn summary_table(results: &Results) -> String {
         .unwrap_or(0)
         .max(6);
 
+    // Leaderboard 2.0's minimum speed only where some run has it (`--scoring lb2`).
+    let kinds: Vec<InfractionKind> = InfractionKind::ALL
+        .into_iter()
+        .filter(|k| {
+            *k != InfractionKind::MinSpeed || records.iter().any(|r| r.infractions.count(*k) > 0)
+        })
+        .collect();
     let mut out = String::new();
     let mut header = format!(
         "{:<id_width$} {:>4}  {:<status_width$} {:>7} {:>7} {:>6}",
         "route", "rep", "status", "DS", "RC", "IS"
     );
-    for kind in InfractionKind::ALL {
+    for &kind in &kinds {
         let _ = write!(header, " {:>5}", kind.short());
     }
     let rule = "-".repeat(header.len());
@@ -47,7 +54,7 @@ pub fn summary_table(results: &Results) -> String {
             r.scores.score_route,
             r.scores.score_penalty
         );
-        for kind in InfractionKind::ALL {
+        for &kind in &kinds {
             let _ = write!(out, " {:>5}", r.infractions.count(kind));
         }
         out.push('\n');
@@ -67,7 +74,7 @@ pub fn summary_table(results: &Results) -> String {
         mean(&|r| r.scores.score_route),
         mean(&|r| r.scores.score_penalty)
     );
-    for kind in InfractionKind::ALL {
+    for &kind in &kinds {
         let _ = write!(out, " {:>5.2}", mean(&|r| r.infractions.count(kind) as f64));
     }
     out.push('\n');
