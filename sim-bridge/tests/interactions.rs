@@ -25,7 +25,7 @@ use sim_bridge::towngen::{self, TownStyle};
 use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::scenarios::Crosser;
 use sim_bridge::world::state::{ActorKind, LightState};
-use sim_bridge::world::traffic::Vehicle;
+use sim_bridge::world::vehicle::Vehicle;
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::BrakeReason;

@@ -10,7 +10,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::files::read_capped_text;
 
-use super::bev::BevGrid;
+use super::grid::BevGrid;
 
 /// The whole network.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

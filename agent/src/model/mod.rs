@@ -15,6 +15,7 @@ pub mod config;
 pub mod cpu_kernels;
 pub mod ffp;
 pub mod fused;
+pub mod grid;
 pub mod hazard;
 pub(crate) mod init;
 pub mod light;

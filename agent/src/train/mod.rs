@@ -8,6 +8,7 @@ pub mod augment;
 pub mod auxiliary;
 pub mod config;
 pub mod data;
+pub mod error;
 pub mod gamma;
 pub mod hazard;
 pub mod light;

@@ -15,7 +15,7 @@ use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
 use super::config::TrainConfig;
-use super::run::TrainError;
+use super::error::TrainError;
 use crate::model::SsrModel;
 use crate::model::config::SsrConfig;
 

@@ -27,18 +27,18 @@ use burn::optim::{
 };
 use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
-use ssrdrive_proto::dataset::DatasetError;
 
 use super::auxiliary::AuxiliaryOutputs;
 use super::config::TrainConfig;
 use super::data::{Batch, SampleDraw, TrainingData};
+pub use super::error::TrainError;
 use super::light::{light_hits, light_labels};
 use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::occupancy::confusion;
 use super::resume::{Progress, load_model, read_progress, save_weights};
 use super::validation::{ValidationMetrics, ValidationSums, spread};
-use crate::checkpoint::{self, CheckpointError};
+use crate::checkpoint;
 use crate::control::{ControlConfig, History};
 use crate::model::classifier::predicted_classes;
 use crate::model::config::SsrConfig;
@@ -46,44 +46,6 @@ use crate::model::hazard::Hazard;
 use crate::model::light::LightClass;
 use crate::model::tcp_head::HeadOutput;
 use crate::model::{SsrModel, float_values};
-
-/// Why a training run could not start or go on.
-#[derive(Debug, thiserror::Error)]
-pub enum TrainError {
-    /// The dataset could not be read or has no usable samples.
-    #[error("dataset: {0}")]
-    Dataset(#[from] DatasetError),
-    /// A checkpoint could not be read or written.
-    #[error(transparent)]
-    Checkpoint(#[from] CheckpointError),
-    /// The training config is invalid (the message names the field).
-    #[error("training config: {0}")]
-    Config(String),
-    /// A file of the run's folder could not be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The resume state is missing, incomplete or does not fit the run.
-    #[error("cannot resume from {path}: {problem}")]
-    Resume {
-        /// The run folder or resume state at fault.
-        path: PathBuf,
-        /// What is wrong with it.
-        problem: String,
-    },
-    /// The loss became NaN or infinite.
-    #[error("step {step}: the loss is {value}; lower the learning rate or check the data")]
-    Diverged {
-        /// The optimiser step whose loss it was, from 1.
-        step: u64,
-        /// The loss.
-        value: f32,
-    },
-}
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
     move |source| TrainError::Io {

@@ -13,7 +13,7 @@
 use glam::DVec2;
 
 use super::state::Obb;
-use super::traffic::Vehicle;
+use super::vehicle::Vehicle;
 use crate::map::lanes::LanePose;
 use crate::map::{LaneIdx, Map};
 

@@ -14,6 +14,7 @@ pub mod lights;
 pub mod scenarios;
 pub mod state;
 pub mod traffic;
+pub mod vehicle;
 
 use ego::{Ego, EgoParams};
 use ego_watch::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED};

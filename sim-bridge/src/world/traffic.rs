@@ -25,12 +25,13 @@
 
 use std::collections::HashMap;
 
-use glam::{DVec2, DVec3};
+use glam::DVec2;
 use rand::{Rng, RngExt as _};
 
 use super::ego_watch::{EgoPresence, courtesy_hold, ego_on_path};
 use super::idm::Idm;
-use super::state::{LightState, Obb};
+use super::state::LightState;
+use super::vehicle::Vehicle;
 use crate::map::{LaneIdx, LaneKind, Map};
 
 /// How background vehicles follow: gentler than the expert, with a longer headway, and slower
@@ -79,37 +80,6 @@ pub fn standing_time(before: f64, speed: f64, dt: f64) -> f64 {
 /// Occupants per lane: (arc length, half length, speed, id).
 type Occupancy = HashMap<LaneIdx, Vec<(f64, f64, f64, u32)>>;
 
-/// One background vehicle.
-#[derive(Debug, Clone)]
-pub struct Vehicle {
-    /// Actor id (unique in the world).
-    pub id: u32,
-    /// Current lane.
-    pub lane: LaneIdx,
-    /// Arc length along it.
-    pub s: f64,
-    /// Lateral offset from the lane centre (left positive), non-zero during a lane change.
-    pub lateral: f64,
-    /// Forward speed, m/s.
-    pub speed: f64,
-    /// Cruise speed, m/s.
-    pub desired_speed: f64,
-    /// The lanes it will take next (at least one unless at a dead end).
-    pub next: Vec<LaneIdx>,
-    /// Half length and half width, m.
-    pub half: DVec2,
-    /// Seconds spent (nearly) stopped in a row.
-    pub stopped_for: f64,
-    /// When it asked to enter the junction ahead.
-    pub arrival: Option<f64>,
-    /// Whether it already stopped at the stop sign ending its current lane.
-    pub stopped_at_sign: bool,
-    /// Drives through red lights (scenario vehicles S7-S9).
-    pub ignores_lights: bool,
-    /// Paint colour index, for renderers.
-    pub colour: u8,
-}
-
 /// The background traffic of a world.
 #[derive(Debug, Clone)]
 pub struct Traffic {
@@ -118,25 +88,6 @@ pub struct Traffic {
     conflicts: HashMap<LaneIdx, Vec<LaneIdx>>,
     light_at_end: HashMap<LaneIdx, usize>,
     stop_at_end: HashMap<LaneIdx, usize>,
-}
-
-impl Vehicle {
-    /// World position and heading.
-    pub fn pose(&self, map: &Map) -> (DVec3, f64) {
-        let pose = map.lane(self.lane).pose_at(self.s);
-        let left = DVec2::from_angle(pose.yaw).perp() * self.lateral;
-        (pose.position + left.extend(0.0), pose.yaw)
-    }
-
-    /// Ground box.
-    pub fn obb(&self, map: &Map) -> Obb {
-        let (p, yaw) = self.pose(map);
-        Obb {
-            centre: p.truncate(),
-            yaw,
-            half: self.half,
-        }
-    }
 }
 
 impl Traffic {

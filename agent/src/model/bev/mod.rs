@@ -3,14 +3,13 @@
 //! spatial cross-attention into the camera features, and a feed-forward network (each followed
 //! by layer norm, BEVFormer's post-norm order).
 
-mod grid;
 mod spatial;
 mod temporal;
 
+pub use super::grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
 use burn::module::{Module, Param};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Distribution, Tensor};
-pub use grid::{BevGrid, CAN_BUS_DIM, GeometryTensors, SampleGeometry};
 pub use spatial::ImageFeatures;
 use spatial::{SpatialContext, SpatialCrossAttention, SpatialCrossAttentionConfig};
 use ssrdrive_proto::camera::MAX_CAMERAS;

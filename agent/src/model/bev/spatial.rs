@@ -1,6 +1,6 @@
 //! Spatial cross-attention: every BEV query lifts pillar points at several heights, projects
 //! them into every camera through the episode's calibration (done on the CPU in
-//! [`super::grid::SampleGeometry`]) and samples the image features around each projection with
+//! [`crate::model::grid::SampleGeometry`]) and samples the image features around each projection with
 //! learned offsets and weights (deformable attention, BEVFormer's MSDeformableAttention3D). The
 //! result is averaged over the cameras that see the cell.
 
