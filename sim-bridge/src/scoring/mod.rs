@@ -255,18 +255,15 @@ pub enum InfractionKind {
 
 impl InfractionKind {
     /// Every kind: the leaderboard 1.0 ones ([`InfractionKind::LB1`]) and 2.0's minimum speed.
-    pub const ALL: [InfractionKind; 10] = [
-        InfractionKind::CollisionPedestrian,
-        InfractionKind::CollisionVehicle,
-        InfractionKind::CollisionLayout,
-        InfractionKind::RedLight,
-        InfractionKind::StopSign,
-        InfractionKind::OutsideRouteLanes,
-        InfractionKind::RouteDeviation,
-        InfractionKind::RouteTimeout,
-        InfractionKind::VehicleBlocked,
-        InfractionKind::MinSpeed,
-    ];
+    pub const ALL: [InfractionKind; 10] = {
+        let mut all = [InfractionKind::MinSpeed; 10];
+        let mut i = 0;
+        while i < Self::LB1.len() {
+            all[i] = Self::LB1[i];
+            i += 1;
+        }
+        all
+    };
 
     /// The leaderboard 1.0 kinds, in the order of its `labels`/`values` rows.
     pub const LB1: [InfractionKind; 9] = [
