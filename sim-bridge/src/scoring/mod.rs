@@ -6,8 +6,9 @@
 //! the "off-road" row), [`collisions`], [`lights`] (red lights and stop signs), [`progress`]
 //! (route deviation, agent blocked, route timeout), [`record`] (route and global records, the
 //! results JSON), [`summary`] (a readable table), and Bench2Drive's figures beside the
-//! leaderboard's: [`bench2drive`] (success, efficiency) and [`comfort`]. [`RouteScorer`] ties the criteria together
-//! for one route; the world calls [`RouteScorer::tick`] once per 20 Hz tick.
+//! leaderboard's: [`bench2drive`] (success, efficiency) and [`comfort`]. [`RouteScorer`] ties
+//! the criteria together for one route; the world calls [`RouteScorer::tick`] once per 20 Hz
+//! tick. [`Rules::Lb2`] adds Leaderboard 2.0's minimum-speed penalty and "Perfect" status.
 //!
 //! Scores: RC is the route-completion percentage, IS the product of the infraction coefficients
 //! (pedestrian 0.50, vehicle 0.60, layout 0.65, red light 0.70, stop 0.80) times
@@ -399,8 +400,9 @@ impl<'a> RouteScorer<'a> {
     /// Called once per 20 Hz tick, after the agent acted and before the world integrates;
     /// `collisions` are the contacts the world detected since the last call, `lights` the light
     /// states indexed like `map.lights`, `traffic_speed` the mean speed of the background
-    /// vehicles (m/s; `None` when there are none), for the efficiency figure. Returns why the route ended, if it did (then and on
-    /// every later call, which evaluates nothing more).
+    /// vehicles (m/s; `None` when there are none), for efficiency and minimum speed. Returns
+    /// why the route ended, if it did (then and on every later call, which evaluates nothing
+    /// more).
     ///
     /// Criteria run in the order LB1.0 builds them: collision, in-route, completion, outside
     /// route lanes, red light, stop sign, blocked; then the route timeout. If several end the
