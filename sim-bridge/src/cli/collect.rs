@@ -2,13 +2,15 @@
 //! `sim_bridge::dataset` docs for the layout). Interrupt it at any time; running the same
 //! command again resumes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim_bridge::client::grpc::{GrpcAgent, GrpcOptions};
-use sim_bridge::dataset::collect::{CollectConfig, EpisodeTask, collect, ticks_per_frame};
+use sim_bridge::dataset::collect::{
+    CollectConfig, CollectSummary, EpisodeTask, collect, ticks_per_frame,
+};
 use sim_bridge::driver::Agent;
 use sim_bridge::eval::suite::evaluation_towns;
 use sim_bridge::map::Map;
@@ -82,71 +84,10 @@ fn run_seed(base: u64, set: &str, route: &str, repetition: usize) -> u64 {
 }
 
 pub fn run(args: CollectArgs) -> anyhow::Result<()> {
-    if args.repetitions == 0 {
-        bail!("--repetitions must be at least 1");
-    }
-    if !(args.noise_rate >= 0.0 && args.noise_rate.is_finite()) {
-        bail!("--noise-rate must be a finite number >= 0");
-    }
-    if !(0.0..=1.0).contains(&args.noise_longitudinal) {
-        bail!("--noise-longitudinal must be a share in 0..1");
-    }
-    if args.noise_steer[1] > 1.0 || args.noise_duration[0] <= 0.0 {
-        bail!("--noise-steer must lie in 0..1 and --noise-duration above 0");
-    }
-    if ticks_per_frame(args.rate).is_none() {
-        bail!(
-            "--rate {}: must be 20 Hz divided by a whole number (20, 10, 5, 4, 2, 1, ...)",
-            args.rate
-        );
-    }
+    check_args(&args)?;
     let rig = Rig::from_name_or_file(&args.rig)?;
-    let mut sets: Vec<(String, Map, Vec<PlannedRoute>)> = Vec::new();
-    let mut ids = Vec::new();
-    for name in args
-        .route
-        .routes
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-    {
-        let one = RouteArgs {
-            routes: name.to_string(),
-            ..args.route.clone()
-        };
-        // --route-ids selects across the sets: one set may hold none of them.
-        let (map, plans, set_ids) = one.load_selected()?;
-        ids.extend(set_ids);
-        if evaluation_towns().contains(&map.name.as_str()) {
-            bail!(
-                "--routes {name} drives {}, a town of an evaluation suite (`eval --suite`): \
-                 training data must not touch it, or the suite no longer measures towns the \
-                 agent never saw; collect on the training towns (`sim-bridge towns list`)",
-                map.name
-            );
-        }
-        if !plans.is_empty() || args.route.route_ids.is_empty() {
-            let (map, planned) = RouteArgs::keep_planned(name, map, plans)?;
-            sets.push((name.to_string(), map, planned));
-        }
-    }
-    check_route_ids(&args.route.route_ids, &ids, &args.route.routes)?;
-    let mut tasks = Vec::new();
-    for repetition in 0..args.repetitions {
-        for (set, map, planned) in &sets {
-            for PlannedRoute { spec, dense } in planned {
-                let seed = run_seed(args.world.seed, set, &spec.id, repetition);
-                tasks.push(EpisodeTask {
-                    map,
-                    route_set: set.clone(),
-                    spec: spec.clone(),
-                    dense: dense.clone(),
-                    repetition,
-                    world: args.world.config(map, seed),
-                });
-            }
-        }
-    }
+    let sets = load_sets(&args)?;
+    let tasks = episode_tasks(&args, &sets);
     let (target, _local_server) = match &args.driver {
         Some(driver) => {
             let (target, server) = server_target(
@@ -188,17 +129,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         tag: args.tag.clone(),
         jobs: args.jobs as usize,
     };
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(tasks.len() as u64)
-    };
-    let style = ProgressStyle::with_template(
-        "{prefix} [{bar:40}] {pos}/{len} episodes {msg} ({elapsed}, eta {eta})",
-    )
-    .unwrap_or_else(|_| ProgressStyle::default_bar());
-    bar.set_style(style.progress_chars("=> "));
-    bar.set_prefix("collect");
+    let bar = progress_bar(args.quiet, tasks.len());
     let frames = std::sync::atomic::AtomicUsize::new(0);
     let started = std::time::Instant::now();
     let driver = driver_factory
@@ -214,7 +145,111 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         bar.inc(1);
     })?;
     bar.finish_and_clear();
-    let manifest = ssrdrive_proto::dataset::Dataset::open(&args.out)?.manifest;
+    print_summary(&args.out, &summary)
+}
+
+/// Refuses settings that cannot make a dataset, naming the flag.
+fn check_args(args: &CollectArgs) -> anyhow::Result<()> {
+    if args.repetitions == 0 {
+        bail!("--repetitions must be at least 1");
+    }
+    if !(args.noise_rate >= 0.0 && args.noise_rate.is_finite()) {
+        bail!("--noise-rate must be a finite number >= 0");
+    }
+    if !(0.0..=1.0).contains(&args.noise_longitudinal) {
+        bail!("--noise-longitudinal must be a share in 0..1");
+    }
+    if args.noise_steer[1] > 1.0 || args.noise_duration[0] <= 0.0 {
+        bail!("--noise-steer must lie in 0..1 and --noise-duration above 0");
+    }
+    if ticks_per_frame(args.rate).is_none() {
+        bail!(
+            "--rate {}: must be 20 Hz divided by a whole number (20, 10, 5, 4, 2, 1, ...)",
+            args.rate
+        );
+    }
+    Ok(())
+}
+
+/// Each route set of `--routes` (comma separated) with its map and planned routes, refusing
+/// the towns of an evaluation suite and route ids no set holds.
+fn load_sets(args: &CollectArgs) -> anyhow::Result<Vec<(String, Map, Vec<PlannedRoute>)>> {
+    let mut sets = Vec::new();
+    let mut ids = Vec::new();
+    for name in args
+        .route
+        .routes
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+    {
+        let one = RouteArgs {
+            routes: name.to_string(),
+            ..args.route.clone()
+        };
+        // --route-ids selects across the sets: one set may hold none of them.
+        let (map, plans, set_ids) = one.load_selected()?;
+        ids.extend(set_ids);
+        if evaluation_towns().contains(&map.name.as_str()) {
+            bail!(
+                "--routes {name} drives {}, a town of an evaluation suite (`eval --suite`): \
+                 training data must not touch it, or the suite no longer measures towns the \
+                 agent never saw; collect on the training towns (`sim-bridge towns list`)",
+                map.name
+            );
+        }
+        if !plans.is_empty() || args.route.route_ids.is_empty() {
+            let (map, planned) = RouteArgs::keep_planned(name, map, plans)?;
+            sets.push((name.to_string(), map, planned));
+        }
+    }
+    check_route_ids(&args.route.route_ids, &ids, &args.route.routes)?;
+    Ok(sets)
+}
+
+/// One episode per repetition, set and route, each with its own world seed.
+fn episode_tasks<'m>(
+    args: &CollectArgs,
+    sets: &'m [(String, Map, Vec<PlannedRoute>)],
+) -> Vec<EpisodeTask<'m>> {
+    let mut tasks = Vec::new();
+    for repetition in 0..args.repetitions {
+        for (set, map, planned) in sets {
+            for PlannedRoute { spec, dense } in planned {
+                let seed = run_seed(args.world.seed, set, &spec.id, repetition);
+                tasks.push(EpisodeTask {
+                    map,
+                    route_set: set.clone(),
+                    spec: spec.clone(),
+                    dense: dense.clone(),
+                    repetition,
+                    world: args.world.config(map, seed),
+                });
+            }
+        }
+    }
+    tasks
+}
+
+/// The episodes' progress bar (hidden with `--quiet`).
+fn progress_bar(quiet: bool, episodes: usize) -> ProgressBar {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(episodes as u64)
+    };
+    let style = ProgressStyle::with_template(
+        "{prefix} [{bar:40}] {pos}/{len} episodes {msg} ({elapsed}, eta {eta})",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style.progress_chars("=> "));
+    bar.set_prefix("collect");
+    bar
+}
+
+/// What this collection added and what the dataset at `out` now holds, town by town.
+fn print_summary(out: &Path, summary: &CollectSummary) -> anyhow::Result<()> {
+    let manifest = ssrdrive_proto::dataset::Dataset::open(out)?.manifest;
     println!(
         "collected {} episodes ({} frames) in {:.1} s: {:.0} frames/s; skipped {} already complete",
         summary.recorded,
@@ -225,7 +260,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     );
     println!(
         "dataset {}: {} episodes, {} frames ({} with a truncated future), {:.1} MB ({:.1} MB per 10k frames)",
-        args.out.display(),
+        out.display(),
         manifest.episodes,
         manifest.frames,
         manifest.truncated_frames,
