@@ -20,7 +20,7 @@ use thiserror::Error;
 
 use super::shard::Shard;
 use super::{RouteRun, run_route};
-use crate::driver::AgentFactory;
+use crate::driver::{Agent, AgentFactory};
 use crate::map::Map;
 use crate::route::xml::RouteSpec;
 use crate::route::{DenseRoute, RoutePlan};
@@ -82,6 +82,61 @@ impl Campaign<'_> {
             agent: String::new(),
             simulator: format!("sim-bridge {}", env!("CARGO_PKG_VERSION")),
             shard: self.shard.map(|s| s.to_string()),
+        }
+    }
+
+    /// Which runs (indices in leaderboard order) this process drives: all of them, or its
+    /// share's.
+    fn selected_runs(&self, lengths: &[f64]) -> Vec<bool> {
+        let mut selected = vec![self.shard.is_none(); self.runs()];
+        if let Some(shard) = self.shard {
+            for run in shard.runs(lengths, self.repetitions) {
+                selected[run] = true;
+            }
+        }
+        selected
+    }
+
+    /// Drives run `index` with `agent` (`progress` sees its route completion every simulated
+    /// second); a route that could not be planned gets its zero-score record without a drive.
+    fn drive(
+        &self,
+        index: usize,
+        agent: &mut dyn Agent,
+        progress: impl FnMut(f64),
+    ) -> (RouteRecord, Option<RouteRun>) {
+        let repetition = index / self.routes.len();
+        let (spec, dense) = &self.routes[index % self.routes.len()];
+        let world = WorldConfig {
+            seed: self.world.seed.wrapping_add(repetition as u64),
+            ..self.world
+        };
+        match dense {
+            Ok(dense) => {
+                let driven = run_route(
+                    self.map,
+                    spec,
+                    dense,
+                    agent,
+                    world,
+                    self.scoring.clone(),
+                    index,
+                    repetition,
+                    progress,
+                );
+                (driven.record.clone(), Some(driven))
+            }
+            Err(reason) => {
+                let record = RouteRecord::unplannable(
+                    index,
+                    &spec.id,
+                    spec.keypoint_length(),
+                    repetition,
+                    world.seed,
+                    &reason.to_string(),
+                );
+                (record, None)
+            }
         }
     }
 
@@ -211,12 +266,7 @@ pub fn run_campaign<O: CampaignObserver>(
     }
     let total = campaign.runs();
     let lengths = campaign.lengths();
-    let mut selected = vec![campaign.shard.is_none(); total];
-    if let Some(shard) = campaign.shard {
-        for run in shard.runs(&lengths, campaign.repetitions) {
-            selected[run] = true;
-        }
-    }
+    let selected = campaign.selected_runs(&lengths);
     let share = selected.iter().filter(|&&s| s).count();
     let (records, earlier_agent) = if campaign.resume {
         earlier_records(campaign, &selected)?
@@ -269,38 +319,9 @@ pub fn run_campaign<O: CampaignObserver>(
             }
             let repetition = index / campaign.routes.len();
             let (spec, dense) = &campaign.routes[index % campaign.routes.len()];
-            let world = WorldConfig {
-                seed: campaign.world.seed.wrapping_add(repetition as u64),
-                ..campaign.world
-            };
             let run = observer.run_started(spec, repetition);
-            let (record, driven) = match dense {
-                Ok(dense) => {
-                    let driven = run_route(
-                        campaign.map,
-                        spec,
-                        dense,
-                        agent.as_mut(),
-                        world,
-                        campaign.scoring.clone(),
-                        index,
-                        repetition,
-                        |rc| observer.progress(&run, rc),
-                    );
-                    (driven.record.clone(), Some(driven))
-                }
-                Err(reason) => {
-                    let record = RouteRecord::unplannable(
-                        index,
-                        &spec.id,
-                        spec.keypoint_length(),
-                        repetition,
-                        world.seed,
-                        &reason.to_string(),
-                    );
-                    (record, None)
-                }
-            };
+            let (record, driven) =
+                campaign.drive(index, agent.as_mut(), |rc| observer.progress(&run, rc));
             let done = RunDone {
                 spec,
                 repetition,
