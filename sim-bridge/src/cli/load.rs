@@ -4,7 +4,7 @@
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -90,17 +90,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         (None, Some(spec)) => Some(Rig::from_name_or_file(spec)?),
         (None, None) => None,
     };
-    // Connecting once waits for SERVING and resolves the rig the server expects.
-    let probe = GrpcAgent::connect(
-        &target,
-        GrpcOptions {
-            rig,
-            ..GrpcOptions::default()
-        },
-    )?;
-    let rig = probe.sensors().expect("a gRPC agent has a rig");
-    eprintln!("server: {}", probe.name());
-    drop(probe);
+    let rig = probe_rig(&target, rig)?;
 
     let templates = match &dataset {
         Some(dataset) => dataset_templates(dataset, args.frames)?,
@@ -133,36 +123,10 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         .build()?;
     let samples = Arc::new(std::sync::Mutex::new(memory));
     let report = runtime.block_on(async {
-        let sampler = metrics_url.clone().map(|url| {
-            let samples = Arc::clone(&samples);
-            tokio::spawn(async move {
-                let started = tokio::time::Instant::now();
-                loop {
-                    tokio::time::sleep(MEMORY_SAMPLE_PERIOD).await;
-                    let url = url.clone();
-                    if let Ok(Ok(bytes)) =
-                        tokio::task::spawn_blocking(move || resident_bytes(&url)).await
-                    {
-                        let at = started.elapsed().as_secs_f64();
-                        samples.lock().expect("not poisoned").push((at, bytes));
-                    }
-                }
-            })
-        });
-        let ticker = {
-            let (bar, progress) = (bar.clone(), Arc::clone(&progress));
-            tokio::spawn(async move {
-                loop {
-                    tokio::time::sleep(Duration::from_millis(500)).await;
-                    bar.set_position(bar.elapsed().as_secs());
-                    bar.set_message(format!(
-                        "{} steps, {} errors",
-                        progress.steps.load(Ordering::Relaxed),
-                        progress.errors.load(Ordering::Relaxed)
-                    ));
-                }
-            })
-        };
+        let sampler = metrics_url
+            .clone()
+            .map(|url| spawn_memory_sampler(url, Arc::clone(&samples)));
+        let ticker = spawn_ticker(bar.clone(), Arc::clone(&progress));
         let report = run_load(&config, Arc::new(templates), Arc::clone(&progress)).await;
         ticker.abort();
         if let Some(sampler) = sampler {
@@ -176,18 +140,71 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         memory.push((report.duration_s, resident_bytes(url)?));
     }
     print_report(&report, &memory);
-    if let Some(path) = &args.out {
-        let json = serde_json::json!({
-            "report": report,
-            "server_rss_bytes": memory
-                .iter()
-                .map(|(at, bytes)| serde_json::json!({"at_s": at, "bytes": bytes}))
-                .collect::<Vec<_>>(),
-        });
-        ssrdrive_proto::files::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())
-            .with_context(|| format!("writing {}", path.display()))?;
+    match &args.out {
+        Some(path) => write_report(path, &report, &memory),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// Connects once to `target`, which waits until it is SERVING, and returns the rig it expects
+/// (`rig`, when given, is checked against it).
+fn probe_rig(target: &str, rig: Option<Rig>) -> anyhow::Result<Rig> {
+    let probe = GrpcAgent::connect(
+        target,
+        GrpcOptions {
+            rig,
+            ..GrpcOptions::default()
+        },
+    )?;
+    eprintln!("server: {}", probe.name());
+    Ok(probe.sensors().expect("a gRPC agent has a rig"))
+}
+
+/// Reads the server's resident memory every [`MEMORY_SAMPLE_PERIOD`] into `samples` (seconds
+/// since the start, bytes) until aborted.
+fn spawn_memory_sampler(
+    url: String,
+    samples: Arc<std::sync::Mutex<Vec<(f64, u64)>>>,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let started = tokio::time::Instant::now();
+        loop {
+            tokio::time::sleep(MEMORY_SAMPLE_PERIOD).await;
+            let url = url.clone();
+            if let Ok(Ok(bytes)) = tokio::task::spawn_blocking(move || resident_bytes(&url)).await {
+                let at = started.elapsed().as_secs_f64();
+                samples.lock().expect("not poisoned").push((at, bytes));
+            }
+        }
+    })
+}
+
+/// Moves the progress bar twice a second with the steps and errors so far, until aborted.
+fn spawn_ticker(bar: ProgressBar, progress: Arc<LoadProgress>) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        loop {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            bar.set_position(bar.elapsed().as_secs());
+            bar.set_message(format!(
+                "{} steps, {} errors",
+                progress.steps.load(Ordering::Relaxed),
+                progress.errors.load(Ordering::Relaxed)
+            ));
+        }
+    })
+}
+
+/// The report and the server's memory samples as JSON at `path` (`--out`).
+fn write_report(path: &Path, report: &LoadReport, memory: &[(f64, u64)]) -> anyhow::Result<()> {
+    let json = serde_json::json!({
+        "report": report,
+        "server_rss_bytes": memory
+            .iter()
+            .map(|(at, bytes)| serde_json::json!({"at_s": at, "bytes": bytes}))
+            .collect::<Vec<_>>(),
+    });
+    ssrdrive_proto::files::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// How often the server's memory is read during a run.
