@@ -120,6 +120,118 @@ struct EpisodeResult {
     finished: tokio::time::Instant,
 }
 
+/// An episode the load drives: its client, episode id and balancer key.
+struct OpenEpisode {
+    client: AgentServiceClient<tonic::transport::Channel>,
+    id: String,
+    key: tonic::metadata::MetadataValue<tonic::metadata::Ascii>,
+}
+
+/// When an episode's steps are due: step k at `start + offset + k * period`, none from `end`.
+#[derive(Clone, Copy)]
+struct Schedule {
+    start: tokio::time::Instant,
+    end: tokio::time::Instant,
+    offset: Duration,
+    period: Duration,
+}
+
+impl Schedule {
+    fn due(&self, k: u64) -> tokio::time::Instant {
+        self.start + self.offset + self.period.mul_f64(k as f64)
+    }
+}
+
+/// Starts `config.episodes` episodes, each on its own connection once the server is SERVING.
+async fn open_episodes(config: &LoadConfig) -> Result<Vec<OpenEpisode>, AgentError> {
+    let mut episodes = Vec::with_capacity(config.episodes);
+    for episode in 0..config.episodes {
+        let channel = connect_when_serving(&config.target, Duration::from_secs(60)).await?;
+        let mut client = AgentServiceClient::new(channel);
+        let key = new_episode_key();
+        let start = v1::StartEpisodeRequest {
+            rig: Some(config.rig.clone()),
+            client: format!("sim-bridge load episode {episode}"),
+            ..Default::default()
+        };
+        let id = client
+            .start_episode(keyed(start, &key))
+            .await
+            .map_err(|s| status_error("StartEpisode", &s))?
+            .into_inner()
+            .episode_id;
+        episodes.push(OpenEpisode { client, id, key });
+    }
+    Ok(episodes)
+}
+
+/// Sends episode `episode`'s steps on `schedule` (templates cycled from template `episode`),
+/// then ends it; steps that fell behind the schedule's end count with their wait so far.
+async fn drive_episode(
+    open: OpenEpisode,
+    episode: usize,
+    schedule: Schedule,
+    templates: Arc<Vec<v1::StepRequest>>,
+    progress: Arc<LoadProgress>,
+    call_timeout: Duration,
+) -> EpisodeResult {
+    let OpenEpisode {
+        mut client,
+        id,
+        key,
+    } = open;
+    let mut result = EpisodeResult {
+        latencies: Vec::new(),
+        codes: BTreeMap::new(),
+        behind: 0,
+        finished: schedule.start,
+    };
+    let mut k: u64 = 0;
+    loop {
+        let intended = schedule.due(k);
+        if intended >= schedule.end {
+            break;
+        }
+        if tokio::time::Instant::now() >= schedule.end {
+            // Steps k.. were due before the end and never went out: each counts with its wait
+            // so far as a lower bound of its latency.
+            while schedule.due(k) < schedule.end {
+                let due = schedule.due(k);
+                result
+                    .latencies
+                    .push((schedule.end - due).as_secs_f64() * 1e3);
+                result.behind += 1;
+                k += 1;
+            }
+            break;
+        }
+        tokio::time::sleep_until(intended).await;
+        let mut request = templates[(episode + k as usize) % templates.len()].clone();
+        request.episode_id = id.clone();
+        request.frame_index = k;
+        let mut request = keyed(request, &key);
+        request.set_timeout(call_timeout);
+        let code = match client.step(request).await {
+            Ok(_) => "Ok".to_string(),
+            Err(status) => {
+                progress.errors.fetch_add(1, Ordering::Relaxed);
+                format!("{:?}", status.code())
+            }
+        };
+        result
+            .latencies
+            .push(intended.elapsed().as_secs_f64() * 1e3);
+        *result.codes.entry(code).or_default() += 1;
+        progress.steps.fetch_add(1, Ordering::Relaxed);
+        k += 1;
+    }
+    result.finished = tokio::time::Instant::now();
+    let _ = client
+        .end_episode(keyed(v1::EndEpisodeRequest { episode_id: id }, &key))
+        .await;
+    result
+}
+
 /// Runs the load; `templates` are cycled (episode `e` starts at template `e`).
 pub async fn run_load(
     config: &LoadConfig,
@@ -136,82 +248,26 @@ pub async fn run_load(
         ))
     })?;
     // Open every episode first, so set-up time never counts against the schedule.
-    let mut clients = Vec::with_capacity(config.episodes);
-    for episode in 0..config.episodes {
-        let channel = connect_when_serving(&config.target, Duration::from_secs(60)).await?;
-        let mut client = AgentServiceClient::new(channel);
-        let key = new_episode_key();
-        let start = v1::StartEpisodeRequest {
-            rig: Some(config.rig.clone()),
-            client: format!("sim-bridge load episode {episode}"),
-            ..Default::default()
-        };
-        let id = client
-            .start_episode(keyed(start, &key))
-            .await
-            .map_err(|s| status_error("StartEpisode", &s))?
-            .into_inner()
-            .episode_id;
-        clients.push((client, id, key));
-    }
+    let episodes = open_episodes(config).await?;
     let start = tokio::time::Instant::now() + Duration::from_millis(100);
     let end = start + config.duration;
     let mut tasks = Vec::with_capacity(config.episodes);
-    for (episode, (mut client, id, key)) in clients.into_iter().enumerate() {
-        // Episodes tick spread over one period, as independent simulators would.
-        let offset = period.mul_f64(episode as f64 / config.episodes as f64);
-        let (templates, progress) = (Arc::clone(&templates), Arc::clone(&progress));
-        let call_timeout = config.call_timeout;
-        tasks.push(tokio::spawn(async move {
-            let mut result = EpisodeResult {
-                latencies: Vec::new(),
-                codes: BTreeMap::new(),
-                behind: 0,
-                finished: start,
-            };
-            let mut k: u64 = 0;
-            loop {
-                let intended = start + offset + period.mul_f64(k as f64);
-                if intended >= end {
-                    break;
-                }
-                if tokio::time::Instant::now() >= end {
-                    // Steps k.. were due before the end and never went out: each counts with
-                    // its wait so far as a lower bound of its latency.
-                    while start + offset + period.mul_f64(k as f64) < end {
-                        let due = start + offset + period.mul_f64(k as f64);
-                        result.latencies.push((end - due).as_secs_f64() * 1e3);
-                        result.behind += 1;
-                        k += 1;
-                    }
-                    break;
-                }
-                tokio::time::sleep_until(intended).await;
-                let mut request = templates[(episode + k as usize) % templates.len()].clone();
-                request.episode_id = id.clone();
-                request.frame_index = k;
-                let mut request = keyed(request, &key);
-                request.set_timeout(call_timeout);
-                let code = match client.step(request).await {
-                    Ok(_) => "Ok".to_string(),
-                    Err(status) => {
-                        progress.errors.fetch_add(1, Ordering::Relaxed);
-                        format!("{:?}", status.code())
-                    }
-                };
-                result
-                    .latencies
-                    .push(intended.elapsed().as_secs_f64() * 1e3);
-                *result.codes.entry(code).or_default() += 1;
-                progress.steps.fetch_add(1, Ordering::Relaxed);
-                k += 1;
-            }
-            result.finished = tokio::time::Instant::now();
-            let _ = client
-                .end_episode(keyed(v1::EndEpisodeRequest { episode_id: id }, &key))
-                .await;
-            result
-        }));
+    for (episode, open) in episodes.into_iter().enumerate() {
+        let schedule = Schedule {
+            start,
+            end,
+            // Episodes tick spread over one period, as independent simulators would.
+            offset: period.mul_f64(episode as f64 / config.episodes as f64),
+            period,
+        };
+        tasks.push(tokio::spawn(drive_episode(
+            open,
+            episode,
+            schedule,
+            Arc::clone(&templates),
+            Arc::clone(&progress),
+            config.call_timeout,
+        )));
     }
     let mut latencies = Vec::new();
     let mut codes = BTreeMap::new();
