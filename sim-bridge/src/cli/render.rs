@@ -219,8 +219,6 @@ impl Film<'_> {
         // Small cameras are enlarged (nearest pixel, whole factors) to the panels' height.
         let zoom = (side / stack_height.max(1)).max(1);
         let cameras: Vec<RgbImage> = obs.frames.iter().map(|f| enlarge(f, zoom)).collect();
-        let cameras_width = cameras.iter().map(|f| f.width).max().unwrap_or(0);
-        let cameras_height: u32 = cameras.iter().map(|f| f.height).sum();
         let plan = self.driver.agent().planned_trajectory();
         let intent = Intent {
             target_point: Some(obs.target_point),
@@ -235,75 +233,102 @@ impl Film<'_> {
             self.args.topdown_radius,
             side,
         );
-        // The debug block's BEV maps, each where the agent sent it: token attention, occupancy.
-        let mut maps = Vec::new();
-        if let Some(debug) = debug {
-            let bad = |e| anyhow::anyhow!("the agent's debug block at tick {}: {e}", obs.frame);
-            if !debug.token_attention.is_empty() {
-                maps.push(token_panel(&debug.token_attention, side).map_err(bad)?);
-            }
-            if !debug.occupancy.is_empty() {
-                maps.push(occupancy_panel(&debug.occupancy, side).map_err(bad)?);
-            }
-        }
-        let panels = 1 + maps.len() as u32;
-        let (width, height) = (cameras_width + panels * side, cameras_height.max(side));
-        let stride = width as usize * 3;
-        let mut rgb = vec![0u8; stride * height as usize];
-        let mut blit = |x0: u32, y0: u32, w: u32, pixels: &[u8]| {
-            for (row, line) in pixels.chunks_exact(w as usize * 3).enumerate() {
-                let at = (y0 as usize + row) * stride + x0 as usize * 3;
-                rgb[at..at + line.len()].copy_from_slice(line);
-            }
+        let mut panels = vec![Panel {
+            image: RgbImage {
+                width: side,
+                height: side,
+                rgb: topdown.pixels().to_vec(),
+            },
+            title: "top-down, north up",
+            key: "plan cyan, target magenta",
+        }];
+        let maps = match debug {
+            Some(debug) => debug_panels(debug, side).map_err(|e| {
+                anyhow::anyhow!("the agent's debug block at tick {}: {e}", obs.frame)
+            })?,
+            None => Vec::new(),
         };
-        let mut y = 0;
-        for frame in &cameras {
-            blit(0, y, frame.width, &frame.rgb);
-            y += frame.height;
-        }
-        blit(cameras_width, 0, side, topdown.pixels());
-        for (k, map) in maps.iter().enumerate() {
-            blit(cameras_width + (1 + k as u32) * side, 0, side, &map.rgb);
-        }
-        // What each panel shows.
-        let mut y = 0;
-        for (frame, image) in obs.frames.iter().zip(&cameras) {
-            label(
-                &mut rgb,
-                width,
-                2,
-                y as i64 + 2,
-                &format!("camera {}", frame.camera),
-            );
-            y += image.height;
-        }
-        // (title at the top, key at the bottom), short enough for a 288-pixel panel.
-        let titles = [
-            ("top-down, north up", "plan cyan, target magenta"),
-            ("token attention", "ego frame, ahead up"),
-            ("occupancy", "vehicle orange, walker cyan"),
-        ];
-        let mut kinds = vec![titles[0]];
-        if let Some(debug) = debug {
-            if !debug.token_attention.is_empty() {
-                kinds.push(titles[1]);
-            }
-            if !debug.occupancy.is_empty() {
-                kinds.push(titles[2]);
-            }
-        }
-        for (k, (title, key)) in kinds.into_iter().enumerate() {
-            let x = (cameras_width + k as u32 * side) as i64 + 2;
-            label(&mut rgb, width, x, 2, title);
-            label(&mut rgb, width, x, height as i64 - 16, key);
-        }
-        if !maps.is_empty() {
+        let with_maps = !maps.is_empty();
+        panels.extend(maps);
+        let names: Vec<String> = obs
+            .frames
+            .iter()
+            .map(|f| format!("camera {}", f.camera))
+            .collect();
+        let RgbImage { width, height, rgb } = compose_view(&cameras, &names, &panels, side);
+        if with_maps {
             let path = self.dir.join(format!("{:06}_view.png", obs.frame));
             write_file(&path, &encode_png(width, height, &rgb)?)?;
         }
         self.frames.push(RgbImage { width, height, rgb });
         Ok(())
     }
+}
+
+/// One square panel beside the cameras, with its title (top) and key (bottom), short enough
+/// for a 288-pixel panel.
+struct Panel {
+    image: RgbImage,
+    title: &'static str,
+    key: &'static str,
+}
+
+/// The debug block's BEV maps, in the order the agent sent them: token attention, occupancy.
+fn debug_panels(debug: &v1::Debug, side: u32) -> Result<Vec<Panel>, String> {
+    let mut panels = Vec::new();
+    if !debug.token_attention.is_empty() {
+        panels.push(Panel {
+            image: token_panel(&debug.token_attention, side)?,
+            title: "token attention",
+            key: "ego frame, ahead up",
+        });
+    }
+    if !debug.occupancy.is_empty() {
+        panels.push(Panel {
+            image: occupancy_panel(&debug.occupancy, side)?,
+            title: "occupancy",
+            key: "vehicle orange, walker cyan",
+        });
+    }
+    Ok(panels)
+}
+
+/// The cameras stacked on the left (each labelled with its name), then the `side`-pixel
+/// panels left to right, each with its title and key.
+fn compose_view(cameras: &[RgbImage], names: &[String], panels: &[Panel], side: u32) -> RgbImage {
+    let cameras_width = cameras.iter().map(|f| f.width).max().unwrap_or(0);
+    let cameras_height: u32 = cameras.iter().map(|f| f.height).sum();
+    let (width, height) = (
+        cameras_width + panels.len() as u32 * side,
+        cameras_height.max(side),
+    );
+    let stride = width as usize * 3;
+    let mut rgb = vec![0u8; stride * height as usize];
+    let mut blit = |x0: u32, y0: u32, w: u32, pixels: &[u8]| {
+        for (row, line) in pixels.chunks_exact(w as usize * 3).enumerate() {
+            let at = (y0 as usize + row) * stride + x0 as usize * 3;
+            rgb[at..at + line.len()].copy_from_slice(line);
+        }
+    };
+    let mut y = 0;
+    for frame in cameras {
+        blit(0, y, frame.width, &frame.rgb);
+        y += frame.height;
+    }
+    for (k, panel) in panels.iter().enumerate() {
+        blit(cameras_width + k as u32 * side, 0, side, &panel.image.rgb);
+    }
+    let mut y = 0;
+    for (image, name) in cameras.iter().zip(names) {
+        label(&mut rgb, width, 2, y as i64 + 2, name);
+        y += image.height;
+    }
+    for (k, panel) in panels.iter().enumerate() {
+        let x = (cameras_width + k as u32 * side) as i64 + 2;
+        label(&mut rgb, width, x, 2, panel.title);
+        label(&mut rgb, width, x, height as i64 - 16, panel.key);
+    }
+    RgbImage { width, height, rgb }
 }
 
 /// `frame` with each pixel repeated `zoom` times across and down.
