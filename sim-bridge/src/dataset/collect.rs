@@ -215,33 +215,11 @@ fn collect_one(
     let name = task.name(config.tag.as_deref());
     let episodes = config.out.join("episodes");
     let dir = episodes.join(&name);
-    let info_path = dir.join("episode.json");
-    if info_path.exists() {
-        let info: EpisodeInfo = read_json(&info_path)?;
-        let same = info.seed == task.world.seed
-            && info.rig == config.rig
-            && info.ticks_per_frame == ticks_per_frame
-            && info.noise == config.noise
-            && info.driver == config.driver
-            && info.randomise_appearance == task.world.randomise_appearance;
-        if !same {
-            return Err(DatasetError::invalid(
-                &info_path,
-                "recorded with another seed, rig, rate, noise, driver or look than this \
-                 collection asks for; collect into a new folder (or repeat the original command)",
-            ));
-        }
-        if info.outcome.status != RouteEnd::AgentCrashed.status() {
-            return Ok(EpisodeDone {
-                info,
-                skipped: true,
-            });
-        }
-        // Kept by builds that stored a run whose driver crashed: redo it.
-        std::fs::remove_dir_all(&dir).map_err(|source| DatasetError::Io {
-            path: dir.clone(),
-            source,
-        })?;
+    if let Some(info) = recorded_before(config, task, ticks_per_frame, &dir)? {
+        return Ok(EpisodeDone {
+            info,
+            skipped: true,
+        });
     }
     let partial = episodes.join(format!(".{name}.partial"));
     let io = |source| DatasetError::Io {
@@ -315,6 +293,44 @@ fn collect_one(
         info,
         skipped: false,
     })
+}
+
+/// The episode already in `dir`, when this collection asked for the same one and its driver
+/// did not crash; a crashed one is removed (to be driven again), one recorded with other
+/// settings is refused.
+fn recorded_before(
+    config: &CollectConfig,
+    task: &EpisodeTask<'_>,
+    ticks_per_frame: u64,
+    dir: &Path,
+) -> Result<Option<EpisodeInfo>, DatasetError> {
+    let info_path = dir.join("episode.json");
+    if !info_path.exists() {
+        return Ok(None);
+    }
+    let info: EpisodeInfo = read_json(&info_path)?;
+    let same = info.seed == task.world.seed
+        && info.rig == config.rig
+        && info.ticks_per_frame == ticks_per_frame
+        && info.noise == config.noise
+        && info.driver == config.driver
+        && info.randomise_appearance == task.world.randomise_appearance;
+    if !same {
+        return Err(DatasetError::invalid(
+            &info_path,
+            "recorded with another seed, rig, rate, noise, driver or look than this \
+             collection asks for; collect into a new folder (or repeat the original command)",
+        ));
+    }
+    if info.outcome.status != RouteEnd::AgentCrashed.status() {
+        return Ok(Some(info));
+    }
+    // Kept by builds that stored a run whose driver crashed: redo it.
+    std::fs::remove_dir_all(dir).map_err(|source| DatasetError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    Ok(None)
 }
 
 /// Refuse to add to a dataset recorded with another rig or rate.
