@@ -9,7 +9,8 @@
 //! Written like Python's `json.dump(indent=4, sort_keys=True)`. A record holds `index`,
 //! `infractions` (one message list per key), `meta` (`duration_game`, `duration_system`,
 //! `route_length`), `route_id`, `scores` (`score_composed` = DS, `score_penalty` = IS,
-//! `score_route` = RC) and `status`. Our additions are optional keys that LB1.0 readers ignore:
+//! `score_route` = RC) and `status`. Our additions are keys that LB1.0 readers ignore:
+//! Leaderboard 2.0's `infractions.min_speed_infractions` (empty unless `--scoring lb2`),
 //! `meta.repetition`, `meta.seed` and `meta.bench2drive` on records, and `meta.records`,
 //! `meta.scores_std`, `meta.total_length`, `meta.duration_game`, `meta.duration_system`,
 //! `meta.infraction_counts` and `meta.bench2drive` on the global record, and a top-level `plan`
