@@ -613,7 +613,7 @@ fn a_light_seen_red_holds_the_car_and_one_seen_green_is_nothing_to_wait_for() {
         Some(2 * plain - 2)
     );
     let flicker = |tick: usize| {
-        if tick % 10 == 0 {
+        if tick.is_multiple_of(10) {
             light(0.4, 0.4)
         } else {
             light(0.01, 0.98)
