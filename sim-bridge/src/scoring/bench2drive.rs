@@ -1,8 +1,8 @@
 //! Bench2Drive's figures beside DS, RC and IS (its `merge_route_json.py` and
 //! `efficiency_smoothness_benchmark.py`):
 //!
-//! - **success**: the route was completed with no infraction at all (Bench2Drive excuses only
-//!   minimum speed, which LB1.0 scoring does not record); the success rate is the share of
+//! - **success**: the route was completed with no infraction but minimum speed (Bench2Drive's
+//!   rule; only `--scoring lb2` records minimum speed); the success rate is the share of
 //!   successful runs.
 //! - **efficiency**: Leaderboard 2.0's `MinimumSpeedRouteTest` with Bench2Drive's 20
 //!   checkpoints ([`SpeedRatio`]): the route is cut into 20 equal stretches of progress, and at
@@ -14,6 +14,8 @@
 //!   in percent; the campaign's is the mean over routes.
 //!
 //! Scenario vehicles (those that run red lights on purpose) are not background traffic.
+//! [`SpeedRatio`] with 4 checkpoints is also Leaderboard 2.0's minimum-speed penalty
+//! ([`super::Rules::Lb2`]).
 
 use serde::{Deserialize, Serialize};
 
