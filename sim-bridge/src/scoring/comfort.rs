@@ -83,23 +83,13 @@ impl ComfortTrace {
         self.samples.push(sample);
     }
 
-    /// Samples so far.
-    pub fn len(&self) -> usize {
-        self.samples.len()
-    }
-
-    /// Whether nothing was sampled.
-    pub fn is_empty(&self) -> bool {
-        self.samples.is_empty()
-    }
-
     /// The share of comfortable windows (0 to 1); `None` for fewer than three samples (too few
     /// to fit the filter's parabola).
     pub fn comfort(&self, bounds: &ComfortBounds) -> Option<f64> {
-        let signals = Signals::of(&self.samples);
         if self.samples.len() <= FILTER_ORDER {
             return None;
         }
+        let signals = Signals::of(&self.samples);
         if self.samples.len() <= WINDOW_SAMPLES {
             return Some(if signals.comfortable(0..self.samples.len(), bounds) {
                 1.0
@@ -125,17 +115,16 @@ struct Signals {
 
 impl Signals {
     /// Accelerations are the velocity's backward differences, the yaw rate the heading's
-    /// (wrapped); the first sample repeats the second's.
+    /// (wrapped); the first sample repeats the second's. Needs at least two samples.
     fn of(samples: &[MotionSample]) -> Self {
-        let n = samples.len();
         let mut out = Signals {
-            lon: Vec::with_capacity(n),
-            lat: Vec::with_capacity(n),
-            magnitude: Vec::with_capacity(n),
-            yaw_rate: Vec::with_capacity(n),
+            lon: Vec::with_capacity(samples.len()),
+            lat: Vec::with_capacity(samples.len()),
+            magnitude: Vec::with_capacity(samples.len()),
+            yaw_rate: Vec::with_capacity(samples.len()),
         };
-        for k in 1..n.max(1) {
-            let (previous, now) = (samples[k - 1], samples[k]);
+        for pair in samples.windows(2) {
+            let (previous, now) = (pair[0], pair[1]);
             let accel = (now.velocity - previous.velocity) / SAMPLE_S;
             let forward = DVec2::from_angle(now.yaw);
             let right = DVec2::new(forward.y, -forward.x);
@@ -151,11 +140,7 @@ impl Signals {
             &mut out.magnitude,
             &mut out.yaw_rate,
         ] {
-            if let Some(&first) = signal.first() {
-                signal.insert(0, first);
-            } else if n == 1 {
-                signal.push(0.0);
-            }
+            signal.insert(0, signal[0]);
         }
         out
     }

@@ -191,14 +191,13 @@ impl<'m> World<'m> {
     /// The mean speed of the background vehicles (scenario vehicles, which run red lights on
     /// purpose, left out), m/s; `None` when there are none.
     pub fn background_speed(&self) -> Option<f64> {
-        let speeds: Vec<f64> = self
+        let (sum, count) = self
             .traffic
             .vehicles
             .iter()
             .filter(|v| !v.ignores_lights)
-            .map(|v| v.speed)
-            .collect();
-        (!speeds.is_empty()).then(|| speeds.iter().sum::<f64>() / speeds.len() as f64)
+            .fold((0.0, 0usize), |(sum, count), v| (sum + v.speed, count + 1));
+        (count > 0).then(|| sum / count as f64)
     }
 
     /// Every other actor.
