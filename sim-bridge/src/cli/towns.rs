@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 use sim_bridge::map::MapOptions;
+use sim_bridge::towngen::procedural::Bends;
 use sim_bridge::towngen::{self, TownStyle};
 
 #[derive(Debug, Subcommand)]
@@ -17,17 +18,39 @@ pub enum TownsCommand {
         #[arg(long, default_value = "sim-bridge/towns")]
         out_dir: PathBuf,
     },
-    /// Write procedural training towns (`ssr_proc_NNN.xodr`, one per seed: grids of varied
-    /// spacing, angles, lanes, widths, bends, gaps and control; see `towngen::procedural`).
-    /// Draw routes on them with `routes random` and collect with `collect --maps DIR`.
+    /// Write procedural training towns (`ssr_proc_NNN.xodr` or, with `--bends tight`,
+    /// `ssr_tight_NNN.xodr`, one per seed: grids of varied spacing, angles, lanes, widths,
+    /// bends, gaps and control; see `towngen::procedural`). Draw routes on them with
+    /// `routes random` and collect with `collect --maps DIR`.
     Procedural {
         /// Seeds, as FIRST-LAST (inclusive) or a comma-separated list.
         #[arg(long, value_parser = parse_seeds)]
         seeds: SeedList,
+        /// The family: `gentle` (loop corners of 18-40 m, some streets gently bent) or `tight`
+        /// (corners a few metres beyond the kerb, some streets detouring through four of them,
+        /// as small towns bend).
+        #[arg(long, value_enum, default_value_t = BendsArg::Gentle)]
+        bends: BendsArg,
         /// Folder to write into.
         #[arg(long)]
         out: PathBuf,
     },
+}
+
+/// `towns procedural --bends`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum BendsArg {
+    Gentle,
+    Tight,
+}
+
+impl From<BendsArg> for Bends {
+    fn from(arg: BendsArg) -> Self {
+        match arg {
+            BendsArg::Gentle => Bends::Gentle,
+            BendsArg::Tight => Bends::Tight,
+        }
+    }
 }
 
 /// The seeds of `towns procedural --seeds`.
@@ -88,8 +111,8 @@ pub fn run(cmd: TownsCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        TownsCommand::Procedural { seeds, out } => {
-            for path in towngen::write_procedural(&out, seeds.0)? {
+        TownsCommand::Procedural { seeds, bends, out } => {
+            for path in towngen::write_procedural(&out, seeds.0, bends.into())? {
                 let map = super::load_map(&path.to_string_lossy(), MapOptions::default())?;
                 let size = map.bounds.1 - map.bounds.0;
                 println!(

@@ -14,8 +14,15 @@
 //!   approaches of others, some junctions free; in about a third of the towns the file carries
 //!   no light at all and the simulator places its own, as on CARLA maps without signals.
 //!
-//! Nothing else is random: the same seed gives the same bytes. None of these towns is an
-//! evaluation town; the held-out radial town is of another layout family.
+//! The tight family, `ssr_tight_NNN` ([`Bends::Tight`]), is the same grid with the bends of
+//! small towns: mostly one lane each way, the loop's corners drawn with the inner kerb 3.5-8.5 m
+//! from the centre of the turn (the innermost lane turning on about 5-10 m, as most corners of
+//! CARLA's Town01 and Town04), and some inner stretches taking a detour of four right-angle
+//! corners that tight. The first family's corners (18-40 m) are
+//! wider than any of the CARLA towns' usual corners; agents trained on it alone cut tight ones.
+//!
+//! Nothing else is random: the same seed and family give the same bytes. None of these towns is
+//! an evaluation town; the held-out radial town is of another layout family.
 
 use std::collections::BTreeSet;
 
@@ -31,17 +38,36 @@ use super::town::Town;
 /// Straight road kept beyond a junction's setback before a bend begins, metres.
 const STRAIGHT: f64 = 3.0;
 
-/// The name of the town of `seed`.
-pub fn name(seed: u64) -> String {
-    format!("ssr_proc_{seed:03}")
+/// How the roads away from junctions bend: the family of a procedural town.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Bends {
+    /// `ssr_proc_NNN`: loop corners of 18-40 m, some inner stretches gently bent.
+    Gentle,
+    /// `ssr_tight_NNN`: loop corners with the inner kerb 3.5-8.5 m from the turn's centre,
+    /// some inner stretches detouring through four right-angle corners as tight.
+    Tight,
 }
 
-/// A random cross-section: 1-3 lanes each way (2 most often), maybe parking, a speed for its
-/// size, lanes 3.1-3.7 m wide.
-fn random_profile(rng: &mut impl Rng) -> Profile {
-    let lanes = match rng.random_range(0..20) {
-        0..=6 => 1,
-        7..=15 => 2,
+/// The name of the town of `seed` in the family `bends`.
+pub fn name(seed: u64, bends: Bends) -> String {
+    match bends {
+        Bends::Gentle => format!("ssr_proc_{seed:03}"),
+        Bends::Tight => format!("ssr_tight_{seed:03}"),
+    }
+}
+
+/// A tight corner's radius for a road of `profile`: its inner sidewalk's back 0.5-5.5 m from
+/// the centre of the turn, by `share` (0 to 1) of that range.
+fn tight_radius(profile: &Profile, share: f64) -> f64 {
+    profile.half_width() + 0.5 + 5.0 * share
+}
+
+/// A random cross-section: 1-3 lanes each way (2 most often; 1 most often in the tight
+/// family, as in small towns), maybe parking, a speed for its size, lanes 3.1-3.7 m wide.
+fn random_profile(rng: &mut impl Rng, bends: Bends) -> Profile {
+    let lanes = match (bends, rng.random_range(0..20)) {
+        (Bends::Gentle, 0..=6) | (Bends::Tight, 0..=9) => 1,
+        (Bends::Gentle, 7..=15) | (Bends::Tight, 10..=17) => 2,
         _ => 3,
     };
     let parking = rng.random_bool(0.3);
@@ -54,22 +80,32 @@ struct Node {
     id: JunctionId,
     /// In layout axes.
     at: DVec2,
+    /// How far its streets stop short of its centre.
+    setback: f64,
     /// (street, whether it is a multi-lane street).
     legs: Vec<(RoadId, bool)>,
 }
 
 /// The town being laid out.
 struct Layout {
+    bends: Bends,
+    /// The least distance between parallel lines (the next column or row, or the loop), nodes
+    /// moved towards each other: what a detour and the street beyond share.
+    line_gap: f64,
+    /// Nodes a detour starts at (one per node).
+    detoured: BTreeSet<usize>,
     b: TownBuilder,
     nodes: Vec<Node>,
 }
 
 impl Layout {
     fn node(&mut self, name: String, at: DVec2, profiles: &[&Profile]) -> usize {
-        let id = self.b.junction(name, at, setback(profiles) + 1.0);
+        let setback = setback(profiles) + 1.0;
+        let id = self.b.junction(name, at, setback);
         self.nodes.push(Node {
             id,
             at,
+            setback,
             legs: Vec::new(),
         });
         self.nodes.len() - 1
@@ -85,9 +121,24 @@ impl Layout {
         self.nodes[b].legs.push((road, multi_lane));
     }
 
-    /// A straight street, or one bent through a midpoint moved sideways by up to a fifth of its
-    /// length, where the bend leaves room for the junctions' setbacks.
-    fn street_maybe_bent(&mut self, rng: &mut impl Rng, a: usize, b: usize, profile: &Profile) {
+    /// An inner stretch from node `a` to node `b`: in the tight family a detour half the time
+    /// ([`Self::detour`]), else straight; in the gentle family straight or bent through a
+    /// midpoint moved sideways by up to a fifth of its length, where the bend leaves room for
+    /// the junctions' setbacks.
+    /// `beyond` is the profile of the next parallel line in +x or +y (a detour's side).
+    fn street_maybe_bent(
+        &mut self,
+        rng: &mut impl Rng,
+        (a, b): (usize, usize),
+        profile: &Profile,
+        beyond: &Profile,
+    ) {
+        if self.bends == Bends::Tight {
+            if !(rng.random_bool(0.6) && self.detour(rng, (a, b), profile, beyond)) {
+                self.street(a, b, &[], 0.0, profile);
+            }
+            return;
+        }
         let (pa, pb) = (self.nodes[a].at, self.nodes[b].at);
         let half = (pb - pa).length() / 2.0;
         let room = half - setback(&[profile]) - 1.0 - STRAIGHT - 5.0;
@@ -103,6 +154,45 @@ impl Layout {
         } else {
             self.street(a, b, &[], 0.0, profile);
         }
+    }
+
+    /// A street from node `a` to node `b` that leaves their line at a right angle, runs beside
+    /// it and comes back: four right-angle corners of [`tight_radius`], each end keeping its
+    /// junction's setback and a straight. It turns towards +x or +y of the layout, into the
+    /// block whose south-west corner is `a`, so no two detours share a block (each node starts
+    /// at most one) and none faces another; it stays a metre clear of the next line (of
+    /// profile `beyond`). False, with nothing built, where the stretch or the block is too small.
+    fn detour(
+        &mut self,
+        rng: &mut impl Rng,
+        (a, b): (usize, usize),
+        profile: &Profile,
+        beyond: &Profile,
+    ) -> bool {
+        let (pa, pb) = (self.nodes[a].at, self.nodes[b].at);
+        let length = (pb - pa).length();
+        let along = (pb - pa) / length;
+        let radius = tight_radius(profile, rng.random_range(0.0..1.0));
+        let middle = 2.0 * radius + rng.random_range(2.0..12.0);
+        let side = 2.0 * radius + rng.random_range(1.0..4.0);
+        let before = self.nodes[a].setback + STRAIGHT + radius;
+        let spare = length - before - middle - (self.nodes[b].setback + STRAIGHT + radius);
+        if spare < 0.0
+            || side + profile.half_width() + 1.0 + beyond.half_width() > self.line_gap
+            || !self.detoured.insert(a)
+        {
+            return false;
+        }
+        let normal = if along.perp().x + along.perp().y < 0.0 {
+            -along.perp()
+        } else {
+            along.perp()
+        };
+        let first = pa + along * (before + rng.random_range(0.0..=spare));
+        let last = first + along * middle;
+        let via = [first, first + normal * side, last + normal * side, last];
+        self.street(a, b, &via, radius, profile);
+        true
     }
 
     /// Lights (with chance `lights`) or else stop signs on the minor approaches (with chance
@@ -138,29 +228,36 @@ fn lines(rng: &mut impl Rng, n: usize) -> Vec<f64> {
     at
 }
 
-/// Build the town of `seed`.
-pub fn build(seed: u64) -> Town {
+/// Build the town of `seed` in the family `bends`.
+pub fn build(seed: u64, bends: Bends) -> Town {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (cols, rows) = (rng.random_range(3..=5usize), rng.random_range(3..=5usize));
     let xs = lines(&mut rng, cols);
     let ys = lines(&mut rng, rows);
-    let col_profiles: Vec<Profile> = (0..cols).map(|_| random_profile(&mut rng)).collect();
-    let row_profiles: Vec<Profile> = (0..rows).map(|_| random_profile(&mut rng)).collect();
-    let loop_profile = random_profile(&mut rng);
+    let col_profiles: Vec<Profile> = (0..cols).map(|_| random_profile(&mut rng, bends)).collect();
+    let row_profiles: Vec<Profile> = (0..rows).map(|_| random_profile(&mut rng, bends)).collect();
+    let loop_profile = random_profile(&mut rng, bends);
     let loop_x = xs[cols - 1] + rng.random_range(55.0..100.0);
     let loop_y = ys[rows - 1] + rng.random_range(55.0..100.0);
-    let corner_radius = rng.random_range(18.0..40.0);
+    let corner_radius = match (bends, rng.random_range(18.0..40.0)) {
+        (Bends::Gentle, radius) => radius,
+        (Bends::Tight, radius) => tight_radius(&loop_profile, (radius - 18.0) / 22.0),
+    };
     let rotation = rng.random_range(0.0..360.0);
 
+    let min_step = |v: &[f64]| v.windows(2).map(|w| w[1] - w[0]).fold(f64::MAX, f64::min);
+    let step = min_step(&xs).min(min_step(&ys));
+    let jitter = 0.12 * step;
     let mut t = Layout {
-        b: TownBuilder::new(name(seed), Frame::new(rotation, 0.0, 0.0)),
+        bends,
+        line_gap: (step - 2.0 * jitter).min(55.0 - jitter),
+        detoured: BTreeSet::new(),
+        b: TownBuilder::new(name(seed, bends), Frame::new(rotation, 0.0, 0.0)),
         nodes: Vec::new(),
     };
     if rng.random_bool(0.35) {
         t.b.leave_lights_to_simulator();
     }
-    let min_step = |v: &[f64]| v.windows(2).map(|w| w[1] - w[0]).fold(f64::MAX, f64::min);
-    let jitter = 0.12 * min_step(&xs).min(min_step(&ys));
 
     // Inner junctions (node c * rows + r), each moved off the grid a little.
     for c in 0..cols {
@@ -221,7 +318,8 @@ pub fn build(seed: u64) -> Town {
         t.street(south[c], inner(c, 0), &[], 0.0, p);
         for r in 1..rows {
             if !gaps.contains(&(inner(c, r - 1), inner(c, r))) {
-                t.street_maybe_bent(&mut rng, inner(c, r - 1), inner(c, r), p);
+                let beyond = col_profiles.get(c + 1).unwrap_or(&loop_profile);
+                t.street_maybe_bent(&mut rng, (inner(c, r - 1), inner(c, r)), p, beyond);
             }
         }
         t.street(inner(c, rows - 1), north[c], &[], 0.0, p);
@@ -231,7 +329,8 @@ pub fn build(seed: u64) -> Town {
         t.street(west[r], inner(0, r), &[], 0.0, p);
         for c in 1..cols {
             if !gaps.contains(&(inner(c - 1, r), inner(c, r))) {
-                t.street_maybe_bent(&mut rng, inner(c - 1, r), inner(c, r), p);
+                let beyond = row_profiles.get(r + 1).unwrap_or(&loop_profile);
+                t.street_maybe_bent(&mut rng, (inner(c - 1, r), inner(c, r)), p, beyond);
             }
         }
         t.street(inner(cols - 1, r), east[r], &[], 0.0, p);

@@ -7,6 +7,7 @@ use std::sync::OnceLock;
 
 use xodr::{Direction, LaneId, LaneType, Orientation, Point, Provenance, RoadNetwork};
 
+use super::procedural::Bends;
 use super::*;
 
 /// Each town, loaded once and shared by the tests.
@@ -475,6 +476,23 @@ fn regenerate_bundled_towns() {
     write_bundled(&dir).expect("writing the towns");
 }
 
+/// The radii of the arcs on the streets between junctions (connectors left out), metres.
+fn street_arc_radii(xodr: &str) -> Vec<f64> {
+    let mut on_street = false;
+    let mut radii = Vec::new();
+    for line in xodr.lines().map(str::trim) {
+        if line.starts_with("<road ") {
+            on_street = line.contains("junction=\"-1\"");
+        } else if let Some(rest) = line.strip_prefix("<arc curvature=\"") {
+            let curvature: f64 = rest.split('"').next().unwrap().parse().unwrap();
+            if on_street {
+                radii.push(1.0 / curvature.abs());
+            }
+        }
+    }
+    radii
+}
+
 #[test]
 fn procedural_towns_load_clean_join_up_repeat_and_vary() {
     let evaluation: BTreeSet<&str> = TownStyle::ALL
@@ -482,41 +500,63 @@ fn procedural_towns_load_clean_join_up_repeat_and_vary() {
         .filter(|s| !s.is_training_town())
         .flat_map(|s| geometry_lines(bundled(s)))
         .collect();
-    let mut without_lights = 0;
-    let mut sizes = BTreeSet::new();
-    for seed in 1..=12 {
-        let xodr = generate_procedural(seed);
+    for bends in [Bends::Gentle, Bends::Tight] {
+        let mut without_lights = 0;
+        let mut sizes = BTreeSet::new();
+        let mut tight_corners = 0;
+        for seed in 1..=12 {
+            let xodr = generate_procedural(seed, bends);
+            assert!(
+                xodr == generate_procedural(seed, bends),
+                "seed {seed} is not deterministic"
+            );
+            assert!(xodr.contains(&format!("name=\"{}\"", procedural::name(seed, bends))));
+            let (net, provenance) = xodr::load_str_with_provenance(&xodr)
+                .unwrap_or_else(|e| panic!("{bends:?} seed {seed} does not load: {e}"));
+            let faults = faults(&provenance);
+            assert!(faults.is_empty(), "{bends:?} seed {seed}: {faults:#?}");
+            let dead = net
+                .driving_lanes()
+                .filter(|l| l.successors.is_empty() || l.predecessors.is_empty())
+                .count();
+            assert_eq!(dead, 0, "{bends:?} seed {seed}: {dead} dead ends");
+            let share = connected_share(&net, true);
+            assert!(
+                share >= 0.95,
+                "{bends:?} seed {seed}: {:.1}% connected",
+                share * 100.0
+            );
+            let shared = geometry_lines(&xodr).intersection(&evaluation).count();
+            assert_eq!(
+                shared, 0,
+                "{bends:?} seed {seed} shares {shared} geometries with an evaluation town"
+            );
+            without_lights += usize::from(!xodr.contains("1000001"));
+            sizes.insert(net.driving_lanes().count());
+            let radii = street_arc_radii(&xodr);
+            // A street's corner stays wider than its own half width (the kerb never folds).
+            assert!(
+                radii.iter().all(|&r| r > 4.0),
+                "{bends:?} seed {seed}: {radii:?}"
+            );
+            tight_corners += radii.iter().filter(|&&r| r < 18.0).count();
+        }
         assert!(
-            xodr == generate_procedural(seed),
-            "seed {seed} is not deterministic"
+            (1..12).contains(&without_lights),
+            "{bends:?}: {without_lights} of 12 towns leave their lights to the simulator"
         );
-        assert!(xodr.contains(&format!("name=\"{}\"", procedural::name(seed))));
-        let (net, provenance) = xodr::load_str_with_provenance(&xodr)
-            .unwrap_or_else(|e| panic!("seed {seed} does not load: {e}"));
-        let faults = faults(&provenance);
-        assert!(faults.is_empty(), "seed {seed}: {faults:#?}");
-        let dead = net
-            .driving_lanes()
-            .filter(|l| l.successors.is_empty() || l.predecessors.is_empty())
-            .count();
-        assert_eq!(dead, 0, "seed {seed}: {dead} dead ends");
-        let share = connected_share(&net, true);
         assert!(
-            share >= 0.95,
-            "seed {seed}: {:.1}% connected",
-            share * 100.0
+            sizes.len() >= 8,
+            "{bends:?}: towns alike in size: {sizes:?}"
         );
-        let shared = geometry_lines(&xodr).intersection(&evaluation).count();
-        assert_eq!(
-            shared, 0,
-            "seed {seed} shares {shared} geometries with an evaluation town"
-        );
-        without_lights += usize::from(!xodr.contains("1000001"));
-        sizes.insert(net.driving_lanes().count());
+        match bends {
+            // The gentle family's bends are all 18 m or wider.
+            Bends::Gentle => assert_eq!(tight_corners, 0),
+            // Four loop corners a town, and detours in most towns.
+            Bends::Tight => assert!(
+                tight_corners >= 12 * 4 + 40,
+                "{tight_corners} tight corners"
+            ),
+        }
     }
-    assert!(
-        (1..12).contains(&without_lights),
-        "{without_lights} of 12 towns leave their lights to the simulator"
-    );
-    assert!(sizes.len() >= 8, "towns alike in size: {sizes:?}");
 }
