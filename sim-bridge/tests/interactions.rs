@@ -26,7 +26,7 @@ use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::scenarios::Crosser;
 use sim_bridge::world::state::{ActorKind, LightState};
 use sim_bridge::world::vehicle::Vehicle;
-use sim_bridge::world::{World, WorldConfig};
+use sim_bridge::world::{TrafficMode, World, WorldConfig};
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::BrakeReason;
 
@@ -62,24 +62,37 @@ fn outer_lane_route(map: &Map) -> DenseRoute {
 
 /// A world with `vehicles` background vehicles and no scenarios or parked cars.
 fn quiet_world<'m>(map: &'m Map, route: &DenseRoute, vehicles: usize) -> World<'m> {
+    quiet_world_in(map, route, vehicles, TrafficMode::Courteous)
+}
+
+/// [`quiet_world`] with traffic of `mode`.
+fn quiet_world_in<'m>(
+    map: &'m Map,
+    route: &DenseRoute,
+    vehicles: usize,
+    traffic: TrafficMode,
+) -> World<'m> {
     let config = WorldConfig {
         vehicles,
         scenarios: false,
         parked_cars: false,
+        traffic,
         ..WorldConfig::default()
     };
     World::new(map, route, config)
 }
 
-/// A world holding exactly one background vehicle, on lane `lane_id` of road `road` at `s`.
+/// A world holding exactly one background vehicle, on lane `lane_id` of road `road` at `s`,
+/// in traffic of `mode`.
 fn world_with_one_vehicle<'m>(
     map: &'m Map,
     route: &DenseRoute,
     (road, lane_id): (&str, i32),
     s: f64,
     speed: f64,
+    mode: TrafficMode,
 ) -> World<'m> {
-    let mut world = quiet_world(map, route, 1);
+    let mut world = quiet_world_in(map, route, 1, mode);
     let lane = map
         .lanes
         .iter()
@@ -107,17 +120,17 @@ const HOLD: Control = Control {
 };
 
 /// A follower coming at 8 m/s on lane -1 from `start_s`, an ego standing at x = 120 with its
-/// centre at `ego_y`: runs `seconds`, asserts they never touch, and calls `each_tick` with the
-/// time and the follower after every step. Returns the follower's final x.
+/// centre at `ego_y`, in traffic of `mode`: runs `seconds`, asserts they never touch, and calls
+/// `each_tick` with the time and the follower after every step. Returns the follower's final x.
 fn follower_beside_standing_ego(
-    start_s: f64,
-    ego_y: f64,
+    (start_s, ego_y): (f64, f64),
+    mode: TrafficMode,
     seconds: f64,
     mut each_tick: impl FnMut(f64, &Vehicle),
 ) -> f64 {
     let map = road();
     let route = outer_lane_route(&map);
-    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), start_s, 8.0);
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), start_s, 8.0, mode);
     world.ego = Ego::new(EgoParams::default(), DVec3::new(120.0, ego_y, 0.0), 0.0);
     let id = world.traffic.vehicles[0].id;
     for _ in 0..(seconds / 0.05) as usize {
@@ -137,7 +150,9 @@ fn a_follower_stops_for_an_ego_that_pokes_into_its_lane() {
     // The ego stands on the outer lane's inner edge: matched to lane -2, its left side 0.96 m
     // into lane -1, where the follower comes: too little room to pass, ever.
     let mut last_speed = f64::NAN;
-    let x = follower_beside_standing_ego(60.0, -3.6, 20.0, |_, v| last_speed = v.speed);
+    let x = follower_beside_standing_ego((60.0, -3.6), TrafficMode::Courteous, 20.0, |_, v| {
+        last_speed = v.speed
+    });
     assert!(last_speed < 0.1 && x < 120.0, "it waits behind the ego");
 }
 
@@ -146,7 +161,7 @@ fn a_follower_held_by_a_standing_ego_creeps_past_when_there_is_room() {
     // The ego stands matched to lane -2, its left side 0.55 m into lane -1: 1.2 m from the
     // follower's centre line, inside the clearance a follower keeps from an ego that may move
     // (its half width + 0.4 m) but wide enough to pass a standing one.
-    let x = follower_beside_standing_ego(85.0, -4.01, 40.0, |t, v| {
+    let x = follower_beside_standing_ego((85.0, -4.01), TrafficMode::Courteous, 40.0, |t, v| {
         let front = v.s + v.half.x;
         if t < 5.0 {
             assert!(front < 117.5, "it holds while the ego may still move");
@@ -159,6 +174,16 @@ fn a_follower_held_by_a_standing_ego_creeps_past_when_there_is_room() {
         x > 140.0,
         "once the ego has stood a while it creeps past and goes on (x = {x:.1})"
     );
+}
+
+#[test]
+fn carla_traffic_waits_behind_a_standing_ego_for_good() {
+    // As CARLA's traffic manager: the follower never squeezes past an ego in its corridor.
+    let mut last_speed = f64::NAN;
+    let x = follower_beside_standing_ego((85.0, -4.01), TrafficMode::Carla, 40.0, |_, v| {
+        last_speed = v.speed
+    });
+    assert!(last_speed < 0.1 && x < 120.0, "it still waits (x = {x:.1})");
 }
 
 #[test]
@@ -217,7 +242,8 @@ fn the_expert_does_not_wait_for_a_car_that_ran_into_its_rear() {
     let map = road();
     let route = outer_lane_route(&map);
     // The ego at s = 100 on the outer lane; a stopped car that ran 1.5 m into its rear.
-    let mut world = world_with_one_vehicle(&map, &route, ("1", -2), 0.0, 0.0);
+    let mut world =
+        world_with_one_vehicle(&map, &route, ("1", -2), 0.0, 0.0, TrafficMode::Courteous);
     world.ego = Ego::new(EgoParams::default(), DVec3::new(100.0, -5.25, 0.0), 0.0);
     let ego_half = world.ego_state().half_extent.x;
     let car = &mut world.traffic.vehicles[0];
@@ -287,7 +313,8 @@ fn ego_caught_on_a_standing_car<'m>(
     depth: f64,
     along: f64,
 ) -> (World<'m>, u32) {
-    let mut world = world_with_one_vehicle(map, route, ("1", -1), 130.0, 0.0);
+    let mut world =
+        world_with_one_vehicle(map, route, ("1", -1), 130.0, 0.0, TrafficMode::Courteous);
     let (car, _) = world.traffic.vehicles[0].pose(map);
     let half = world.traffic.vehicles[0].half;
     let corner = glam::DVec2::new(car.x - half.x + along, car.y - half.y + depth);
@@ -330,7 +357,8 @@ fn an_ego_cannot_drive_into_a_car_it_hits_head_on() {
     let map = road();
     let route = outer_lane_route(&map);
     // Square behind the car, 0.3 m into its rear, pushing on (the car creeps off).
-    let mut world = world_with_one_vehicle(&map, &route, ("1", -1), 130.0, 0.0);
+    let mut world =
+        world_with_one_vehicle(&map, &route, ("1", -1), 130.0, 0.0, TrafficMode::Courteous);
     let (car, _) = world.traffic.vehicles[0].pose(&map);
     let half = world.traffic.vehicles[0].half;
     let ego_half = EgoParams::default().half_extent;
@@ -357,7 +385,8 @@ fn the_expert_waits_for_a_lane_change_gap_then_noses_into_a_slow_queue() {
     let route = route(&map, (20.0, -1.75), (180.0, -5.25));
     // The ego stands just short of where the route changes into the new lane; a car crawls
     // alongside in it.
-    let mut world = world_with_one_vehicle(&map, &route, ("2", -2), 1.0, 0.5);
+    let mut world =
+        world_with_one_vehicle(&map, &route, ("2", -2), 1.0, 0.5, TrafficMode::Courteous);
     world.ego = Ego::new(EgoParams::default(), DVec3::new(96.0, -1.75, 0.0), 0.0);
     let index = ego_index(&world, &route);
     let mut memory = HazardMemory::default();
@@ -380,8 +409,10 @@ fn the_expert_waits_for_a_lane_change_gap_then_noses_into_a_slow_queue() {
     assert_eq!(view.cause, Some(BrakeReason::LaneChange), "{view:?}");
 }
 
-#[test]
-fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
+/// An ego standing 6 m short of where its route changes into the outer lane, a car coming up
+/// that lane 40 m behind it at 8 m/s, traffic of `mode`: after 15 s, the car's speed and the
+/// room it leaves behind the ego's rear; then, the lane change behind the ego, its speed 5 s on.
+fn car_behind_an_ego_waiting_to_change_lanes(mode: TrafficMode) -> (f64, f64, f64) {
     let map = road();
     let route = route_through(&map, &[(20.0, -1.75), (150.0, -1.75), (250.0, -5.25)]);
     let start = route
@@ -389,12 +420,10 @@ fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
         .iter()
         .position(|p| p.option.is_lane_change())
         .expect("the route changes into the outer lane");
-    // The ego stands 6 m short of where its route starts to change lanes; a car comes up the
-    // outer lane behind it at 8 m/s.
     let stand = route.points[start - 6];
     let target = route.points[route.points.len() - 1].lane;
     let ego_s = map.lane(target).project(stand.position.truncate()).s;
-    let mut world = world_with_one_vehicle(&map, &route, ("1", -2), ego_s - 40.0, 8.0);
+    let mut world = world_with_one_vehicle(&map, &route, ("1", -2), ego_s - 40.0, 8.0, mode);
     world.ego = Ego::new(EgoParams::default(), stand.position, stand.yaw);
     let ego_half = world.ego_state().half_extent.x;
     for _ in 0..(15.0 / 0.05) as usize {
@@ -403,20 +432,33 @@ fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
         world.step(HOLD);
     }
     let car = &world.traffic.vehicles[0];
-    assert!(car.speed < 0.1, "it waits for the ego: {car:?}");
-    let room = ego_s - ego_half - (car.s + car.half.x);
+    let (waiting, room) = (car.speed, ego_s - ego_half - (car.s + car.half.x));
+    world.trigger_scenarios(route.points.len() - 1);
+    for _ in 0..(5.0 / 0.05) as usize {
+        world.step(HOLD);
+    }
+    (waiting, room, world.traffic.vehicles[0].speed)
+}
+
+#[test]
+fn traffic_lets_an_ego_that_waits_to_change_lanes_in() {
+    let (speed, room, after) = car_behind_an_ego_waiting_to_change_lanes(TrafficMode::Courteous);
+    assert!(speed < 0.1, "it waits for the ego: {speed:.2} m/s");
     assert!(
         (2.0..6.0).contains(&room),
         "it leaves {room:.1} m behind the ego"
     );
-
     // Once the ego no longer waits (the lane change is behind it), the car goes on.
-    let end = route.points.len() - 1;
-    world.trigger_scenarios(end);
-    for _ in 0..(5.0 / 0.05) as usize {
-        world.step(HOLD);
-    }
-    assert!(world.traffic.vehicles[0].speed > 1.0, "it drives on");
+    assert!(after > 1.0, "it drives on");
+}
+
+#[test]
+fn carla_traffic_drives_past_an_ego_that_waits_to_change_lanes() {
+    let (speed, room, _) = car_behind_an_ego_waiting_to_change_lanes(TrafficMode::Carla);
+    assert!(
+        speed > 1.0 && room < 0.0,
+        "it passes without a gap: {speed:.2} m/s, {room:.1} m"
+    );
 }
 
 #[test]
@@ -579,54 +621,60 @@ fn the_ego_takes_its_turn_at_a_junction_without_lights() {
         .expect("the route takes connector a");
     // The ego stands 8 m before the junction; a car stands on `b`.
     let stand = route.points[entry - 8];
-    let mut world = quiet_world(&map, &route, 1);
-    let car = &mut world.traffic.vehicles[0];
-    car.speed = 0.0;
-    car.lane = b;
-    car.s = map.lane(b).length() / 2.0;
-    car.next = map
-        .lane(b)
-        .successors
-        .first()
-        .copied()
-        .into_iter()
-        .collect();
-    world.ego = Ego::new(EgoParams::default(), stand.position, stand.yaw);
-    let index = ego_index(&world, &route);
-    world.trigger_scenarios(index);
-    world.step(HOLD);
-    assert_eq!(world.ego_junction_request().map(|(c, _)| c), Some(a));
-    let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
-    assert_eq!(
-        view.cause,
-        Some(BrakeReason::Vehicle),
-        "it waits its turn: {view:?}"
-    );
-    // With `b` clear the way is free.
-    let far = (map.lanes.iter())
-        .find(|l| !l.in_junction() && (l.points[0] - stand.position).length() > 200.0)
-        .expect("a lane far away");
-    world.traffic.vehicles[0].lane = far.idx;
-    world.traffic.vehicles[0].s = 0.0;
-    let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
-    assert_eq!(view.obstacle, None, "{view:?}");
-
-    // A car that comes to `b` after the ego waits for it.
-    let b_approach = map.lane(entered_from(b).unwrap());
-    let car = &mut world.traffic.vehicles[0];
-    car.lane = b_approach.idx;
-    car.s = b_approach.length() - 5.0;
-    car.next = vec![b];
-    car.arrival = None;
-    for _ in 0..(5.0 / 0.05) as usize {
+    for mode in [TrafficMode::Courteous, TrafficMode::Carla] {
+        let mut world = quiet_world_in(&map, &route, 1, mode);
+        let car = &mut world.traffic.vehicles[0];
+        car.speed = 0.0;
+        car.lane = b;
+        car.s = map.lane(b).length() / 2.0;
+        car.next = map
+            .lane(b)
+            .successors
+            .first()
+            .copied()
+            .into_iter()
+            .collect();
+        world.ego = Ego::new(EgoParams::default(), stand.position, stand.yaw);
+        let index = ego_index(&world, &route);
         world.trigger_scenarios(index);
         world.step(HOLD);
+        assert_eq!(world.ego_junction_request().map(|(c, _)| c), Some(a));
+        let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
+        assert_eq!(
+            view.cause,
+            Some(BrakeReason::Vehicle),
+            "it waits its turn: {view:?}"
+        );
+        // With `b` clear the way is free.
+        let far = (map.lanes.iter())
+            .find(|l| !l.in_junction() && (l.points[0] - stand.position).length() > 200.0)
+            .expect("a lane far away");
+        world.traffic.vehicles[0].lane = far.idx;
+        world.traffic.vehicles[0].s = 0.0;
+        let view = hazards::scan(&world, &route, index, &mut HazardMemory::default());
+        assert_eq!(view.obstacle, None, "{view:?}");
+
+        // A car that comes to `b` after the ego waits for it.
+        let b_approach = map.lane(entered_from(b).unwrap());
+        let car = &mut world.traffic.vehicles[0];
+        car.lane = b_approach.idx;
+        car.s = b_approach.length() - 5.0;
+        car.next = vec![b];
+        car.arrival = None;
+        for _ in 0..(5.0 / 0.05) as usize {
+            world.trigger_scenarios(index);
+            world.step(HOLD);
+        }
+        let car = &world.traffic.vehicles[0];
+        match mode {
+            TrafficMode::Courteous => assert_eq!(
+                car.lane, b_approach.idx,
+                "it leaves the turn to the ego: {car:?}"
+            ),
+            // CARLA's traffic manager knows nothing of the ego's turn: the car goes.
+            TrafficMode::Carla => assert_ne!(car.lane, b_approach.idx, "it goes: {car:?}"),
+        }
     }
-    let car = &world.traffic.vehicles[0];
-    assert_eq!(
-        car.lane, b_approach.idx,
-        "it leaves the turn to the ego: {car:?}"
-    );
 }
 
 #[test]

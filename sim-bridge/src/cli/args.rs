@@ -184,6 +184,11 @@ pub struct WorldArgs {
     /// No parked cars.
     #[arg(long)]
     pub no_parked_cars: bool,
+    /// How background traffic treats the ego: `courteous` (lets it into a lane it waits to
+    /// change into, gives it its turn and way at junctions, creeps past it when it stands) or
+    /// `carla` (as CARLA's traffic manager: an obstacle not to drive into, nothing more).
+    #[arg(long, value_enum, default_value = "courteous")]
+    pub traffic: sim_bridge::world::TrafficMode,
     /// Vary camera colours, sun and sensor noise with the seed.
     #[arg(long)]
     pub randomise_appearance: bool,
@@ -199,6 +204,7 @@ impl WorldArgs {
             walkers: self.walkers,
             scenarios: !self.no_scenarios,
             parked_cars: !self.no_parked_cars,
+            traffic: self.traffic,
             seed,
             randomise_appearance: self.randomise_appearance,
         }

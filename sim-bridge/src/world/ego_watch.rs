@@ -9,6 +9,13 @@
 //! queue lets it in, as drivers do for a car that signals (without it a lane change planned
 //! inside a standing or crawling queue never happens). [`super::traffic`] follows the gaps
 //! these give like any other.
+//!
+//! The squeeze and the courtesy, with two more in [`super::traffic`] (the ego's turn among the
+//! vehicles waiting at a junction without lights, and way given to an ego that approaches a
+//! junction at speed), read the ego's route or favour it; CARLA's traffic manager does none of
+//! them. [`TrafficMode::Carla`] turns all four off and keeps only what the traffic manager does:
+//! the ego is a body that vehicles do not drive into (the corridor check, and the ego holding
+//! the junction connector it is on).
 
 use glam::DVec2;
 
@@ -45,6 +52,19 @@ const SQUEEZE_STEP: f64 = 0.25;
 /// faster, it keeps [`EGO_WATCH_MARGIN`] and brakes, so it passes at about this speed.
 const SQUEEZE_SPEED: f64 = 1.0;
 
+/// How background traffic treats the ego (`--traffic`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum TrafficMode {
+    /// Courtesies CARLA's traffic manager does not extend: vehicles let the ego into a lane it
+    /// waits to change into, give it its turn at junctions without lights and way when it
+    /// approaches a junction at speed, and creep past it once it has stood
+    /// [`SQUEEZE_AFTER_S`].
+    #[default]
+    Courteous,
+    /// As CARLA's traffic manager: the ego is an obstacle vehicles stop for, nothing more.
+    Carla,
+}
+
 /// The ego as other traffic sees it.
 #[derive(Debug, Clone, Copy)]
 pub struct EgoPresence {
@@ -64,6 +84,9 @@ pub struct EgoPresence {
     pub junction_request: Option<(LaneIdx, f64)>,
     /// Seconds the ego has stood (slower than [`super::traffic::STANDING_SPEED`]) in a row.
     pub standing_for: f64,
+    /// Whether traffic extends its courtesies to the ego. With [`TrafficMode::Carla`] the
+    /// world leaves `merging_into` and `junction_request` empty.
+    pub mode: TrafficMode,
 }
 
 impl EgoPresence {
@@ -78,14 +101,18 @@ impl EgoPresence {
 /// ego's speed along the path. The traffic's lane occupancy sees the ego only on the lane it is
 /// matched to; this is the traffic manager's geometric check that keeps a follower from
 /// driving into an ego that turns or stops across its path. A vehicle held by an ego that has
-/// stood [`SQUEEZE_AFTER_S`] sweeps its own box instead ([`squeeze_gap`]).
+/// stood [`SQUEEZE_AFTER_S`] sweeps its own box instead ([`squeeze_gap`]), in
+/// [`TrafficMode::Courteous`] only.
 pub(super) fn ego_on_path(map: &Map, v: &Vehicle, ego: &EgoPresence) -> Option<(f64, f64)> {
     let (position, _) = v.pose(map);
     let near = (position.truncate() - ego.position()).length() < EGO_WATCH + 10.0;
     if !near || (position.z - ego.z).abs() > 3.0 {
         return None;
     }
-    if ego.standing_for > SQUEEZE_AFTER_S && v.speed < SQUEEZE_SPEED {
+    if ego.mode == TrafficMode::Courteous
+        && ego.standing_for > SQUEEZE_AFTER_S
+        && v.speed < SQUEEZE_SPEED
+    {
         return squeeze_gap(map, v, ego).map(|gap| (gap, 0.0));
     }
     let corridor = v.half.y + EGO_WATCH_MARGIN;

@@ -17,6 +17,7 @@ pub mod traffic;
 pub mod vehicle;
 
 use ego::{Ego, EgoParams};
+pub use ego_watch::TrafficMode;
 use ego_watch::{EgoPresence, MERGE_WAIT_AHEAD, MERGE_WAIT_SPEED};
 use glam::{DVec2, DVec3};
 use lights::LightController;
@@ -55,6 +56,8 @@ pub struct WorldConfig {
     pub scenarios: bool,
     /// Parked cars on parking lanes.
     pub parked_cars: bool,
+    /// How background traffic treats the ego.
+    pub traffic: TrafficMode,
     /// Seed of every random choice.
     pub seed: u64,
     /// Draw camera frames in a look varied from the seed (colours, sun, noise) instead of the
@@ -69,6 +72,7 @@ impl Default for WorldConfig {
             walkers: 0,
             scenarios: true,
             parked_cars: true,
+            traffic: TrafficMode::default(),
             seed: 0,
             randomise_appearance: false,
         }
@@ -121,6 +125,7 @@ pub struct World<'m> {
     junction_request: Option<(LaneIdx, f64)>,
     /// Seconds the ego has stood still in a row.
     ego_standing_for: f64,
+    traffic_mode: TrafficMode,
     rng: ChaCha8Rng,
     ids: IdSource,
 }
@@ -171,6 +176,7 @@ impl<'m> World<'m> {
             junction_entries: junction_entries(map, route),
             junction_request: None,
             ego_standing_for: 0.0,
+            traffic_mode: config.traffic,
             rng,
             ids,
         };
@@ -321,7 +327,8 @@ impl<'m> World<'m> {
             .lane_for_pose(ego.position, ego.yaw)
             .filter(|(_, p)| p.distance < 2.0)
             .map(|(l, p)| (l, p.s));
-        let merging_into = (ego.speed < MERGE_WAIT_SPEED)
+        let courteous = self.traffic_mode == TrafficMode::Courteous;
+        let merging_into = (courteous && ego.speed < MERGE_WAIT_SPEED)
             .then(|| self.lane_change_ahead())
             .flatten()
             .map(|lane| (lane, self.map.lane(lane).project(ego.position.truncate()).s));
@@ -333,8 +340,9 @@ impl<'m> World<'m> {
             z: ego.position.z,
             speed: ego.speed,
             merging_into,
-            junction_request: self.junction_request,
+            junction_request: self.junction_request.filter(|_| courteous),
             standing_for: self.ego_standing_for,
+            mode: self.traffic_mode,
         };
         self.time += DT;
         self.lights.update(self.time);

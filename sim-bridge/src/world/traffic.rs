@@ -19,7 +19,8 @@
 //! each waiting for the other. A vehicle whose path runs into a lane that ends (a lane drop, as on
 //! CARLA's Town06 highways) merges into a neighbour that goes on, as CARLA's traffic manager does.
 //! Near the ego, vehicles also keep clear of its box whatever lane it is on, and let it into a
-//! lane it waits to change into ([`super::ego_watch`]). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the
+//! lane it waits to change into ([`super::ego_watch`]; the courtesies, giving the ego its turn
+//! and way included, are off in [`TrafficMode::Carla`]). Vehicles stuck for [`RESPAWN_AFTER_S`] out of the
 //! ego's sight (more than [`RESPAWN_CLEARANCE`] away), or at such a lane end anywhere, are moved to
 //! a free place elsewhere, as a stand-in for CARLA's traffic manager clearing jams.
 
@@ -28,7 +29,7 @@ use std::collections::HashMap;
 use glam::DVec2;
 use rand::{Rng, RngExt as _};
 
-use super::ego_watch::{EgoPresence, courtesy_hold, ego_on_path};
+use super::ego_watch::{EgoPresence, TrafficMode, courtesy_hold, ego_on_path};
 use super::idm::Idm;
 use super::state::LightState;
 use super::vehicle::Vehicle;
@@ -318,12 +319,15 @@ impl Traffic {
     ) -> Vec<bool> {
         let mut occupied = self.junction_occupants(map);
         // The ego blocks the connector it is on, and, while it approaches a junction at speed,
-        // every connector it could take: traffic gives way to an ego about to enter.
+        // every connector it could take: courteous traffic gives way to an ego about to enter.
         if let Some((lane, s)) = ego.on_lane {
             let l = map.lane(lane);
             if l.in_junction() {
                 occupied.push(lane);
-            } else if l.length() - s < REQUEST_DISTANCE + 2.0 * ego.speed && ego.speed > 1.0 {
+            } else if ego.mode == TrafficMode::Courteous
+                && l.length() - s < REQUEST_DISTANCE + 2.0 * ego.speed
+                && ego.speed > 1.0
+            {
                 occupied.extend(l.successors.iter().filter(|c| map.lane(**c).in_junction()));
             }
         }
