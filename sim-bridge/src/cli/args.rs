@@ -9,6 +9,7 @@ use clap::Args;
 use sim_bridge::client::local::{LocalRole, LocalServer};
 use sim_bridge::map::{Map, MapOptions};
 use sim_bridge::route::planner::plan_route;
+use sim_bridge::route::scenario_file::ScenarioFile;
 use sim_bridge::route::xml::RouteSpec;
 use sim_bridge::route::{DenseRoute, RoutePlan};
 use sim_bridge::world::WorldConfig;
@@ -179,8 +180,17 @@ pub struct WorldArgs {
     #[arg(long, default_value_t = 0)]
     pub walkers: usize,
     /// No route scenarios (walkers crossing, cyclists, red-light runners).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "scenarios")]
     pub no_scenarios: bool,
+    /// A leaderboard scenario file (e.g. ../shared/carla/all_towns_traffic_scenarios_public.json):
+    /// each route gets the scenarios the leaderboard 1.0 would give it from the file's triggers
+    /// for its town, instead of scenarios drawn along it from the seed (see sim-bridge's README,
+    /// "Scenarios").
+    #[arg(long, value_name = "FILE")]
+    pub scenarios: Option<PathBuf>,
+    /// The file of --scenarios, read once.
+    #[arg(skip)]
+    pub scenario_file: std::sync::OnceLock<ScenarioFile>,
     /// No parked cars.
     #[arg(long)]
     pub no_parked_cars: bool,
@@ -195,19 +205,34 @@ pub struct WorldArgs {
 }
 
 impl WorldArgs {
-    /// The world of one run on `map` with world seed `seed`.
-    pub fn config(&self, map: &Map, seed: u64) -> WorldConfig {
-        WorldConfig {
+    /// The world of one run on `map` with world seed `seed`; an error when --scenarios cannot
+    /// be read or has no triggers for the map's town.
+    pub fn config(&self, map: &Map, seed: u64) -> anyhow::Result<WorldConfig> {
+        let scenario_file = match &self.scenarios {
+            None => None,
+            Some(path) => {
+                let file = match self.scenario_file.get() {
+                    Some(file) => file,
+                    None => {
+                        let read = ScenarioFile::read(path)?;
+                        self.scenario_file.get_or_init(|| read)
+                    }
+                };
+                Some(file.town(&map.name)?)
+            }
+        };
+        Ok(WorldConfig {
             vehicles: self
                 .vehicles
                 .unwrap_or_else(|| sim_bridge::world::leaderboard_vehicles(map)),
             walkers: self.walkers,
             scenarios: !self.no_scenarios,
+            scenario_file,
             parked_cars: !self.no_parked_cars,
             traffic: self.traffic,
             seed,
             randomise_appearance: self.randomise_appearance,
-        }
+        })
     }
 }
 

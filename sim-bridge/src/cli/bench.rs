@@ -127,7 +127,7 @@ fn bench_render(rig: &str, frames: u64, every: u64, vehicles: usize) -> anyhow::
         spec,
         &dense,
         &mut capture,
-        config,
+        config.clone(),
         ScoringConfig::default(),
         0,
         0,

@@ -87,7 +87,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     check_args(&args)?;
     let rig = Rig::from_name_or_file(&args.rig)?;
     let sets = load_sets(&args)?;
-    let tasks = episode_tasks(&args, &sets);
+    let tasks = episode_tasks(&args, &sets)?;
     let (target, _local_server) = match &args.driver {
         Some(driver) => {
             let (target, server) = server_target(
@@ -207,11 +207,12 @@ fn load_sets(args: &CollectArgs) -> anyhow::Result<Vec<(String, Map, Vec<Planned
     Ok(sets)
 }
 
-/// One episode per repetition, set and route, each with its own world seed.
+/// One episode per repetition, set and route, each with its own world seed; an error when
+/// --scenarios has nothing for a set's town.
 fn episode_tasks<'m>(
     args: &CollectArgs,
     sets: &'m [(String, Map, Vec<PlannedRoute>)],
-) -> Vec<EpisodeTask<'m>> {
+) -> anyhow::Result<Vec<EpisodeTask<'m>>> {
     let mut tasks = Vec::new();
     for repetition in 0..args.repetitions {
         for (set, map, planned) in sets {
@@ -223,12 +224,12 @@ fn episode_tasks<'m>(
                     spec: spec.clone(),
                     dense: dense.clone(),
                     repetition,
-                    world: args.world.config(map, seed),
+                    world: args.world.config(map, seed)?,
                 });
             }
         }
     }
-    tasks
+    Ok(tasks)
 }
 
 /// The episodes' progress bar (hidden with `--quiet`).

@@ -250,7 +250,7 @@ fn drive(
         map: &map,
         routes: &planned,
         repetitions,
-        world: args.world.config(&map, args.world.seed),
+        world: args.world.config(&map, args.world.seed)?,
         scoring: ScoringConfig {
             rules: args.scoring,
             timeout: args.timeout,

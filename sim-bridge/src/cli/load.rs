@@ -351,7 +351,7 @@ fn rendered_templates(args: &LoadArgs, rig: &Rig) -> anyhow::Result<Vec<v1::Step
         timeout: Some((args.frames as u64 * every) as f64 * sim_bridge::world::DT + 1.0),
         ..ScoringConfig::default()
     };
-    let world = args.world.config(&map, args.world.seed);
+    let world = args.world.config(&map, args.world.seed)?;
     run_route(
         &map,
         &first.spec,

@@ -112,7 +112,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             written: 0,
             error: None,
         };
-        let world = args.world.config(&map, args.world.seed);
+        let world = args.world.config(&map, args.world.seed)?;
         let run = run_route(
             &map,
             spec,
@@ -228,7 +228,7 @@ impl Film<'_> {
             world.map,
             route,
             &world.ego_state(),
-            &world.actors(),
+            &world.visible_actors(),
             intent,
             self.args.topdown_radius,
             side,

@@ -241,7 +241,7 @@ fn collect_one(
         &task.spec,
         &task.dense,
         &mut recorder,
-        task.world,
+        task.world.clone(),
         ScoringConfig::default(),
         0,
         task.repetition,

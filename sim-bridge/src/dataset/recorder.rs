@@ -293,7 +293,7 @@ fn actors_near(obs: &Observation, world: &World<'_>) -> Vec<ActorRecord> {
                     ActorKind::Vehicle => ActorClass::Vehicle,
                     ActorKind::Cyclist => ActorClass::Cyclist,
                     ActorKind::Walker => ActorClass::Walker,
-                    ActorKind::Static => ActorClass::Static,
+                    ActorKind::Static | ActorKind::Debris => ActorClass::Static,
                 },
                 centre: [centre.x, centre.y],
                 yaw: angle_diff(a.obb.yaw, obs.yaw),

@@ -109,7 +109,7 @@ impl Campaign<'_> {
         let (spec, dense) = &self.routes[index % self.routes.len()];
         let world = WorldConfig {
             seed: self.world.seed.wrapping_add(repetition as u64),
-            ..self.world
+            ..self.world.clone()
         };
         match dense {
             Ok(dense) => {

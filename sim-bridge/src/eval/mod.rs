@@ -62,7 +62,7 @@ pub fn run_route(
     let started = Instant::now();
     let plan = global_plan(dense);
     let mut follower = RouteFollower::new(plan.clone());
-    let mut world = World::new(map, dense, world_config);
+    let mut world = World::new(map, dense, world_config.clone());
     let mut agent_error = agent
         .start_route(&RouteContext {
             map,
@@ -103,7 +103,7 @@ pub fn run_route(
         let node = follower.step(ego.position.truncate());
         let frames = match &mut cameras {
             Some((rig, renderer)) if agent.wants_frames(frame) => {
-                let actors = world.actors();
+                let actors = world.visible_actors();
                 let scene = SceneState {
                     ego,
                     actors: &actors,

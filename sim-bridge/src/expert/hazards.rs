@@ -149,7 +149,7 @@ fn brake_reason(kind: ActorKind) -> BrakeReason {
     match kind {
         ActorKind::Vehicle | ActorKind::Cyclist => BrakeReason::Vehicle,
         ActorKind::Walker => BrakeReason::Walker,
-        ActorKind::Static => BrakeReason::Obstacle,
+        ActorKind::Static | ActorKind::Debris => BrakeReason::Obstacle,
     }
 }
 

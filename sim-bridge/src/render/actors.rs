@@ -40,6 +40,10 @@ pub fn push_actor(out: &mut Vec<Tri>, actor: &ActorView, app: &Appearance, eye: 
             let cabin = half * Vec2::new(0.55, 0.88);
             part(-0.15 * half.x, cabin, 0.95, 1.5).push(out, glass, app, eye);
         }
+        ActorKind::Debris => {
+            let dirt = Vec3::new(0.22, 0.19, 0.15);
+            part(0.0, half, 0.0, 0.06).push(out, dirt, app, eye);
+        }
         ActorKind::Walker => {
             let clothes = app.car(actor.id.wrapping_mul(7) ^ 3);
             let skin = Vec3::new(0.8, 0.62, 0.5);

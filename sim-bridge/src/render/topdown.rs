@@ -115,6 +115,7 @@ fn actor_colour(kind: ActorKind) -> [u8; 3] {
         ActorKind::Cyclist => [250, 140, 40],
         ActorKind::Walker => [250, 90, 200],
         ActorKind::Static => [150, 120, 90],
+        ActorKind::Debris => [90, 80, 70],
     }
 }
 

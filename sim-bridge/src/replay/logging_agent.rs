@@ -50,6 +50,7 @@ fn kind_name(kind: ActorKind) -> &'static str {
         ActorKind::Cyclist => "cyclist",
         ActorKind::Walker => "walker",
         ActorKind::Static => "static",
+        ActorKind::Debris => "debris",
     }
 }
 

@@ -1,10 +1,12 @@
 //! Routes: CARLA route files ([`xml`]), the dense 1 m route over the lane graph with a
 //! RoadOption per point ([`planner`]), the leaderboard's downsampled global plan and the
 //! TCP-style route follower that yields the target point and command every tick ([`plan`]), and
-//! the bundled route sets ([`sets`]).
+//! the bundled route sets ([`sets`]), and the leaderboard's scenario files matched to a route
+//! ([`scenario_file`]).
 
 pub mod plan;
 pub mod planner;
+pub mod scenario_file;
 pub mod sets;
 pub mod xml;
 

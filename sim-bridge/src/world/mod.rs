@@ -30,6 +30,7 @@ use traffic::{REQUEST_DISTANCE, Traffic, standing_time};
 
 use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;
+use crate::route::scenario_file::TownScenarios;
 
 /// Simulation step, seconds: the contract's tick ([`ssrdrive_proto::TICK_S`], 20 Hz).
 pub const DT: f64 = ssrdrive_proto::TICK_S;
@@ -46,14 +47,18 @@ pub fn leaderboard_vehicles(map: &Map) -> usize {
 }
 
 /// What to populate the world with.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct WorldConfig {
     /// Background vehicles (the leaderboard uses 120 on Town05).
     pub vehicles: usize,
     /// Background walkers on sidewalks.
     pub walkers: usize,
-    /// Route scenarios (S3, S4, S7-S9).
+    /// Route scenarios: from `scenario_file` when given, else S3, S4 and S7-S9 drawn along the
+    /// route from the seed.
     pub scenarios: bool,
+    /// The town's triggers of a leaderboard scenario file (`--scenarios`), matched to the route
+    /// as the leaderboard does ([`crate::route::scenario_file`]).
+    pub scenario_file: Option<TownScenarios>,
     /// Parked cars on parking lanes.
     pub parked_cars: bool,
     /// How background traffic treats the ego.
@@ -71,6 +76,7 @@ impl Default for WorldConfig {
             vehicles: 120,
             walkers: 0,
             scenarios: true,
+            scenario_file: None,
             parked_cars: true,
             traffic: TrafficMode::default(),
             seed: 0,
@@ -108,6 +114,8 @@ pub struct World<'m> {
     pub crossers: Vec<Crosser>,
     /// Static obstacles.
     pub statics: Vec<StaticProp>,
+    /// Debris on the road (Scenario1): seen, never touched.
+    pub debris: Vec<StaticProp>,
     /// Traffic lights.
     pub lights: LightController,
     /// Route scenarios.
@@ -151,13 +159,15 @@ impl<'m> World<'m> {
             Vec::new()
         };
         let mut crossers = scenarios::background_walkers(map, config.walkers, &mut ids, &mut rng);
-        let mut scenario_list = Vec::new();
-        if config.scenarios {
-            let placed = scenarios::place_route_scenarios(map, route, &mut ids, &mut rng);
-            statics.extend(placed.statics);
-            crossers.extend(placed.crossers);
-            scenario_list = placed.scenarios;
-        }
+        let placed = match (&config.scenario_file, config.scenarios) {
+            (_, false) => scenarios::Placement::default(),
+            (Some(file), true) => {
+                scenarios::place_from_file(map, route, &file.triggers, config.seed, &mut ids)
+            }
+            (None, true) => scenarios::place_route_scenarios(map, route, &mut ids, &mut rng),
+        };
+        statics.extend(placed.statics);
+        crossers.extend(placed.crossers);
         // Nothing may start on top of the ego.
         let ego_box = ego.state().obb();
         statics.retain(|s| !s.obb.overlaps(&ego_box));
@@ -168,8 +178,9 @@ impl<'m> World<'m> {
             traffic,
             crossers,
             statics,
+            debris: placed.debris,
             lights,
-            scenarios: scenario_list,
+            scenarios: placed.scenarios,
             route_progress: 0,
             route_distance: route.cum.clone(),
             lane_changes: lane_changes(map, route),
@@ -235,15 +246,14 @@ impl<'m> World<'m> {
                 velocity: c.velocity(),
             });
         }
-        for s in &self.statics {
-            out.push(ActorView {
-                id: 0,
-                kind: ActorKind::Static,
-                obb: s.obb,
-                z: s.z,
-                velocity: DVec2::ZERO,
-            });
-        }
+        out.extend(self.statics.iter().map(|s| s.view(ActorKind::Static)));
+        out
+    }
+
+    /// [`Self::actors`] and the debris on the road, which nothing touches: what cameras see.
+    pub fn visible_actors(&self) -> Vec<ActorView> {
+        let mut out = self.actors();
+        out.extend(self.debris.iter().map(|s| s.view(ActorKind::Debris)));
         out
     }
 

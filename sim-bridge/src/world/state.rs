@@ -112,6 +112,9 @@ pub enum ActorKind {
     Walker,
     /// A static prop or obstacle: a layout collision.
     Static,
+    /// Flat debris on the road (Scenario1), drawn but driven over: never a contact, and not
+    /// among [`crate::world::World::actors`].
+    Debris,
 }
 
 /// Collision class and its infraction coefficient (leaderboard 1.0).
@@ -131,7 +134,7 @@ impl ActorKind {
         match self {
             ActorKind::Vehicle | ActorKind::Cyclist => CollisionClass::Vehicle,
             ActorKind::Walker => CollisionClass::Pedestrian,
-            ActorKind::Static => CollisionClass::Layout,
+            ActorKind::Static | ActorKind::Debris => CollisionClass::Layout,
         }
     }
 }

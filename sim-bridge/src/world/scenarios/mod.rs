@@ -1,26 +1,34 @@
 //! Route scenarios and other non-traffic actors: walkers and cyclists that cross in front of
-//! the ego, red-light runners at signalized junctions, parked cars, and optional background
-//! walkers on the sidewalks.
+//! the ego, red-light runners at signalized junctions, debris, parked cars, and optional
+//! background walkers on the sidewalks.
 //!
-//! Placement (the leaderboard reads trigger points from a scenario file; our towns have none, so
-//! they are drawn along the route from the world seed):
-//! - S3 DynamicObjectCrossing: on straight stretches, about every [`S3_SPACING`] m, a walker
-//!   waits behind a parked van on the right edge [`CROSSING_AHEAD`] m past the trigger and
-//!   crosses when the ego reaches the trigger.
-//! - S4 VehicleTurningRoute: after a LEFT or RIGHT turn, a cyclist crosses the exit road
-//!   [`CROSSING_AHEAD`] m past the junction when the ego enters the junction.
+//! A route's scenarios come from one of two placements: [`leaderboard`] gives it those a
+//! leaderboard scenario file's triggers give it (`--scenarios`), as the leaderboard 1.0 does;
+//! without a file, [`drawn`] draws S3, S4 and S7 along it from the world seed. [`builders`]
+//! holds one builder per scenario type, which both use:
+//! - S3 DynamicObjectCrossing: a walker waits behind a parked van on the right edge some metres
+//!   past the trigger and crosses the whole road when the ego reaches the trigger.
+//! - S4 VehicleTurningRoute: after a LEFT or RIGHT turn, a cyclist crosses the exit road a few
+//!   metres past the junction.
 //! - S7-S9 SignalJunctionCrossingRoute: at a signalized junction the ego crosses, its light is
 //!   held green while a vehicle on a conflicting approach runs its red light.
+//! - S1 ControlLoss (from a file only): debris on the ego's lane, driven over.
 //!
 //! Each scenario fires once, when the ego's progress along the route passes its trigger.
 
+mod builders;
+mod drawn;
+mod leaderboard;
+
+pub use drawn::place_route_scenarios;
+pub use leaderboard::place_from_file;
+
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
-use ssrdrive_proto::command::RoadOption;
 
 use super::state::{ActorKind, Obb};
 use crate::map::{LaneIdx, LaneKind, Map};
-use crate::route::DenseRoute;
+use crate::world::ActorView;
 
 /// Metres of route between S3 walkers, on average.
 pub const S3_SPACING: f64 = 250.0;
@@ -120,13 +128,27 @@ impl Crosser {
     }
 }
 
-/// A static obstacle (parked car, scenario van): collisions with it are layout collisions.
+/// A static obstacle (parked car, scenario van): collisions with it are layout collisions. Also
+/// the shape of Scenario1's debris, which nothing collides with.
 #[derive(Debug, Clone, Copy)]
 pub struct StaticProp {
     /// Ground box.
     pub obb: Obb,
     /// Ground height.
     pub z: f64,
+}
+
+impl StaticProp {
+    /// As agents and renderers see it, as a `kind`.
+    pub fn view(&self, kind: ActorKind) -> ActorView {
+        ActorView {
+            id: 0,
+            kind,
+            obb: self.obb,
+            z: self.z,
+            velocity: DVec2::ZERO,
+        }
+    }
 }
 
 /// What a scenario does when triggered.
@@ -165,6 +187,8 @@ pub struct Placement {
     pub crossers: Vec<Crosser>,
     /// Static props.
     pub statics: Vec<StaticProp>,
+    /// Debris on the road (Scenario1).
+    pub debris: Vec<StaticProp>,
     /// Scenarios in trigger order.
     pub scenarios: Vec<Scenario>,
 }
@@ -197,144 +221,6 @@ impl IdSource {
         self.0 += 1;
         self.0
     }
-}
-
-/// The carriageway across a route point: the point on its right edge, the outward (rightward)
-/// unit vector, and the distance from that edge to the far (left) edge of the whole road,
-/// opposite lanes included.
-fn carriageway(map: &Map, lane: LaneIdx, at: DVec3, yaw: f64) -> (DVec3, DVec2, f64) {
-    let mut l = map.lane(lane);
-    while let Some(r) = l.right.filter(|r| map.lane(*r).kind == LaneKind::Driving) {
-        l = map.lane(r);
-    }
-    let proj = l.project(at.truncate());
-    let centre = l.pose_at(proj.s).position;
-    let right = -DVec2::from_angle(yaw).perp();
-    let edge = centre + (right * (l.width / 2.0)).extend(0.0);
-    let across = map
-        .lanes_near(edge.truncate(), 25.0, |x| {
-            x.kind == LaneKind::Driving && !x.in_junction()
-        })
-        .into_iter()
-        .map(|(x, p)| {
-            let point = map.lane(x).pose_at(p.s).position.truncate();
-            (point - edge.truncate()).dot(-right) + map.lane(x).width / 2.0
-        })
-        .filter(|w| *w < 25.0)
-        .fold(l.width, f64::max);
-    (edge, right, across)
-}
-
-/// Place scenarios along `route`.
-pub fn place_route_scenarios(
-    map: &Map,
-    route: &DenseRoute,
-    ids: &mut IdSource,
-    rng: &mut impl Rng,
-) -> Placement {
-    let mut out = Placement::default();
-    let n = route.points.len();
-    let ahead = CROSSING_AHEAD as usize;
-    // S3: straight stretches, away from junctions and lane changes.
-    let mut next_s3 = rng.random_range(80.0..S3_SPACING);
-    let mut i = 0;
-    while i + ahead + 15 < n {
-        let p = route.points[i];
-        let window = &route.points[i..i + ahead + 15];
-        let straight = window
-            .iter()
-            .all(|q| crate::map::angle_diff(q.yaw, p.yaw).abs() < 0.1);
-        let clear = straight
-            && window
-                .iter()
-                .all(|q| q.option == RoadOption::LaneFollow && !map.lane(q.lane).in_junction());
-        if route.cum[i] >= next_s3 && clear {
-            let c = route.points[i + ahead];
-            let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
-            let forward = DVec2::from_angle(c.yaw);
-            let van_centre = edge.truncate() + right * 1.4 - forward * 3.5;
-            out.statics.push(StaticProp {
-                obb: Obb {
-                    centre: van_centre,
-                    yaw: c.yaw,
-                    half: DVec2::new(2.5, 1.1),
-                },
-                z: edge.z,
-            });
-            let walker = (ActorKind::Walker, WALKER_SPEED, DVec2::splat(0.3));
-            let crosser = Crosser::waiting_to_cross(ids.next(), walker, edge, right, 2.5, across);
-            out.add_crossing(map, "Scenario3", i, crosser);
-            next_s3 = route.cum[i] + rng.random_range(0.6..1.4) * S3_SPACING;
-            i += ahead + 15;
-            continue;
-        }
-        i += 1;
-    }
-    // Junction runs: S4 after turns, S7-9 at signalized junctions.
-    let mut i = 0;
-    while i < n {
-        if !map.lane(route.points[i].lane).in_junction() {
-            i += 1;
-            continue;
-        }
-        let start = i;
-        while i < n && map.lane(route.points[i].lane).in_junction() {
-            i += 1;
-        }
-        let option = route.points[start].option;
-        let incoming = route.points[start.saturating_sub(1)].lane;
-        let light = map
-            .lights
-            .iter()
-            .find(|l| l.stop_lines.iter().any(|s| s.lane == incoming))
-            .map(|l| l.id);
-        if let (Some(ego_light), true) = (light, rng.random_range(0.0..1.0) < 0.5)
-            && let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light)
-        {
-            let trigger = start.saturating_sub(30);
-            out.scenarios.push(Scenario {
-                name: "Scenario7",
-                trigger,
-                action: ScenarioAction::RedLightRunner { ego_light, lane, s },
-                fired: false,
-            });
-            continue;
-        }
-        if matches!(option, RoadOption::Left | RoadOption::Right)
-            && i + ahead < n
-            && rng.random_range(0.0..1.0) < 0.5
-        {
-            let c = route.points[(i + 10).min(n - 1)];
-            let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
-            let cyclist = (ActorKind::Cyclist, CYCLIST_SPEED, DVec2::new(0.9, 0.35));
-            let crosser = Crosser::waiting_to_cross(ids.next(), cyclist, edge, right, 3.0, across);
-            out.add_crossing(map, "Scenario4", start, crosser);
-        }
-    }
-    out.scenarios.sort_by_key(|s| s.trigger);
-    out
-}
-
-/// A place 35 m before the stop line of an approach (of the same junction, not the ego's) whose
-/// connectors conflict with `ego_connector`.
-fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(LaneIdx, f64)> {
-    let junction = map.lane(ego_connector).junction?;
-    let conflicts = super::junctions::conflicts(map);
-    let theirs = conflicts.get(&ego_connector)?;
-    for light in map
-        .lights
-        .iter()
-        .filter(|l| l.junction == junction && l.id != ego_light)
-    {
-        for line in &light.stop_lines {
-            let lane = map.lane(line.lane);
-            let crosses = lane.successors.iter().any(|s| theirs.contains(s));
-            if crosses && lane.length() > 40.0 {
-                return Some((line.lane, lane.length() - 35.0));
-            }
-        }
-    }
-    None
 }
 
 /// Whether a box on the ground reaches into a driving lane (a corner or the centre lies within
