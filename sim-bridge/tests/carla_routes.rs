@@ -187,7 +187,7 @@ fn the_expert_drives_a_sample_of_long_routes_on_each_carla_town() {
         let scores: Vec<f64> = specs
             .iter()
             .enumerate()
-            .map(|(index, spec)| expert_ds(&map, spec, world, index))
+            .map(|(index, spec)| expert_ds(&map, spec, world.clone(), index))
             .collect();
         let mean = scores.iter().sum::<f64>() / scores.len() as f64;
         eprintln!("Town{town}: DS {scores:?}, mean {mean:.1}");
@@ -242,7 +242,7 @@ fn the_expert_drives_routes_on_a_town_it_was_never_tuned_on() {
             waypoint(b)
         );
         let spec = &xml::parse("town02", &xml).unwrap()[0];
-        scores.push(expert_ds(&map, spec, world, k));
+        scores.push(expert_ds(&map, spec, world.clone(), k));
     }
     let mean = scores.iter().sum::<f64>() / scores.len() as f64;
     eprintln!("Town02: DS {scores:?}, mean {mean:.1}");

@@ -190,7 +190,7 @@ fn the_dataset_stores_exactly_the_frames_an_agent_is_shown() {
         &task.spec,
         &task.dense,
         &mut watcher,
-        task.world,
+        task.world.clone(),
         ScoringConfig::default(),
         0,
         0,

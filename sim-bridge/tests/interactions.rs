@@ -691,7 +691,7 @@ fn a_light_held_green_by_a_scenario_shows_yellow_before_red() {
         };
         // Where the light's own cycle is when the hold ends: the case that needs a yellow
         // between the held green and the cycle's red.
-        let mut unforced = World::new(&map, &route, config);
+        let mut unforced = World::new(&map, &route, config.clone());
         unforced.lights.update(7.05);
         hold_ended_in_red += usize::from(unforced.light_states()[id] == LightState::Red);
         let mut world = World::new(&map, &route, config);

@@ -156,12 +156,13 @@ fn turn_scenarios_need_the_routes_next_turn_and_one_scenario_stands_per_position
         seen += 1;
         for n in [4, 7, 8, 9] {
             let matched = match_to_route(&[trigger_at(&route, k, n, 0.0, 0.0)], &route, 0);
-            let runs = match (n, option) {
-                (4, RoadOption::Left | RoadOption::Right) => true,
-                (7, _) => true,
-                (8, RoadOption::Left) | (9, RoadOption::Right) => true,
-                _ => false,
-            };
+            let runs = matches!(
+                (n, option),
+                (4, RoadOption::Left | RoadOption::Right)
+                    | (7, _)
+                    | (8, RoadOption::Left)
+                    | (9, RoadOption::Right)
+            );
             assert_eq!(
                 matched.len(),
                 usize::from(runs),

@@ -169,7 +169,7 @@ fn a_runs_infraction_list_holds_every_infraction_of_its_record() {
             spec,
             &dense,
             &mut Fixed(STRAIGHT_ON),
-            config,
+            config.clone(),
             ScoringConfig::default(),
             0,
             0,

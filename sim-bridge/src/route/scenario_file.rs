@@ -76,7 +76,7 @@ impl Trigger {
 
     fn heads_like(&self, yaw: f64) -> bool {
         let dyaw = (self.yaw - yaw).to_degrees().rem_euclid(360.0);
-        dyaw < TRIGGER_ANGLE || dyaw > 360.0 - TRIGGER_ANGLE
+        !(TRIGGER_ANGLE..=360.0 - TRIGGER_ANGLE).contains(&dyaw)
     }
 }
 
