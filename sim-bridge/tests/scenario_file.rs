@@ -13,9 +13,12 @@ use sim_bridge::route::sets::RouteSet;
 use sim_bridge::route::{DenseRoute, planner, xml};
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::towngen;
+use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::state::ActorKind;
+use sim_bridge::world::vehicle::Script;
 use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::command::RoadOption;
+use ssrdrive_proto::control::Control;
 
 /// Route `k` of the bundled `set`, planned on its town.
 fn bundled_route(set: &str, k: usize) -> (Map, xml::RouteSpec, DenseRoute) {
@@ -263,5 +266,222 @@ fn the_public_scenario_file_gives_carla_long_routes_their_scenarios() {
     assert_eq!(
         counts.iter().sum::<usize>(),
         counts[1] + counts[3] + counts[4]
+    );
+}
+
+/// A world on `route` without background traffic, whose scenarios come from one trigger of
+/// scenario `n` at route index `k`.
+fn world_with<'m>(map: &'m Map, town: &str, route: &DenseRoute, n: u8, k: usize) -> World<'m> {
+    let file =
+        ScenarioFile::parse(&file_text(town, &[trigger_at(route, k, n, 0.0, 0.0)]), "t").unwrap();
+    let config = WorldConfig {
+        vehicles: 0,
+        parked_cars: false,
+        scenario_file: Some(file.town(town).unwrap()),
+        ..WorldConfig::default()
+    };
+    World::new(map, route, config)
+}
+
+/// Put the ego on route point `k`, fire what it has reached and tick `seconds` with it held
+/// there (standing).
+fn stand_at(world: &mut World<'_>, route: &DenseRoute, k: usize, seconds: f64) {
+    let p = route.points[k];
+    world.ego = Ego::new(EgoParams::default(), p.position, p.yaw);
+    for _ in 0..(seconds / 0.05).round() as usize {
+        world.trigger_scenarios(k);
+        world.step(HOLD);
+    }
+}
+
+const HOLD: Control = Control {
+    steer: 0.0,
+    throttle: 0.0,
+    brake: 1.0,
+};
+
+/// The first route index from which `metres` of road stay out of junctions and a junction
+/// follows within `then` more metres.
+fn before_a_junction(map: &Map, route: &DenseRoute, metres: f64, then: f64) -> usize {
+    let in_junction = |k: usize| map.lane(route.points[k].lane).in_junction();
+    (0..route.points.len())
+        .find(|&k| {
+            let clear_to = route.cum[k] + metres;
+            let junction = (k..route.points.len()).find(|&j| in_junction(j));
+            junction.is_some_and(|j| route.cum[j] > clear_to && route.cum[j] < clear_to + then)
+                && !in_junction(k)
+        })
+        .expect("a stretch before a junction")
+}
+
+#[test]
+fn scenario2_a_leader_drives_off_stops_short_of_the_junction_and_leaves_once_the_ego_waits() {
+    let (map, _, route) = bundled_route("train-small", 0);
+    let k = before_a_junction(&map, &route, 40.0, 80.0);
+    let mut world = world_with(&map, "ssr_train_small", &route, 2, k);
+    assert!(
+        world.traffic.vehicles.is_empty(),
+        "nothing before the trigger"
+    );
+    stand_at(&mut world, &route, k, 20.0);
+    let leader = world
+        .traffic
+        .vehicles
+        .first()
+        .expect("the leader appeared")
+        .clone();
+    assert_eq!(leader.script, Script::StopsShortOfJunction(20.0));
+    assert!(leader.speed < 0.1, "it stopped: {leader:?}");
+    let at = leader.pose(&map).0;
+    let junction = route.points[k..]
+        .iter()
+        .find(|p| map.lane(p.lane).in_junction())
+        .unwrap()
+        .position;
+    let short = (junction - at).truncate().length();
+    assert!(
+        (18.0..26.0).contains(&short),
+        "{short:.1} m short of the junction"
+    );
+    // The ego comes up behind it and waits: the leader leaves.
+    let behind = (k..route.points.len())
+        .find(|&j| (route.points[j].position - at).truncate().length() < 9.0)
+        .unwrap();
+    stand_at(&mut world, &route, behind, 2.0);
+    assert!(world.traffic.vehicles.is_empty(), "the leader left");
+}
+
+#[test]
+fn scenario5_two_vehicles_wait_for_the_trigger_then_drive_off_and_leave() {
+    // A multi-lane street: the dense training town's first route that has a left lane.
+    let set = RouteSet::find("train-dense").unwrap();
+    let map = Map::from_str(
+        set.town.name(),
+        towngen::bundled(set.town),
+        MapOptions::default(),
+    )
+    .unwrap();
+    let specs = xml::parse(set.name, set.bundled_xml()).unwrap();
+    let (route, k) = specs
+        .iter()
+        .filter_map(|s| planner::plan_route(&map, s).ok())
+        .find_map(|r| {
+            let k = (40..r.points.len()).find(|&k| {
+                let ahead = (k..r.points.len()).find(|&j| r.cum[j] > r.cum[k] + 40.0);
+                ahead.is_some_and(|j| {
+                    r.points[k - 10..=j]
+                        .iter()
+                        .all(|p| !map.lane(p.lane).in_junction() && map.lane(p.lane).left.is_some())
+                })
+            })?;
+            Some((r, k))
+        })
+        .expect("a route with 40 m of two lanes one way");
+    let mut world = world_with(&map, set.town.name(), &route, 5, k);
+    let waiting: Vec<_> = world.traffic.vehicles.iter().map(|v| (v.id, v.s)).collect();
+    assert_eq!(waiting.len(), 2, "two vehicles stand from the start");
+    stand_at(&mut world, &route, k.saturating_sub(30), 10.0);
+    for (v, (_, s)) in world.traffic.vehicles.iter().zip(&waiting) {
+        assert_eq!(v.script, Script::Waits);
+        assert!((v.s - s).abs() < 0.01, "they wait for the trigger");
+    }
+    stand_at(&mut world, &route, k, 5.0);
+    assert!(
+        world.traffic.vehicles.iter().all(|v| v.speed > 3.0),
+        "they drive off: {:?}",
+        world.traffic.vehicles
+    );
+    let far = (k..route.points.len()).find(|&j| route.cum[j] > route.cum[k] + 141.0);
+    if let Some(far) = far {
+        stand_at(&mut world, &route, far, 0.1);
+        assert!(world.traffic.vehicles.is_empty(), "they left after 140 m");
+    }
+}
+
+#[test]
+fn scenario6_barriers_block_the_lane_and_a_flow_comes_the_other_way() {
+    // A route with 115 m of road out of junctions (barriers at 50 m, the source at 110 m).
+    let (map, route, k) = (0..40)
+        .find_map(|r| {
+            let (map, _, route) = bundled_route("train-small", r);
+            let clear = |k: usize| {
+                (k..route.points.len())
+                    .take_while(|&j| route.cum[j] < route.cum[k] + 115.0)
+                    .all(|j| !map.lane(route.points[j].lane).in_junction())
+            };
+            let k = (0..route.points.len())
+                .find(|&k| route.cum[k] + 120.0 < route.length() && clear(k))?;
+            Some((map, route, k))
+        })
+        .expect("115 m without a junction");
+    let plain = world_with(&map, "ssr_train_small", &route, 1, k);
+    let mut world = world_with(&map, "ssr_train_small", &route, 6, k);
+    assert_eq!(world.statics.len(), plain.statics.len() + 2, "two barriers");
+    let barrier = world.statics.last().unwrap().obb;
+    let ego_lane = map.lane(route.points[k].lane);
+    let on_lane = ego_lane.project(barrier.centre);
+    assert!(
+        on_lane.distance < ego_lane.width / 2.0,
+        "across the ego's lane"
+    );
+    stand_at(&mut world, &route, k, 1.0);
+    let first = world.traffic.vehicles.first().expect("an oncoming vehicle");
+    let (_, yaw) = first.pose(&map);
+    let source = (k..route.points.len())
+        .find(|&j| route.cum[j] >= route.cum[k] + 110.0)
+        .unwrap();
+    let heading = sim_bridge::map::angle_diff(yaw, route.points[source].yaw).abs();
+    assert!(heading > 2.5, "it comes the other way");
+    // The source sends the next once the last is 40 m away, up to 7.
+    stand_at(&mut world, &route, k, 60.0);
+    let sent = world.traffic.vehicles.len();
+    assert!((2..=7).contains(&sent), "{sent} sent");
+}
+
+#[test]
+fn scenario10_a_vehicle_crosses_the_junction_without_lights_in_the_egos_way() {
+    let (map, _, route) = bundled_route("train-small", 0);
+    let conflicts = sim_bridge::world::junctions::conflicts(&map);
+    // A junction without a light on the ego's approach, 60 m or more after the trigger.
+    let k = (1..route.points.len())
+        .find(|&j| {
+            let lane = map.lane(route.points[j].lane);
+            lane.in_junction()
+                && !map.lane(route.points[j - 1].lane).in_junction()
+                && map.light_ending(route.points[j - 1].lane).is_none()
+                && route.cum[j] > 70.0
+        })
+        .map(|j| {
+            (0..j)
+                .rev()
+                .find(|&t| route.cum[j] - route.cum[t] > 60.0)
+                .unwrap()
+        })
+        .expect("a junction without lights");
+    let mut world = world_with(&map, "ssr_train_small", &route, 10, k);
+    let junction_start = (k..route.points.len())
+        .find(|&j| map.lane(route.points[j].lane).in_junction())
+        .unwrap();
+    let fire = (0..junction_start)
+        .rev()
+        .find(|&j| route.cum[junction_start] - route.cum[j] >= 30.0)
+        .unwrap();
+    stand_at(&mut world, &route, fire - 1, 0.1);
+    assert!(
+        world.traffic.vehicles.is_empty(),
+        "not before 30 m short of it"
+    );
+    stand_at(&mut world, &route, fire, 0.05);
+    let crosser = world.traffic.vehicles.first().expect("a crossing vehicle");
+    assert!(crosser.ignores_lights(), "it does not give way");
+    let its_way = crosser
+        .next
+        .first()
+        .copied()
+        .expect("a path into the junction");
+    let ego_connector = route.points[junction_start].lane;
+    assert!(
+        conflicts[&ego_connector].contains(&its_way),
+        "its way crosses the ego's"
     );
 }

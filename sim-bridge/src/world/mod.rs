@@ -23,10 +23,11 @@ use glam::{DVec2, DVec3};
 use lights::LightController;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use scenarios::{Crosser, IdSource, Scenario, ScenarioAction, StaticProp};
+use scenarios::{Crosser, IdSource, Scenario, StaticProp};
 use ssrdrive_proto::control::Control;
 use state::{ActorKind, CollisionEvent, ContactGeometry, EgoState, LightState, Obb};
 use traffic::{REQUEST_DISTANCE, Traffic, standing_time};
+use vehicle::Script;
 
 use crate::map::{LaneIdx, Map};
 use crate::route::DenseRoute;
@@ -120,6 +121,8 @@ pub struct World<'m> {
     pub lights: LightController,
     /// Route scenarios.
     pub scenarios: Vec<Scenario>,
+    /// Fired scenarios still running.
+    running: Vec<scenarios::Running>,
     route_progress: usize,
     /// Distance along the route of each route point, m.
     route_distance: Vec<f64>,
@@ -145,7 +148,7 @@ impl<'m> World<'m> {
         let start = route.points[0];
         let ego = Ego::new(EgoParams::default(), start.position, start.yaw);
         let lights = LightController::new(map, &mut rng);
-        let traffic = Traffic::new(
+        let mut traffic = Traffic::new(
             map,
             config.vehicles,
             start.position.truncate(),
@@ -168,6 +171,10 @@ impl<'m> World<'m> {
         };
         statics.extend(placed.statics);
         crossers.extend(placed.crossers);
+        for v in &placed.vehicles {
+            let waits = (Script::Waits, 0.0, 1.0);
+            traffic.spawn_scenario_vehicle(map, v.id, (v.lane, v.s), waits, &mut rng);
+        }
         // Nothing may start on top of the ego.
         let ego_box = ego.state().obb();
         statics.retain(|s| !s.obb.overlaps(&ego_box));
@@ -181,6 +188,7 @@ impl<'m> World<'m> {
             debris: placed.debris,
             lights,
             scenarios: placed.scenarios,
+            running: Vec::new(),
             route_progress: 0,
             route_distance: route.cum.clone(),
             lane_changes: lane_changes(map, route),
@@ -205,14 +213,14 @@ impl<'m> World<'m> {
         self.lights.states()
     }
 
-    /// The mean speed of the background vehicles (scenario vehicles, which run red lights on
-    /// purpose, left out), m/s; `None` when there are none.
+    /// The mean speed of the background vehicles (scenario vehicles, which stand or run red
+    /// lights on purpose, left out), m/s; `None` when there are none.
     pub fn background_speed(&self) -> Option<f64> {
         let (sum, count) = self
             .traffic
             .vehicles
             .iter()
-            .filter(|v| !v.ignores_lights)
+            .filter(|v| v.is_background())
             .fold((0.0, 0usize), |(sum, count), v| (sum + v.speed, count + 1));
         (count > 0).then(|| sum / count as f64)
     }
@@ -255,33 +263,6 @@ impl<'m> World<'m> {
         let mut out = self.actors();
         out.extend(self.debris.iter().map(|s| s.view(ActorKind::Debris)));
         out
-    }
-
-    /// Fire scenarios whose trigger the ego has reached; `progress` is the ego's index on the
-    /// dense route.
-    pub fn trigger_scenarios(&mut self, progress: usize) {
-        self.route_progress = self.route_progress.max(progress);
-        for k in 0..self.scenarios.len() {
-            if self.scenarios[k].fired || self.scenarios[k].trigger > self.route_progress {
-                continue;
-            }
-            self.scenarios[k].fired = true;
-            match self.scenarios[k].action.clone() {
-                ScenarioAction::StartCrosser(id) => {
-                    if let Some(c) = self.crossers.iter_mut().find(|c| c.id == id) {
-                        c.moving = true;
-                    }
-                }
-                ScenarioAction::RedLightRunner { ego_light, lane, s } => {
-                    self.lights
-                        .force(ego_light, LightState::Green, self.time + 15.0);
-                    let id = self.ids.0 + 1;
-                    self.ids.0 += 1;
-                    self.traffic
-                        .spawn_runner(self.map, id, lane, s, &mut self.rng);
-                }
-            }
-        }
     }
 
     /// The lane the route changes into next, when that change starts within
@@ -367,6 +348,7 @@ impl<'m> World<'m> {
         for c in &mut self.crossers {
             c.step(DT);
         }
+        self.run_scenarios();
         self.collisions(before)
     }
 

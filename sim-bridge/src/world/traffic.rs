@@ -32,7 +32,7 @@ use rand::{Rng, RngExt as _};
 use super::ego_watch::{EgoPresence, TrafficMode, courtesy_hold, ego_on_path};
 use super::idm::Idm;
 use super::state::LightState;
-use super::vehicle::Vehicle;
+use super::vehicle::{Script, Vehicle};
 use crate::map::{LaneIdx, LaneKind, Map};
 
 /// How background vehicles follow: gentler than the expert, with a longer headway, and slower
@@ -168,12 +168,20 @@ impl Traffic {
         None
     }
 
-    /// Add a scenario vehicle that drives through red lights from `lane` at `s`, at speed.
-    pub fn spawn_runner(&mut self, map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) {
+    /// Add a scenario's vehicle on `lane` at `s`: (its script, its speed now, its cruise
+    /// speed in m/s).
+    pub fn spawn_scenario_vehicle(
+        &mut self,
+        map: &Map,
+        id: u32,
+        (lane, s): (LaneIdx, f64),
+        (script, speed, cruise): (Script, f64, f64),
+        rng: &mut impl Rng,
+    ) {
         let mut v = new_vehicle(map, id, lane, s, rng);
-        v.ignores_lights = true;
-        v.speed = 8.0;
-        v.desired_speed = 9.0;
+        v.script = script;
+        v.speed = speed;
+        v.desired_speed = cruise;
         self.vehicles.push(v);
     }
 
@@ -277,7 +285,14 @@ impl Traffic {
             }
             offset += length;
         }
-        best
+        match v.script {
+            Script::Waits => best.min_by_gap((0.0, 0.0)),
+            Script::StopsShortOfJunction(short) => match junction_ahead(map, v) {
+                Some(d) => best.min_by_gap(((d - short - v.half.x).max(0.0), 0.0)),
+                None => best,
+            },
+            Script::Traffic | Script::RunsReds => best,
+        }
     }
 
     /// Whether the vehicle must hold at the end of its current lane.
@@ -292,7 +307,7 @@ impl Traffic {
         if !approaching_junction(map, v) {
             return false;
         }
-        if !v.ignores_lights
+        if !v.ignores_lights()
             && let Some(&light) = self.light_at_end.get(&v.lane)
         {
             match lights[light] {
@@ -348,7 +363,7 @@ impl Traffic {
             .iter()
             .zip(&requests)
             .map(|(v, request)| match *request {
-                _ if v.ignores_lights => true,
+                _ if v.ignores_lights() => true,
                 Some(request) => self.may_go(request, &occupied, &all),
                 None => !approaching_junction(map, v) || has_exit_room(map, v, occ),
             })
@@ -402,7 +417,7 @@ impl Traffic {
             .iter()
             .map(|v| {
                 let connector = *v.next.first()?;
-                let held_by_light = !v.ignores_lights
+                let held_by_light = !v.ignores_lights()
                     && self
                         .light_at_end
                         .get(&v.lane)
@@ -410,7 +425,7 @@ impl Traffic {
                 let arrival = v.arrival.filter(|_| {
                     map.lane(connector).in_junction()
                         && !held_by_light
-                        && (v.ignores_lights || has_exit_room(map, v, occ))
+                        && (v.ignores_lights() || has_exit_room(map, v, occ))
                 })?;
                 Some((connector, arrival, v.id))
             })
@@ -442,7 +457,7 @@ impl Traffic {
     fn avoid_full_exits(&mut self, map: &Map, occ: &Occupancy, rng: &mut impl Rng) {
         for v in &mut self.vehicles {
             let at_entry = map.lane(v.lane).length() - v.s < REQUEST_DISTANCE;
-            if v.ignores_lights
+            if v.ignores_lights()
                 || !at_entry
                 || !approaching_junction(map, v)
                 || has_exit_room(map, v, occ)
@@ -572,6 +587,21 @@ impl Traffic {
     }
 }
 
+/// How far along its path from its centre a vehicle outside a junction reaches the next one, m.
+fn junction_ahead(map: &Map, v: &Vehicle) -> Option<f64> {
+    if map.lane(v.lane).in_junction() {
+        return None;
+    }
+    let mut offset = map.lane(v.lane).length() - v.s;
+    for &lane in &v.next {
+        if map.lane(lane).in_junction() {
+            return Some(offset);
+        }
+        offset += map.lane(lane).length();
+    }
+    None
+}
+
 /// Whether the vehicle is on a non-junction lane and its path enters a junction next.
 fn approaching_junction(map: &Map, v: &Vehicle) -> bool {
     !map.lane(v.lane).in_junction() && v.next.first().is_some_and(|n| map.lane(*n).in_junction())
@@ -637,7 +667,7 @@ fn new_vehicle(map: &Map, id: u32, lane: LaneIdx, s: f64, rng: &mut impl Rng) ->
         stopped_for: 0.0,
         arrival: None,
         stopped_at_sign: false,
-        ignores_lights: false,
+        script: Script::Traffic,
         colour: rng.random_range(0..16),
     };
     extend_path(map, &mut v, rng);

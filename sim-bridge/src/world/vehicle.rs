@@ -32,13 +32,39 @@ pub struct Vehicle {
     pub arrival: Option<f64>,
     /// Whether it already stopped at the stop sign ending its current lane.
     pub stopped_at_sign: bool,
-    /// Drives through red lights (scenario vehicles S7-S9).
-    pub ignores_lights: bool,
+    /// What it does besides following the traffic rules (scenario vehicles).
+    pub script: Script,
     /// Paint colour index, for renderers.
     pub colour: u8,
 }
 
+/// A vehicle's part: background traffic, or a scenario's vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Script {
+    /// Background traffic: lights, signs, right of way.
+    #[default]
+    Traffic,
+    /// Runs red lights and takes junctions whatever their right of way (the S7-S9 red-light
+    /// runner, the S10 crossing vehicle).
+    RunsReds,
+    /// Stands until its scenario starts (Scenario5's vehicles).
+    Waits,
+    /// Stops this many metres short of the next junction on its path and stays (Scenario2's
+    /// leading vehicle).
+    StopsShortOfJunction(f64),
+}
+
 impl Vehicle {
+    /// Whether it runs red lights and ignores right of way ([`Script::RunsReds`]).
+    pub fn ignores_lights(&self) -> bool {
+        self.script == Script::RunsReds
+    }
+
+    /// Whether it is background traffic rather than a scenario's vehicle.
+    pub fn is_background(&self) -> bool {
+        self.script == Script::Traffic
+    }
+
     /// World position and heading.
     pub fn pose(&self, map: &Map) -> (DVec3, f64) {
         let pose = map.lane(self.lane).pose_at(self.s);

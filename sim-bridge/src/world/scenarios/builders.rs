@@ -6,8 +6,8 @@ use glam::{DVec2, DVec3};
 use ssrdrive_proto::command::RoadOption;
 
 use super::{
-    ActorKind, CYCLIST_SPEED, Crosser, IdSource, Placement, Scenario, ScenarioAction, StaticProp,
-    WALKER_SPEED,
+    ActorKind, CYCLIST_SPEED, Crosser, IdSource, Placement, ScenarioAction, StaticProp,
+    WALKER_SPEED, WaitingVehicle,
 };
 use crate::map::{LaneIdx, LaneKind, Map};
 use crate::route::DenseRoute;
@@ -103,12 +103,8 @@ pub(super) fn red_light_runner(
     let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light) else {
         return false;
     };
-    out.scenarios.push(Scenario {
-        name,
-        trigger: start.saturating_sub(30),
-        action: ScenarioAction::RedLightRunner { ego_light, lane, s },
-        fired: false,
-    });
+    let action = ScenarioAction::RedLightRunner { ego_light, lane, s };
+    out.add(name, start.saturating_sub(30), action);
     true
 }
 
@@ -152,4 +148,213 @@ pub(super) fn junction_runs(map: &Map, route: &DenseRoute) -> Vec<(usize, usize,
         runs.push((start, i, route.points[start].option));
     }
     runs
+}
+
+/// The route index `metres` past index `from`, if the route goes that far.
+pub(super) fn index_ahead(route: &DenseRoute, from: usize, metres: f64) -> Option<usize> {
+    let goal = route.cum[from] + metres;
+    (from..route.points.len()).find(|&k| route.cum[k] >= goal)
+}
+
+/// The route index `metres` before index `from` (0 at the start).
+pub(super) fn index_back(route: &DenseRoute, from: usize, metres: f64) -> usize {
+    let goal = route.cum[from] - metres;
+    (0..=from)
+        .rev()
+        .find(|&k| route.cum[k] <= goal)
+        .unwrap_or(0)
+}
+
+/// The route index `metres` past `from` along the ego's road, or the last one before the next
+/// junction if that comes first (scenario_runner's lane walks stop at a junction); `None` when
+/// the route ends first.
+pub(super) fn ahead_on_road(
+    map: &Map,
+    route: &DenseRoute,
+    from: usize,
+    metres: f64,
+) -> Option<usize> {
+    let goal = route.cum[from] + metres;
+    let mut last = from;
+    for k in from..route.points.len() {
+        if map.lane(route.points[k].lane).in_junction() {
+            return Some(last);
+        }
+        last = k;
+        if route.cum[k] >= goal {
+            return Some(k);
+        }
+    }
+    None
+}
+
+/// Where route index `k` lies on its lane: (lane, arc length).
+fn lane_place(map: &Map, route: &DenseRoute, k: usize) -> (LaneIdx, f64) {
+    let p = route.points[k];
+    (p.lane, map.lane(p.lane).project(p.position.truncate()).s)
+}
+
+/// Scenario2 FollowLeadingVehicle, fired at route index `trigger`: a vehicle appears 25 m ahead
+/// on the ego's lane (nearer where a junction comes first) and drives at 10 m/s until it stops
+/// short of the next junction ([`ScenarioAction::LeadingVehicle`]).
+pub(super) fn s2_leading_vehicle(
+    map: &Map,
+    route: &DenseRoute,
+    trigger: usize,
+    out: &mut Placement,
+) {
+    let Some(k) = ahead_on_road(map, route, trigger, 25.0).filter(|&k| k > trigger + 8) else {
+        return;
+    };
+    let (lane, s) = lane_place(map, route, k);
+    let action = ScenarioAction::LeadingVehicle {
+        lane,
+        s,
+        speed: 10.0,
+    };
+    out.add("Scenario2", trigger, action);
+}
+
+/// Scenario5 OtherLeadingVehicle at route index `trigger`: a vehicle stands 35 m ahead on the
+/// ego's lane and another 36 m ahead on the lane to its left (same direction; none where there
+/// is no such lane) from the start; at the trigger they drive off at 17.2 and 45 m/s, and they
+/// leave once the ego has driven 140 m past it (scenario_runner's constants).
+pub(super) fn s5_other_leading_vehicles(
+    map: &Map,
+    route: &DenseRoute,
+    trigger: usize,
+    ids: &mut IdSource,
+    out: &mut Placement,
+) {
+    let mut vehicles = Vec::new();
+    if let Some(k) = ahead_on_road(map, route, trigger, 35.0).filter(|&k| k > trigger + 8) {
+        let (lane, s) = lane_place(map, route, k);
+        vehicles.push((
+            WaitingVehicle {
+                id: ids.next(),
+                lane,
+                s,
+            },
+            55.0 / 3.2,
+        ));
+    }
+    if let Some(k) = ahead_on_road(map, route, trigger, 36.0).filter(|&k| k > trigger + 8)
+        && let Some(left) = map.lane(route.points[k].lane).left
+    {
+        let s = map
+            .lane(left)
+            .project(route.points[k].position.truncate())
+            .s;
+        vehicles.push((
+            WaitingVehicle {
+                id: ids.next(),
+                lane: left,
+                s,
+            },
+            45.0,
+        ));
+    }
+    if vehicles.is_empty() {
+        return;
+    }
+    out.vehicles.extend(vehicles.iter().map(|(v, _)| *v));
+    let action = ScenarioAction::Release {
+        vehicles: vehicles.iter().map(|(v, speed)| (v.id, *speed)).collect(),
+        metres: 140.0,
+    };
+    out.add("Scenario5", trigger, action);
+}
+
+/// Scenario6 ManeuverOppositeDirection at route index `trigger`: two street barriers across
+/// the ego's lane 50 and 52 m ahead (the second half a lane to the right), and from the
+/// trigger a flow of vehicles on the oncoming lane from 110 m ahead at 5.56 m/s, at most 7,
+/// until the ego has driven 220 m past the trigger (scenario_runner's constants). Nothing is
+/// placed where the road has no oncoming lane.
+pub(super) fn s6_maneuver_opposite_direction(
+    map: &Map,
+    route: &DenseRoute,
+    trigger: usize,
+    out: &mut Placement,
+) {
+    let (Some(first), Some(source)) = (
+        ahead_on_road(map, route, trigger, 50.0),
+        index_ahead(route, trigger, 110.0),
+    ) else {
+        return;
+    };
+    let p = route.points[source];
+    let lane_width = map.lane(p.lane).width;
+    let left = p.forward().perp();
+    let oncoming = map
+        .lanes_near(p.position.truncate() + left * lane_width, lane_width, |l| {
+            l.kind == LaneKind::Driving && !l.in_junction()
+        })
+        .into_iter()
+        .find(|(l, proj)| {
+            let yaw = map.lane(*l).pose_at(proj.s).yaw;
+            crate::map::angle_diff(yaw, p.yaw).abs() > 2.5
+        });
+    let Some((lane, projection)) = oncoming else {
+        return;
+    };
+    let second = ahead_on_road(map, route, first, 2.0).unwrap_or(first);
+    for (k, aside) in [(first, 0.0), (second, -0.5 * lane_width)] {
+        let q = route.points[k];
+        out.statics.push(StaticProp {
+            obb: Obb {
+                centre: q.position.truncate() + q.forward().perp() * aside,
+                yaw: q.yaw + std::f64::consts::FRAC_PI_2,
+                half: DVec2::new(1.0, 0.3),
+            },
+            z: q.position.z,
+        });
+    }
+    let action = ScenarioAction::OncomingFlow {
+        lane,
+        s: projection.s,
+        speed: 5.56,
+        count: 7,
+        metres: 220.0,
+    };
+    out.add("Scenario6", trigger, action);
+}
+
+/// Scenario10 NoSignalJunctionCrossingRoute at the first junction without a light on the ego's
+/// approach from route index `trigger` on: a vehicle on another approach whose way crosses
+/// the ego's drives across without giving way, timed to meet the ego there; it starts 30 m
+/// before the ego's junction entry (not before the trigger).
+pub(super) fn s10_junction_crosser(
+    map: &Map,
+    route: &DenseRoute,
+    trigger: usize,
+    out: &mut Placement,
+) {
+    let conflicts = crate::world::junctions::conflicts(map);
+    for (start, _, _) in junction_runs(map, route)
+        .into_iter()
+        .filter(|r| r.0 > trigger)
+    {
+        let incoming = route.points[start - 1].lane;
+        if map.light_ending(incoming).is_some() {
+            continue;
+        }
+        let ego_connector = route.points[start].lane;
+        let approach = conflicts.get(&ego_connector).and_then(|theirs| {
+            theirs
+                .iter()
+                .filter_map(|c| map.lane(*c).predecessors.first().copied())
+                .find(|&a| {
+                    a != incoming && !map.lane(a).in_junction() && map.lane(a).length() > 15.0
+                })
+        });
+        if let Some(lane) = approach {
+            let fire = index_back(route, start, 30.0).max(trigger);
+            let action = ScenarioAction::JunctionCrosser {
+                lane,
+                ego_to_junction: route.cum[start] - route.cum[fire],
+            };
+            out.add("Scenario10", fire, action);
+        }
+        return;
+    }
 }

@@ -19,10 +19,33 @@
 //!   traffic crosses against the ego, and spawns nobody). Skipped where the ego's approach has
 //!   no light.
 //!
-//! Scenario2, 5, 6 and 10 are matched and sampled like the others (they take their position
-//! from a lower-numbered one) but place nothing yet.
-
-use super::builders::{junction_runs, red_light_runner, s3_walker, s4_cyclist};
+//! - Scenario2 FollowLeadingVehicle: at the trigger a vehicle appears 25 m ahead on the ego's
+//!   lane (nearer where a junction comes first), drives at 10 m/s and stops 20 m short of the
+//!   next junction; it leaves once the ego has stood 1 s within 20 m of it (as
+//!   scenario_runner's).
+//! - Scenario5 OtherLeadingVehicle: a vehicle stands 35 m ahead on the ego's lane and another
+//!   36 m ahead on the lane to its left from the start of the route; at the trigger they drive
+//!   off at 17.2 and 45 m/s, and leave once the ego has driven 140 m past it (as
+//!   scenario_runner's; its left vehicle takes the left lane whatever its direction, here only
+//!   a same-direction one).
+//! - Scenario6 ManeuverOppositeDirection: two street barriers across the ego's lane 50 and 52 m
+//!   past the trigger, and from the trigger vehicles on the oncoming lane from 110 m ahead at
+//!   5.56 m/s, the next whenever none is within 40 m of the source, at most 7, until the ego
+//!   has driven 220 m past it (as scenario_runner's). The ego has to pass the barriers on the
+//!   oncoming lane; the bundled expert does not overtake, so it waits there until blocked.
+//! - Scenario10 NoSignalJunctionCrossingRoute: at the first junction after the trigger whose
+//!   approach has no light, a vehicle on another approach whose way crosses the ego's drives
+//!   across without giving way, placed 30 m before the ego's entry so that it arrives about
+//!   when the ego does. scenario_runner's route version spawns nobody (it waits for the ego to
+//!   cross; any crossing vehicle is background traffic); this one brings the crossing vehicle
+//!   its standalone version has.
+//!
+//! A file's `other_actors` are read by no route scenario of the leaderboard 1.0 (only its
+//! sampling looks at them); they are ignored here.
+use super::builders::{
+    index_ahead, index_back, junction_runs, red_light_runner, s2_leading_vehicle, s3_walker,
+    s4_cyclist, s5_other_leading_vehicles, s6_maneuver_opposite_direction, s10_junction_crosser,
+};
 use super::{IdSource, Placement, StaticProp};
 use crate::map::{LaneKind, Map};
 use crate::route::DenseRoute;
@@ -90,26 +113,15 @@ pub fn place_from_file(
                     red_light_runner(map, route, start, name, &mut out);
                 }
             }
+            2 => s2_leading_vehicle(map, route, i, &mut out),
+            5 => s5_other_leading_vehicles(map, route, i, ids, &mut out),
+            6 => s6_maneuver_opposite_direction(map, route, i, &mut out),
+            10 => s10_junction_crosser(map, route, i, &mut out),
             _ => {}
         }
     }
     out.scenarios.sort_by_key(|s| s.trigger);
     out
-}
-
-/// The route index `metres` past index `from`, if the route goes that far.
-fn index_ahead(route: &DenseRoute, from: usize, metres: f64) -> Option<usize> {
-    let goal = route.cum[from] + metres;
-    (from..route.points.len()).find(|&k| route.cum[k] >= goal)
-}
-
-/// The route index `metres` before index `from` (0 at the start).
-fn index_back(route: &DenseRoute, from: usize, metres: f64) -> usize {
-    let goal = route.cum[from] - metres;
-    (0..=from)
-        .rev()
-        .find(|&k| route.cum[k] <= goal)
-        .unwrap_or(0)
 }
 
 /// Driving lanes to the right of `lane` in its direction.

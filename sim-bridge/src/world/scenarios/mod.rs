@@ -19,9 +19,11 @@
 mod builders;
 mod drawn;
 mod leaderboard;
+mod live;
 
 pub use drawn::place_route_scenarios;
 pub use leaderboard::place_from_file;
+pub(super) use live::Running;
 
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
@@ -165,6 +167,69 @@ pub enum ScenarioAction {
         /// Distance along that lane where the runner starts, m.
         s: f64,
     },
+    /// Scenario2: a leading vehicle appears on `lane` at `s` and drives at `speed` until
+    /// [`S2_STOP_SHORT`] m short of the next junction, where it stops; it leaves once the ego
+    /// has stood [`S2_EGO_STOOD_S`] within [`S2_EGO_NEAR`] m of it.
+    LeadingVehicle {
+        /// Lane it appears on.
+        lane: LaneIdx,
+        /// Where along it, m.
+        s: f64,
+        /// Cruise speed, m/s.
+        speed: f64,
+    },
+    /// Scenario5: the placed vehicles (ids, each with its cruise speed) that wait for the
+    /// trigger drive off; they leave once the ego has driven `metres` past the trigger.
+    Release {
+        /// Vehicle ids and cruise speeds, m/s.
+        vehicles: Vec<(u32, f64)>,
+        /// How far past the trigger the ego drives before they leave, m.
+        metres: f64,
+    },
+    /// Scenario6: vehicles come along the oncoming lane `lane` from `s` at `speed`, one
+    /// whenever none is within [`S6_SOURCE_CLEAR`] m of the source, at most `count`, until the
+    /// ego has driven `metres` past the trigger, when they leave.
+    OncomingFlow {
+        /// The oncoming lane.
+        lane: LaneIdx,
+        /// Where along it they appear, m.
+        s: f64,
+        /// Their speed, m/s.
+        speed: f64,
+        /// How many at most.
+        count: usize,
+        /// How far past the trigger the ego drives before they leave, m.
+        metres: f64,
+    },
+    /// Scenario10: a vehicle on the approach `lane` of a junction without lights crosses it
+    /// without giving way, placed so that at its speed it reaches the junction about when the
+    /// ego, `ego_to_junction` m from its entry at the trigger, does at its speed then.
+    JunctionCrosser {
+        /// The approach lane it drives in on.
+        lane: LaneIdx,
+        /// The ego's distance to the junction at the trigger, along the route, m.
+        ego_to_junction: f64,
+    },
+}
+
+/// How far short of the next junction Scenario2's leading vehicle stops, m.
+pub const S2_STOP_SHORT: f64 = 20.0;
+/// Scenario2's leading vehicle leaves once the ego has stood this long ...
+pub const S2_EGO_STOOD_S: f64 = 1.0;
+/// ... within this distance of it, m.
+pub const S2_EGO_NEAR: f64 = 20.0;
+/// Scenario6's source sends the next vehicle once none is this close to it, m.
+pub const S6_SOURCE_CLEAR: f64 = 40.0;
+
+/// A scenario vehicle placed with the world that waits for its trigger (Scenario5).
+#[derive(Debug, Clone, Copy)]
+pub struct WaitingVehicle {
+    /// Its id, which the scenario's action names.
+    pub id: u32,
+    /// Lane.
+    pub lane: LaneIdx,
+    /// Where along it, m.
+    pub s: f64,
 }
 
 /// One scenario instance on the route.
@@ -189,11 +254,23 @@ pub struct Placement {
     pub statics: Vec<StaticProp>,
     /// Debris on the road (Scenario1).
     pub debris: Vec<StaticProp>,
+    /// Scenario vehicles standing from the start (Scenario5).
+    pub vehicles: Vec<WaitingVehicle>,
     /// Scenarios in trigger order.
     pub scenarios: Vec<Scenario>,
 }
 
 impl Placement {
+    /// A scenario that fires at route index `trigger`.
+    fn add(&mut self, name: &'static str, trigger: usize, action: ScenarioAction) {
+        self.scenarios.push(Scenario {
+            name,
+            trigger,
+            action,
+            fired: false,
+        });
+    }
+
     /// A crosser that starts when the ego reaches route index `trigger`, unless the place it
     /// waits at reaches into a driving lane: where roads bend or meet, a spot beside one road
     /// can lie on another (the route's own, before the trigger: the ego would wait for it, and
@@ -202,13 +279,7 @@ impl Placement {
         if reaches_driving_lane(map, &crosser.obb()) {
             return;
         }
-        let action = ScenarioAction::StartCrosser(crosser.id);
-        self.scenarios.push(Scenario {
-            name,
-            trigger,
-            action,
-            fired: false,
-        });
+        self.add(name, trigger, ScenarioAction::StartCrosser(crosser.id));
         self.crossers.push(crosser);
     }
 }

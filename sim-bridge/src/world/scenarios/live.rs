@@ -1,0 +1,196 @@
+//! Scenarios while they run: firing each at its trigger, and what a running one does every
+//! tick until it ends (Scenario2's leading vehicle leaving, Scenario5's vehicles leaving,
+//! Scenario6's oncoming flow).
+
+use super::{S2_EGO_NEAR, S2_EGO_STOOD_S, S6_SOURCE_CLEAR, ScenarioAction};
+use crate::map::LaneIdx;
+use crate::world::World;
+use crate::world::state::LightState;
+use crate::world::vehicle::Script;
+
+/// A fired scenario that still has something to do.
+#[derive(Debug, Clone)]
+pub(in crate::world) enum Running {
+    /// Scenario2: the leading vehicle `id` leaves once the ego has stood near it.
+    LeaderWaits(u32),
+    /// Scenario5 and 6: `vehicles` leave, and a flow stops, once the ego's progress along the
+    /// route passes `until` metres.
+    UntilEgoDrove {
+        until: f64,
+        vehicles: Vec<u32>,
+        flow: Option<Flow>,
+    },
+}
+
+/// Scenario6's source of oncoming vehicles.
+#[derive(Debug, Clone, Copy)]
+pub(in crate::world) struct Flow {
+    lane: LaneIdx,
+    s: f64,
+    speed: f64,
+    left: usize,
+}
+
+impl World<'_> {
+    /// Fire scenarios whose trigger the ego has reached; `progress` is the ego's index on the
+    /// dense route.
+    pub fn trigger_scenarios(&mut self, progress: usize) {
+        self.route_progress = self.route_progress.max(progress);
+        for k in 0..self.scenarios.len() {
+            if self.scenarios[k].fired || self.scenarios[k].trigger > self.route_progress {
+                continue;
+            }
+            self.scenarios[k].fired = true;
+            self.fire(self.scenarios[k].action.clone());
+        }
+    }
+
+    /// The ego's distance along the route, m.
+    fn ego_route_distance(&self) -> f64 {
+        self.route_distance
+            .get(self.route_progress)
+            .copied()
+            .unwrap_or(0.0)
+    }
+
+    fn next_id(&mut self) -> u32 {
+        self.ids.0 += 1;
+        self.ids.0
+    }
+
+    fn fire(&mut self, action: ScenarioAction) {
+        match action {
+            ScenarioAction::StartCrosser(id) => {
+                if let Some(c) = self.crossers.iter_mut().find(|c| c.id == id) {
+                    c.moving = true;
+                }
+            }
+            ScenarioAction::RedLightRunner { ego_light, lane, s } => {
+                self.lights
+                    .force(ego_light, LightState::Green, self.time + 15.0);
+                let id = self.next_id();
+                let runner = (Script::RunsReds, 8.0, 9.0);
+                self.traffic
+                    .spawn_scenario_vehicle(self.map, id, (lane, s), runner, &mut self.rng);
+            }
+            ScenarioAction::LeadingVehicle { lane, s, speed } => {
+                let id = self.next_id();
+                let leader = (
+                    Script::StopsShortOfJunction(super::S2_STOP_SHORT),
+                    0.0,
+                    speed,
+                );
+                self.traffic
+                    .spawn_scenario_vehicle(self.map, id, (lane, s), leader, &mut self.rng);
+                self.running.push(Running::LeaderWaits(id));
+            }
+            ScenarioAction::Release { vehicles, metres } => {
+                for v in &mut self.traffic.vehicles {
+                    if let Some((_, speed)) = vehicles.iter().find(|(id, _)| *id == v.id) {
+                        v.script = Script::Traffic;
+                        v.desired_speed = *speed;
+                    }
+                }
+                self.running.push(Running::UntilEgoDrove {
+                    until: self.ego_route_distance() + metres,
+                    vehicles: vehicles.iter().map(|(id, _)| *id).collect(),
+                    flow: None,
+                });
+            }
+            ScenarioAction::OncomingFlow {
+                lane,
+                s,
+                speed,
+                count,
+                metres,
+            } => {
+                self.running.push(Running::UntilEgoDrove {
+                    until: self.ego_route_distance() + metres,
+                    vehicles: Vec::new(),
+                    flow: Some(Flow {
+                        lane,
+                        s,
+                        speed,
+                        left: count,
+                    }),
+                });
+            }
+            ScenarioAction::JunctionCrosser {
+                lane,
+                ego_to_junction,
+            } => {
+                const SPEED: f64 = 8.0;
+                let ego_time = ego_to_junction / self.ego.speed.max(3.0);
+                let length = self.map.lane(lane).length();
+                let s = (length - SPEED * ego_time).clamp(0.0, (length - 3.0).max(0.0));
+                let id = self.next_id();
+                let crosser = (Script::RunsReds, SPEED, SPEED);
+                self.traffic.spawn_scenario_vehicle(
+                    self.map,
+                    id,
+                    (lane, s),
+                    crosser,
+                    &mut self.rng,
+                );
+            }
+        }
+    }
+
+    /// One tick of the running scenarios: leaving vehicles leave, flows send the next.
+    pub(in crate::world) fn run_scenarios(&mut self) {
+        let ego = self.ego.state();
+        let progressed = self.ego_route_distance();
+        let mut leaving = Vec::new();
+        let mut running = std::mem::take(&mut self.running);
+        running.retain_mut(|r| match r {
+            Running::LeaderWaits(id) => {
+                let near = self
+                    .traffic
+                    .vehicles
+                    .iter()
+                    .find(|v| v.id == *id)
+                    .is_none_or(|v| {
+                        (v.pose(self.map).0 - ego.position).truncate().length() < S2_EGO_NEAR
+                    });
+                let done = near && self.ego_standing_for >= S2_EGO_STOOD_S;
+                if done {
+                    leaving.push(*id);
+                }
+                !done
+            }
+            Running::UntilEgoDrove {
+                until,
+                vehicles,
+                flow,
+            } => {
+                if progressed >= *until {
+                    leaving.append(vehicles);
+                    return false;
+                }
+                if let Some(flow) = flow.as_mut().filter(|f| f.left > 0) {
+                    let source = self.map.lane(flow.lane).pose_at(flow.s).position;
+                    let clear = self.traffic.vehicles.iter().all(|v| {
+                        (v.pose(self.map).0 - source).truncate().length() > S6_SOURCE_CLEAR
+                    });
+                    if clear {
+                        self.ids.0 += 1;
+                        let id = self.ids.0;
+                        let oncoming = (Script::Traffic, flow.speed, flow.speed);
+                        self.traffic.spawn_scenario_vehicle(
+                            self.map,
+                            id,
+                            (flow.lane, flow.s),
+                            oncoming,
+                            &mut self.rng,
+                        );
+                        vehicles.push(id);
+                        flow.left -= 1;
+                    }
+                }
+                true
+            }
+        });
+        self.running = running;
+        self.traffic.vehicles.retain(|v| !leaving.contains(&v.id));
+    }
+}
