@@ -74,7 +74,7 @@ impl Campaign<'_> {
         CampaignPlan {
             routes: self.label.clone(),
             town: self.map.name.clone(),
-            fingerprint: format!("{:016x}", fnv1a(driven.as_bytes())),
+            fingerprint: format!("{:016x}", ssrdrive_proto::dataset::fnv1a(driven.as_bytes())),
             repetitions: self.repetitions,
             seed: self.world.seed,
             runs: self.runs(),
@@ -150,13 +150,6 @@ impl Campaign<'_> {
             })
             .collect()
     }
-}
-
-/// The 64-bit FNV-1a hash (stable across builds and platforms, unlike std's hasher).
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &b| {
-        (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    })
 }
 
 /// One finished run, as the observer hears of it.
