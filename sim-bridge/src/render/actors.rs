@@ -25,6 +25,11 @@ pub fn push_actor(out: &mut Vec<Tri>, actor: &ActorView, app: &Appearance, eye: 
     };
     let eye = Some(eye);
     match actor.kind {
+        // A prop shorter than a car (Scenario6's street barriers) is a plain block.
+        ActorKind::Static if half.x < 1.5 => {
+            let barrier = Vec3::new(0.75, 0.2, 0.15);
+            part(0.0, half, 0.0, 1.0).push(out, barrier, app, eye);
+        }
         ActorKind::Vehicle | ActorKind::Static => {
             let id = if actor.kind == ActorKind::Static {
                 // Props have no id: colour them by place, which never changes.
