@@ -8,7 +8,7 @@ use sim_bridge::expert::Expert;
 use sim_bridge::map::{LaneKind, Map, MapOptions};
 use sim_bridge::route::{planner, xml};
 use sim_bridge::scoring::ScoringConfig;
-use sim_bridge::world::{WorldConfig, leaderboard_vehicles};
+use sim_bridge::world::{TrafficMode, WorldConfig, leaderboard_vehicles};
 
 /// The expert's driving score on one route (run `index` of its evaluation).
 fn expert_ds(map: &Map, spec: &xml::RouteSpec, world: WorldConfig, index: usize) -> f64 {
@@ -195,6 +195,36 @@ fn the_expert_drives_a_sample_of_long_routes_on_each_carla_town() {
             mean >= floor,
             "Town{town}: mean DS {mean:.1} under {floor}: {scores:?}"
         );
+    }
+}
+
+/// The long routes where the expert once stood for good at a green light, held by another
+/// approach's red: a light whose line ends the lane the route leaves by a lane change, or a
+/// kerb-side head of a light further on projected onto a turning ego's heading. It drives them
+/// through, in CARLA-like traffic.
+#[test]
+fn the_expert_is_held_only_by_the_light_of_its_own_next_stop_line() {
+    let Some(dir) = carla_dir() else { return };
+    for (town, ids) in [("03", ["10", "21"]), ("04", ["14", "38"])] {
+        let map =
+            Map::load_file(&dir.join(format!("Town{town}.xodr")), MapOptions::default()).unwrap();
+        let file = dir.join(format!(
+            "training_routes/transfuser/routes_town{town}_long.xml"
+        ));
+        let specs = xml::read_file(&file).unwrap();
+        let world = WorldConfig {
+            vehicles: leaderboard_vehicles(&map),
+            traffic: TrafficMode::Carla,
+            ..WorldConfig::default()
+        };
+        for (index, spec) in specs
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| ids.contains(&s.id.as_str()))
+        {
+            let ds = expert_ds(&map, spec, world.clone(), index);
+            assert!(ds > 99.0, "Town{town} route {}: DS {ds:.1}", spec.id);
+        }
     }
 }
 

@@ -31,6 +31,9 @@ const HEAD_IN_VIEW: f64 = 4.0;
 /// How far past its [`HEAD_IN_VIEW`] point a stopping ego still holds there rather than going
 /// on to the line, m (the IDM may come to rest a little past it).
 const HEAD_SLACK: f64 = 1.5;
+/// How far beside its approach's end a light head may stand and still hold the ego short of it,
+/// m: a kerb-side head (Town01, Town02) stands a few metres to the right of its lane.
+const HEAD_ASIDE: f64 = 12.0;
 /// The firmest braking the expert plans on to stop for a yellow light, a red light under it or
 /// its turn at a junction, m/s^2 (beyond that it goes on).
 const STOP_DECEL: f64 = 6.0;
@@ -299,12 +302,23 @@ fn stop_lines(
 ) {
     let ego = world.ego_state();
     let map = world.map;
-    // The last lane ahead may continue past the scan window: its end is not in reach yet.
-    let ends_in_window =
-        |j: usize| j + 1 < route.points.len() && route.points[j + 1].lane != route.points[j].lane;
+    // The route reaches a lane's end, where its stop line is, when it goes on to one of the
+    // lane's successors: leaving it sideways (a lane change) is not reaching its end, and the
+    // last lane ahead may continue past the scan window.
+    let ends_in_window = |lane: LaneIdx, j: usize| {
+        route
+            .points
+            .get(j + 1)
+            .is_some_and(|next| map.lane(lane).successors.contains(&next.lane))
+    };
     let gap_to = |j: usize| along(route, index, j) - ego.half_extent.x - STOP_LINE_MARGIN;
+    // Only the next stop line, with no junction before it, may hold the ego short of its head.
+    let mut next_line = true;
     for &(lane, j) in lanes_ahead {
-        if !ends_in_window(j) {
+        if map.lane(lane).in_junction() {
+            next_line = false;
+        }
+        if !ends_in_window(lane, j) {
             continue;
         }
         let gap = gap_to(j);
@@ -318,7 +332,10 @@ fn stop_lines(
             if !front_past && view.light_ahead.is_none_or(|(nearest, _)| gap < nearest) {
                 view.light_ahead = Some((gap.max(0.0), state));
             }
-            let stop_gap = head_in_view_gap(world, light).map_or(gap, |g| g.min(gap));
+            let head_gap = next_line
+                .then(|| head_in_view_gap(world, light, lane, gap))
+                .flatten();
+            let stop_gap = head_gap.map_or(gap, |g| g.min(gap));
             match state {
                 LightState::Red if front_past => {}
                 LightState::Red => view.obstacle(stop_gap, 0.0, BrakeReason::TrafficLight),
@@ -346,12 +363,28 @@ fn stop_lines(
 }
 
 /// The obstacle gap (as for a stop line) that stops the ego [`HEAD_IN_VIEW`] short of
-/// `light`'s head, while it can still stop there comfortably ([`STOP_DECEL`], give or take
-/// [`HEAD_SLACK`]); `None` past that point (the line decides).
-fn head_in_view_gap(world: &World<'_>, light: &TrafficLight) -> Option<f64> {
+/// `light`'s head, for a head that stands before the stop line ending `lane` (`line_gap`
+/// ahead, as [`stop_lines`] measures it) and beside that approach (within [`HEAD_ASIDE`]),
+/// while the ego can still stop there comfortably ([`STOP_DECEL`], give or take
+/// [`HEAD_SLACK`]); `None` past that point, or for a head elsewhere (the line decides). The
+/// head is measured along the approach's end, not the ego's heading: on a turning route a head
+/// off to the side would otherwise project a few metres ahead of the ego.
+fn head_in_view_gap(
+    world: &World<'_>,
+    light: &TrafficLight,
+    lane: LaneIdx,
+    line_gap: f64,
+) -> Option<f64> {
     let ego = world.ego_state();
-    let head_ahead =
-        (light.head.truncate() - ego.position.truncate()).dot(ego.forward()) - ego.half_extent.x;
+    let approach = world.map.lane(lane);
+    let end = approach.pose_at(approach.length());
+    let from_line = light.head.truncate() - end.position.truncate();
+    let along_approach = DVec2::from_angle(end.yaw);
+    let before_line = -from_line.dot(along_approach);
+    if before_line <= 0.0 || from_line.perp_dot(along_approach).abs() > HEAD_ASIDE {
+        return None;
+    }
+    let head_ahead = line_gap + STOP_LINE_MARGIN - before_line;
     // The IDM holds the ego its standstill gap short of an obstacle.
     let gap = head_ahead - HEAD_IN_VIEW + super::IDM.min_gap;
     let stopping = ego.speed * ego.speed / (2.0 * STOP_DECEL);
