@@ -576,7 +576,10 @@ impl Traffic {
             let v = &self.vehicles[i];
             let far = (v.pose(map).0.truncate() - ego.position()).length() > RESPAWN_CLEARANCE;
             let at_lane_end = v.next.is_empty() && map.lane(v.lane).successors.is_empty();
-            if v.stopped_for < RESPAWN_AFTER_S || !(far || at_lane_end) {
+            // A scenario's vehicle that stands on purpose stays for its scenario.
+            let stands_by_script =
+                matches!(v.script, Script::Waits | Script::StopsShortOfJunction(_));
+            if v.stopped_for < RESPAWN_AFTER_S || !(far || at_lane_end) || stands_by_script {
                 continue;
             }
             if let Some((lane, s)) = self.free_spot(map, ego.position(), 80.0, rng) {
