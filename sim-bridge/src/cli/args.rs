@@ -185,7 +185,7 @@ pub struct WorldArgs {
     /// A leaderboard scenario file (e.g. ../shared/carla/all_towns_traffic_scenarios_public.json):
     /// each route gets the scenarios the leaderboard 1.0 would give it from the file's triggers
     /// for its town, instead of scenarios drawn along it from the seed (see sim-bridge's README,
-    /// "Scenarios").
+    /// "Scenario files").
     #[arg(long, value_name = "FILE")]
     pub scenarios: Option<PathBuf>,
     /// The file of --scenarios, read once.

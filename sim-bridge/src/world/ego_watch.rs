@@ -57,8 +57,7 @@ const SQUEEZE_SPEED: f64 = 1.0;
 pub enum TrafficMode {
     /// Courtesies CARLA's traffic manager does not extend: vehicles let the ego into a lane it
     /// waits to change into, give it its turn at junctions without lights and way when it
-    /// approaches a junction at speed, and creep past it once it has stood
-    /// [`SQUEEZE_AFTER_S`].
+    /// approaches a junction at speed, and creep past it once it has stood 5 s.
     #[default]
     Courteous,
     /// As CARLA's traffic manager: the ego is an obstacle vehicles stop for, nothing more.

@@ -18,7 +18,6 @@
 //!   the seed's placement does (scenario_runner changes the junction's lights so background
 //!   traffic crosses against the ego, and spawns nobody). Skipped where the ego's approach has
 //!   no light.
-//!
 //! - Scenario2 FollowLeadingVehicle: at the trigger a vehicle appears 25 m ahead on the ego's
 //!   lane (nearer where a junction comes first), drives at 10 m/s and stops 20 m short of the
 //!   next junction; it leaves once the ego has stood 1 s within 20 m of it (as
@@ -42,6 +41,7 @@
 //!
 //! A file's `other_actors` are read by no route scenario of the leaderboard 1.0 (only its
 //! sampling looks at them); they are ignored here.
+
 use super::builders::{
     index_ahead, index_back, junction_runs, red_light_runner, s2_leading_vehicle, s3_walker,
     s4_cyclist, s5_other_leading_vehicles, s6_maneuver_opposite_direction, s10_junction_crosser,
