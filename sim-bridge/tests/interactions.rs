@@ -799,3 +799,39 @@ fn traffic_does_not_enter_a_junction_it_cannot_leave() {
     let car = &world.traffic.vehicles[1];
     assert_ne!(car.lane, from, "it went another way: {car:?}");
 }
+
+#[test]
+fn the_expert_drives_on_past_a_walker_it_clears_well_before_the_walker_arrives() {
+    let map = road();
+    let route = outer_lane_route(&map);
+    let mut world = quiet_world(&map, &route, 0);
+    // A walker at 1.8 m/s heading across the road from 7.6 m right of the ego's lane centre
+    // (6 m outside its corridor: it gets there in 3.3 s), its line 6 m ahead of the ego's front.
+    world.crossers = vec![Crosser {
+        id: 100_000,
+        kind: ActorKind::Walker,
+        position: DVec3::new(100.0 + 2.45 + 6.0, -5.25 - 1.66 - 6.0, 0.0),
+        yaw: FRAC_PI_2,
+        speed: 1.8,
+        remaining: 50.0,
+        moving: true,
+        half: DVec2::splat(0.3),
+        patrol: false,
+        gone: false,
+    }];
+    let mut scan_at_speed = |speed: f64| {
+        world.ego = Ego::new(EgoParams::default(), DVec3::new(100.0, -5.25, 0.0), 0.0);
+        world.ego.speed = speed;
+        let index = ego_index(&world, &route);
+        hazards::scan(&world, &route, index, &mut HazardMemory::default())
+    };
+    // At 8 m/s its rear is past the line in 1.4 s: no walking pace, no stop (braking would
+    // only leave it in the walker's way).
+    let driving = scan_at_speed(8.0);
+    assert!(
+        !driving.walker_near && driving.obstacle.is_none(),
+        "{driving:?}"
+    );
+    // Standing, it lets the walker cross first.
+    assert!(scan_at_speed(0.0).walker_near);
+}

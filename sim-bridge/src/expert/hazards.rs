@@ -56,12 +56,21 @@ const NOSE_IN_SPEED: f64 = 3.0;
 /// [`WALKER_TRACK_MARGIN`] m of the corridor slows the expert to walking pace. One walking
 /// along the sidewalk does neither: the rule before (walking pace for any moving walker less
 /// than 10 m to the side and 20 m ahead) held the expert at walking pace in 18.5 % of its
-/// frames with 20 background walkers, and the learner crept at 2 m/s on empty roads.
+/// frames with 20 background walkers, and the learner crept at 2 m/s on empty roads. Nor does
+/// one the ego passes first ([`WALKER_PASS_S`]).
 const WALKER_AHEAD: f64 = 20.0;
 const WALKER_TRACK_S: f64 = 3.0;
 const WALKER_TRACK_MARGIN: f64 = 1.0;
-/// The track is checked every `WALKER_TRACK_S / TRACK_STEPS` s (0.5 s: 0.9 m at walking pace).
-const TRACK_STEPS: usize = 6;
+/// How far ahead in time a track is followed to see whether the ego passes first: a walker or
+/// cyclist whose track enters the corridor only after the ego's rear, at its speed now, has
+/// cleared that point by [`PASS_FIRST_MARGIN_S`] changes nothing (a walker starting to cross a
+/// wide road 11 m to the side takes 5 s to reach the ego's lane; slowing for it only put the ego
+/// in its way when it got there).
+const WALKER_PASS_S: f64 = 8.0;
+/// See [`WALKER_PASS_S`].
+const PASS_FIRST_MARGIN_S: f64 = 1.5;
+/// The track is checked every `TRACK_STEP_S` s (0.9 m at walking pace).
+const TRACK_STEP_S: f64 = 0.5;
 
 /// What the scan remembers between ticks: stop signs already served on this route, and since
 /// when it has been waiting for a gap to change lanes.
@@ -128,14 +137,23 @@ pub fn scan(
             let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
             view.obstacle(gap, speed, brake_reason(a.kind));
         }
-        match track(a, route, front, walker_end, corridor) {
-            Track::Clear => {}
-            Track::Near => view.walker_near = true,
-            Track::Crossing(j) => {
-                view.walker_near = true;
-                let gap = along(route, index, j) - ego.half_extent.x;
-                view.obstacle(gap, 0.0, brake_reason(a.kind));
-            }
+        let track = track(a, route, front, walker_end, corridor);
+        // Passing first: the ego's rear, at its speed now, clears the crossing point well
+        // before the walker gets there.
+        let passes_first = track.crossing.is_some_and(|(j, enters)| {
+            let rear_clears = (along(route, index, j) + ego.half_extent.x) / ego.speed.max(0.1);
+            rear_clears + PASS_FIRST_MARGIN_S < enters
+        });
+        if passes_first {
+            continue;
+        }
+        view.walker_near |= track.near;
+        if let Some((j, _)) = track
+            .crossing
+            .filter(|(_, enters)| *enters <= WALKER_TRACK_S)
+        {
+            let gap = along(route, index, j) - ego.half_extent.x;
+            view.obstacle(gap, 0.0, brake_reason(a.kind));
         }
     }
     lane_change_gap(world, route, index, end, memory, &mut view);
@@ -156,34 +174,35 @@ fn brake_reason(kind: ActorKind) -> BrakeReason {
     }
 }
 
-/// Where a walker's or cyclist's track meets the path (see [`WALKER_AHEAD`]).
-enum Track {
-    /// Not moving, not a walker or cyclist, or its track stays clear of the path.
-    Clear,
-    /// Its track comes near the corridor.
-    Near,
-    /// Its track enters the corridor, first at this route point.
-    Crossing(usize),
+/// How a walker's or cyclist's track meets the path (see [`WALKER_AHEAD`]).
+#[derive(Debug, Default)]
+struct Track {
+    /// It comes within [`WALKER_TRACK_MARGIN`] of the corridor in the next [`WALKER_TRACK_S`].
+    near: bool,
+    /// It enters the corridor in the next [`WALKER_PASS_S`]: first at this route point, after
+    /// this many seconds.
+    crossing: Option<(usize, f64)>,
 }
 
-/// The track of `actor` over the next [`WALKER_TRACK_S`] at its velocity against the corridor
+/// The track of `actor` over the next [`WALKER_PASS_S`] at its velocity against the corridor
 /// (half width `corridor`) along route points `from..=to`.
 fn track(actor: &ActorView, route: &DenseRoute, from: usize, to: usize, corridor: f64) -> Track {
+    let mut out = Track::default();
     if !matches!(actor.kind, ActorKind::Walker | ActorKind::Cyclist)
         || actor.velocity.length() <= 0.1
     {
-        return Track::Clear;
+        return out;
     }
     let reach = corridor + WALKER_TRACK_MARGIN;
-    let travel = WALKER_TRACK_S * actor.velocity.length();
+    let travel = WALKER_PASS_S * actor.velocity.length();
     // Nothing on this stretch of the path can come near.
     let start = route.points[from].position.truncate();
     if actor.obb.centre.distance(start) > WALKER_AHEAD + travel + reach {
-        return Track::Clear;
+        return out;
     }
-    let mut near = false;
-    for k in 0..=TRACK_STEPS {
-        let seconds = WALKER_TRACK_S * k as f64 / TRACK_STEPS as f64;
+    let steps = (WALKER_PASS_S / TRACK_STEP_S).round() as usize;
+    for k in 0..=steps {
+        let seconds = TRACK_STEP_S * k as f64;
         let moved = Obb {
             centre: actor.obb.centre + actor.velocity * seconds,
             ..actor.obb
@@ -191,12 +210,14 @@ fn track(actor: &ActorView, route: &DenseRoute, from: usize, to: usize, corridor
         for j in from..=to {
             let distance = moved.distance_to(route.points[j].position.truncate());
             if distance < corridor {
-                return Track::Crossing(j);
+                out.crossing = Some((j, seconds));
+                out.near |= seconds <= WALKER_TRACK_S;
+                return out;
             }
-            near |= distance < reach;
+            out.near |= distance < reach && seconds <= WALKER_TRACK_S;
         }
     }
-    if near { Track::Near } else { Track::Clear }
+    out
 }
 
 /// Before a lane change on the path, wait at its start while a vehicle on the target lane is
