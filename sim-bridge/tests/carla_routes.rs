@@ -6,6 +6,7 @@ use common::carla_dir;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{LaneKind, Map, MapOptions};
+use sim_bridge::route::scenario_file::ScenarioFile;
 use sim_bridge::route::{planner, xml};
 use sim_bridge::scoring::ScoringConfig;
 use sim_bridge::world::{TrafficMode, WorldConfig, leaderboard_vehicles};
@@ -226,6 +227,35 @@ fn the_expert_is_held_only_by_the_light_of_its_own_next_stop_line() {
             assert!(ds > 99.0, "Town{town} route {}: DS {ds:.1}", spec.id);
         }
     }
+}
+
+/// Town06's long route 48 (with the leaderboard's public scenario file) changes lanes into a
+/// queue that moves in waves with car-length gaps; in CARLA-like traffic nobody leaves a gap,
+/// and the expert once stood at the change until blocked. It zip-merges ahead of a car that
+/// can stop short of its nose.
+#[test]
+fn the_expert_merges_into_a_moving_queue() {
+    let Some(dir) = carla_dir() else { return };
+    let map = Map::load_file(&dir.join("Town06.xodr"), MapOptions::default()).unwrap();
+    let specs =
+        xml::read_file(&dir.join("training_routes/transfuser/routes_town06_long.xml")).unwrap();
+    let (index, spec) = specs
+        .iter()
+        .enumerate()
+        .find(|(_, s)| s.id == "48")
+        .unwrap();
+    let scenarios = ScenarioFile::read(&dir.join("all_towns_traffic_scenarios_public.json"))
+        .unwrap()
+        .town("Town06")
+        .unwrap();
+    let world = WorldConfig {
+        vehicles: leaderboard_vehicles(&map),
+        traffic: TrafficMode::Carla,
+        scenario_file: Some(scenarios),
+        ..WorldConfig::default()
+    };
+    let ds = expert_ds(&map, spec, world, index);
+    assert!(ds > 99.0, "Town06 route 48: DS {ds:.1}");
 }
 
 /// Generalisation: on Town02, a town with no route file in ../shared (nothing was tuned on it),

@@ -125,12 +125,15 @@ pub fn scan(
         .find(|&j| along(route, index, j) >= ego.half_extent.x)
         .unwrap_or(end);
     let walker_end = ahead_end(route, index, WALKER_AHEAD);
+    // Nosing into a lane ahead of cars that stop for it: those are behind, not in its way.
+    let nosing_ahead_of = lane_change_gap(world, route, index, end, memory, &mut view);
     for a in &actors {
         let rel = a.obb.centre - ego.position.truncate();
         if rel.length() > SCAN_AHEAD + 10.0 || (a.z - ego.position.z).abs() > 3.0 {
             continue;
         }
         if let Some(j) = (front..=end)
+            .filter(|_| !nosing_ahead_of.contains(&a.id))
             .find(|&j| a.obb.distance_to(route.points[j].position.truncate()) < corridor)
         {
             let gap = along(route, index, j) - ego.half_extent.x;
@@ -156,7 +159,6 @@ pub fn scan(
             view.obstacle(gap, 0.0, brake_reason(a.kind));
         }
     }
-    lane_change_gap(world, route, index, end, memory, &mut view);
     let lanes_ahead: Vec<(LaneIdx, usize)> = last_index_per_lane(route, index, end);
     stop_lines(world, route, index, &lanes_ahead, memory, &mut view);
     red_light_under_ego(world, &mut view);
@@ -222,7 +224,11 @@ fn track(actor: &ActorView, route: &DenseRoute, from: usize, to: usize, corridor
 
 /// Before a lane change on the path, wait at its start while a vehicle on the target lane is
 /// alongside ([`LANE_CHANGE_ALONGSIDE`] either side of the ego) or closing in from behind;
-/// after [`LANE_CHANGE_PATIENCE`], nose into a queue slower than [`NOSE_IN_SPEED`].
+/// after [`LANE_CHANGE_PATIENCE`], nose in (a zip merge) when each of them is slower than
+/// [`NOSE_IN_SPEED`] or could stop comfortably short of the ego's nose: traffic stops for the
+/// box on its path, and a moving queue with car-length gaps never leaves a gap a standing car
+/// can take. Returns the vehicles it noses in ahead of (those whose front is behind its nose),
+/// which are then behind it, not in its way.
 fn lane_change_gap(
     world: &World<'_>,
     route: &DenseRoute,
@@ -230,21 +236,21 @@ fn lane_change_gap(
     end: usize,
     memory: &mut HazardMemory,
     view: &mut HazardView,
-) {
+) -> Vec<u32> {
     let map = world.map;
     let Some(switch) = (index.max(1)..=end).find(|&j| {
         let (a, b) = (map.lane(route.points[j - 1].lane), route.points[j].lane);
         a.left == Some(b) || a.right == Some(b)
     }) else {
         memory.lane_change_wait = None;
-        return;
+        return Vec::new();
     };
     let start = (index..=switch)
         .find(|&j| route.points[j].option.is_lane_change())
         .unwrap_or(switch);
     if start <= index {
         memory.lane_change_wait = None;
-        return; // already changing: carry on
+        return Vec::new(); // already changing: carry on
     }
     let ego = world.ego_state();
     let target = map.lane(route.points[switch].lane);
@@ -252,40 +258,50 @@ fn lane_change_gap(
     let impatient = memory
         .lane_change_wait
         .is_some_and(|since| world.time - since > LANE_CHANGE_PATIENCE);
-    let blockers: Vec<_> = world
-        .traffic
-        .vehicles
-        .iter()
-        .filter(|v| {
-            let on_target = v.lane == target.idx || target.predecessors.contains(&v.lane);
-            let s = if v.lane == target.idx {
-                v.s
-            } else {
-                v.s - map.lane(v.lane).length()
-            };
-            // Behind, a car blocks the change while it could not stop comfortably (after a
-            // second's reaction) short of the ego.
+    // Each vehicle on the target lane with its arc length there (measured on the target lane).
+    let on_target = world.traffic.vehicles.iter().filter_map(|v| {
+        if v.lane == target.idx {
+            Some((v, v.s))
+        } else if target.predecessors.contains(&v.lane) {
+            Some((v, v.s - map.lane(v.lane).length()))
+        } else {
+            None
+        }
+    });
+    let stopping = |v: &crate::world::vehicle::Vehicle| {
+        v.speed * FOLLOWER_REACTION + v.speed * v.speed / (2.0 * FOLLOWER_DECEL)
+    };
+    // Behind, a car blocks the change while it could not stop comfortably (after a second's
+    // reaction) short of the ego.
+    let blockers: Vec<_> = on_target
+        .filter(|(v, s)| {
             let behind = ego_s - s;
-            let stopping = v.speed * FOLLOWER_REACTION + v.speed * v.speed / (2.0 * FOLLOWER_DECEL);
             let alongside = behind.abs() < LANE_CHANGE_ALONGSIDE;
-            let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping;
-            on_target && (alongside || closing)
+            let closing = behind > 0.0 && behind < LANE_CHANGE_ALONGSIDE + stopping(v);
+            alongside || closing
         })
         .collect();
     if blockers.is_empty() {
-        return;
+        return Vec::new();
     }
     memory.lane_change_wait.get_or_insert(world.time);
-    let slow = blockers.iter().all(|v| v.speed < NOSE_IN_SPEED);
-    if impatient && slow {
-        // A queue this slow never opens a gap by itself: nose in at walking pace, as in a zip
-        // merge. The cars behind brake for the box on their path, and the scan along the
-        // ego's path keeps it off the one ahead.
+    let nose = ego_s + ego.half_extent.x;
+    let yields = |(v, s): &(&crate::world::vehicle::Vehicle, f64)| {
+        v.speed < NOSE_IN_SPEED || nose - (s + v.half.x) > stopping(v)
+    };
+    if impatient && blockers.iter().all(yields) {
+        // Nose in at walking pace, as in a zip merge. The cars behind brake for the box on
+        // their path, and the scan along the ego's path keeps it off the one ahead.
         view.nosing_in = true;
-        return;
+        return blockers
+            .iter()
+            .filter(|(v, s)| s + v.half.x < nose)
+            .map(|(v, _)| v.id)
+            .collect();
     }
     let gap = along(route, index, start) - ego.half_extent.x;
     view.obstacle(gap, 0.0, BrakeReason::LaneChange);
+    Vec::new()
 }
 
 /// Index of the last route point within `distance` of `index`.
