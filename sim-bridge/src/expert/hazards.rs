@@ -132,10 +132,9 @@ pub fn scan(
         if rel.length() > SCAN_AHEAD + 10.0 || (a.z - ego.position.z).abs() > 3.0 {
             continue;
         }
-        if let Some(j) = (front..=end)
-            .filter(|_| !nosing_ahead_of.contains(&a.id))
-            .find(|&j| a.obb.distance_to(route.points[j].position.truncate()) < corridor)
-        {
+        let on_path = (front..=end)
+            .find(|&j| a.obb.distance_to(route.points[j].position.truncate()) < corridor);
+        if let Some(j) = on_path.filter(|_| !nosing_ahead_of.contains(&a.id)) {
             let gap = along(route, index, j) - ego.half_extent.x;
             let speed = a.velocity.dot(route_dir(route, j)).max(0.0);
             view.obstacle(gap, speed, brake_reason(a.kind));
