@@ -14,13 +14,16 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use crate::driver::{Agent, AgentError, Observation, RouteContext};
+use ssrdrive_proto::camera::Rig;
+
+use crate::driver::{Agent, AgentError, CameraFrame, Observation, RouteContext};
 use crate::map::Map;
 use crate::render::{Appearance, CameraRenderer, SceneState};
 use crate::route::DenseRoute;
 use crate::route::plan::{RouteFollower, global_plan};
 use crate::route::xml::RouteSpec;
 use crate::scoring::{Infraction, RouteEnd, RouteRecord, RouteScorer, ScoringConfig};
+use crate::world::state::EgoState;
 use crate::world::{ActorView, World, WorldConfig};
 
 /// Ticks between two samples of the ego trace kept for pictures.
@@ -45,6 +48,42 @@ pub struct RouteRun {
     pub agent_error: Option<AgentError>,
 }
 
+/// An agent's cameras: the rig it asked for and a renderer in the world's look.
+struct Cameras {
+    rig: Rig,
+    renderer: CameraRenderer,
+}
+
+impl Cameras {
+    /// What the cameras see of `world` on tick `frame`, the ego at `ego`.
+    fn render(&mut self, world: &World<'_>, ego: EgoState, frame: u64) -> Vec<CameraFrame> {
+        let actors = world.visible_actors();
+        let scene = SceneState {
+            ego,
+            actors: &actors,
+            lights: world.light_states(),
+        };
+        self.renderer.render(&self.rig, &scene, frame)
+    }
+}
+
+/// Starts `agent` on the route of `context` and sets up the cameras it asks for (none for an
+/// agent without sensors); its error when it refuses the route or asks for an unusable rig.
+fn start_agent(
+    agent: &mut dyn Agent,
+    context: &RouteContext<'_>,
+    world_config: &WorldConfig,
+) -> Result<Option<Cameras>, AgentError> {
+    agent.start_route(context)?;
+    let Some(rig) = agent.sensors() else {
+        return Ok(None);
+    };
+    rig.validate()
+        .map_err(|e| AgentError(format!("its camera rig is unusable: {e}")))?;
+    let renderer = CameraRenderer::new(context.map, Appearance::of_world(world_config));
+    Ok(Some(Cameras { rig, renderer }))
+}
+
 /// One route run: `spec` planned as `dense`, `repetition` and world seed recorded in the
 /// record's meta; `on_tick` sees the route completion (percent) every simulated second.
 #[allow(clippy::too_many_arguments)]
@@ -63,31 +102,19 @@ pub fn run_route(
     let plan = global_plan(dense);
     let mut follower = RouteFollower::new(plan.clone());
     let mut world = World::new(map, dense, world_config.clone());
-    let mut agent_error = agent
-        .start_route(&RouteContext {
-            map,
-            route: dense,
-            plan: &plan,
-            route_id: &spec.id,
-            repetition,
-            seed: world_config.seed,
-            ego_half_extent: world.ego_state().half_extent,
-        })
-        .err();
-    let mut cameras = None;
-    if agent_error.is_none()
-        && let Some(rig) = agent.sensors()
-    {
-        match rig.validate() {
-            Ok(()) => {
-                cameras = Some((
-                    rig,
-                    CameraRenderer::new(map, Appearance::of_world(&world_config)),
-                ))
-            }
-            Err(e) => agent_error = Some(AgentError(format!("its camera rig is unusable: {e}"))),
-        }
-    }
+    let context = RouteContext {
+        map,
+        route: dense,
+        plan: &plan,
+        route_id: &spec.id,
+        repetition,
+        seed: world_config.seed,
+        ego_half_extent: world.ego_state().half_extent,
+    };
+    let (mut cameras, mut agent_error) = match start_agent(agent, &context, &world_config) {
+        Ok(cameras) => (cameras, None),
+        Err(error) => (None, Some(error)),
+    };
     let mut scorer = RouteScorer::new(map, dense, scoring);
     let mut contacts = Vec::new();
     let mut progress = 0;
@@ -102,15 +129,7 @@ pub fn run_route(
         world.trigger_scenarios(progress);
         let node = follower.step(ego.position.truncate());
         let frames = match &mut cameras {
-            Some((rig, renderer)) if agent.wants_frames(frame) => {
-                let actors = world.visible_actors();
-                let scene = SceneState {
-                    ego,
-                    actors: &actors,
-                    lights: world.light_states(),
-                };
-                renderer.render(rig, &scene, frame)
-            }
+            Some(cameras) if agent.wants_frames(frame) => cameras.render(&world, ego, frame),
             _ => Vec::new(),
         };
         let obs = Observation::of_ego(world.time, frame, &ego, &node, frames);
