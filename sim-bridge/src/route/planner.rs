@@ -203,7 +203,6 @@ fn search(
         if expansions > MAX_EXPANSIONS {
             return None;
         }
-        let lane = map.lane(spot.lane);
         if let Some(&goal) = goals
             .iter()
             .find(|goal| spot.lane == goal.lane && spot.s <= goal.s + 1e-6)
@@ -221,11 +220,11 @@ fn search(
             legs.reverse();
             return Some((legs, goal));
         }
-        let mut push = |next: LaneSpot, cost: f64, leg: Leg, arena: &mut Vec<_>| {
+        for (next, cost, leg) in moves(map, spot, goals, squeeze) {
             let key = (next.lane, (next.s * 2.0).round() as i64);
             let g2 = g + cost;
             if best.get(&key).is_some_and(|&b| b <= g2) {
-                return;
+                continue;
             }
             best.insert(key, g2);
             arena.push((next, Some(id), Some(leg)));
@@ -235,100 +234,110 @@ fn search(
                 spot: next,
                 id: arena.len() - 1,
             });
-        };
-        let rest = lane.length() - spot.s;
-        for &succ in &lane.successors {
-            if map.lane(succ).kind != LaneKind::Driving {
-                continue;
-            }
-            let leg = Leg::Drive {
-                lane: spot.lane,
-                from: spot.s,
-                to: lane.length(),
-            };
-            push(
-                LaneSpot { lane: succ, s: 0.0 },
-                rest.max(0.0),
-                leg,
-                &mut arena,
-            );
-        }
-        if lane.in_junction() {
-            continue;
-        }
-        for (neighbour, left) in [(lane.left, true), (lane.right, false)] {
-            let Some(n) = neighbour else { continue };
-            if map.lane(n).kind != LaneKind::Driving {
-                continue;
-            }
-            // A goal on the neighbour that a full-length change would overshoot (a keypoint a
-            // few metres into a lane that only a lane change reaches): a shorter change that
-            // lands on it, costed as the full one plus the penalty again.
-            // (Projected only when a goal is on the neighbour: this is the search's inner loop.)
-            let beside = || {
-                map.lane(n)
-                    .project(lane.pose_at(spot.s).position.truncate())
-                    .s
-            };
-            for goal in goals.iter().filter(|g| g.lane == n) {
-                let length = goal.s - beside();
-                if (SHORT_CHANGE_MIN..LANE_CHANGE_LENGTH).contains(&length)
-                    && spot.s + length <= lane.length()
-                {
-                    let leg = Leg::Change {
-                        from: spot.lane,
-                        s0: spot.s,
-                        to: n,
-                        s1: goal.s,
-                        length,
-                        left,
-                    };
-                    let cost = LANE_CHANGE_LENGTH + 2.0 * LANE_CHANGE_PENALTY;
-                    push(*goal, cost, leg, &mut arena);
-                }
-            }
-            // Change as soon as there is room, and only where the target lane goes on after it.
-            let target = map.lane(n);
-            let s_end = spot.s + LANE_CHANGE_LENGTH;
-            let (s1, length, penalties) = if s_end <= lane.length() {
-                let proj = target.project(lane.pose_at(s_end).position.truncate());
-                if proj.s >= target.length() - 1.0 {
-                    continue;
-                }
-                (proj.s, LANE_CHANGE_LENGTH, 1.0)
-            } else if squeeze {
-                // Only when the pair has no path without it ([`plan_route`]'s second search):
-                // no room left for a full change before the lane ends (a keypoint a few metres
-                // before a junction whose turn leaves from the neighbour only), so as CARLA's
-                // planner, whose lane-change edges have no minimum length, change over what is
-                // left, onto a neighbour that goes on (its successors count), as long as the
-                // route still moves forward across it (a step back is a route no car can
-                // follow).
-                let end = lane.pose_at(lane.length());
-                let proj = target.project(end.position.truncate());
-                let land = target.pose_at(proj.s).position - end.position;
-                let forward = rest + land.truncate().dot(DVec2::from_angle(end.yaw));
-                let goes_on = !target.successors.is_empty() || proj.s < target.length() - 1.0;
-                if forward < SQUEEZED_CHANGE_MIN || !goes_on {
-                    continue;
-                }
-                (proj.s, rest.max(0.0), 3.0)
-            } else {
-                continue;
-            };
-            let leg = Leg::Change {
-                from: spot.lane,
-                s0: spot.s,
-                to: n,
-                s1,
-                length,
-                left,
-            };
-            let cost = LANE_CHANGE_LENGTH + penalties * LANE_CHANGE_PENALTY;
-            push(LaneSpot { lane: n, s: s1 }, cost, leg, &mut arena);
         }
     }
     None
+}
+
+/// The moves out of `spot`, each with its cost: on to every driving successor, and, outside
+/// junctions, changes to each driving neighbour (a short one onto a goal a full change would
+/// overshoot; a full one as soon as there is room and the target lane goes on after it; with
+/// `squeeze`, one over the room left before the lane ends).
+fn moves(
+    map: &Map,
+    spot: LaneSpot,
+    goals: &[LaneSpot],
+    squeeze: bool,
+) -> Vec<(LaneSpot, f64, Leg)> {
+    let lane = map.lane(spot.lane);
+    let mut out = Vec::new();
+    let rest = lane.length() - spot.s;
+    for &succ in &lane.successors {
+        if map.lane(succ).kind != LaneKind::Driving {
+            continue;
+        }
+        let leg = Leg::Drive {
+            lane: spot.lane,
+            from: spot.s,
+            to: lane.length(),
+        };
+        out.push((LaneSpot { lane: succ, s: 0.0 }, rest.max(0.0), leg));
+    }
+    if lane.in_junction() {
+        return out;
+    }
+    for (neighbour, left) in [(lane.left, true), (lane.right, false)] {
+        let Some(n) = neighbour else { continue };
+        if map.lane(n).kind != LaneKind::Driving {
+            continue;
+        }
+        // A goal on the neighbour that a full-length change would overshoot (a keypoint a
+        // few metres into a lane that only a lane change reaches): a shorter change that
+        // lands on it, costed as the full one plus the penalty again.
+        // (Projected only when a goal is on the neighbour: this is the search's inner loop.)
+        let beside = || {
+            map.lane(n)
+                .project(lane.pose_at(spot.s).position.truncate())
+                .s
+        };
+        for goal in goals.iter().filter(|g| g.lane == n) {
+            let length = goal.s - beside();
+            if (SHORT_CHANGE_MIN..LANE_CHANGE_LENGTH).contains(&length)
+                && spot.s + length <= lane.length()
+            {
+                let leg = Leg::Change {
+                    from: spot.lane,
+                    s0: spot.s,
+                    to: n,
+                    s1: goal.s,
+                    length,
+                    left,
+                };
+                let cost = LANE_CHANGE_LENGTH + 2.0 * LANE_CHANGE_PENALTY;
+                out.push((*goal, cost, leg));
+            }
+        }
+        // Change as soon as there is room, and only where the target lane goes on after it.
+        let target = map.lane(n);
+        let s_end = spot.s + LANE_CHANGE_LENGTH;
+        let (s1, length, penalties) = if s_end <= lane.length() {
+            let proj = target.project(lane.pose_at(s_end).position.truncate());
+            if proj.s >= target.length() - 1.0 {
+                continue;
+            }
+            (proj.s, LANE_CHANGE_LENGTH, 1.0)
+        } else if squeeze {
+            // Only when the pair has no path without it ([`plan_route`]'s second search):
+            // no room left for a full change before the lane ends (a keypoint a few metres
+            // before a junction whose turn leaves from the neighbour only), so as CARLA's
+            // planner, whose lane-change edges have no minimum length, change over what is
+            // left, onto a neighbour that goes on (its successors count), as long as the
+            // route still moves forward across it (a step back is a route no car can
+            // follow).
+            let end = lane.pose_at(lane.length());
+            let proj = target.project(end.position.truncate());
+            let land = target.pose_at(proj.s).position - end.position;
+            let forward = rest + land.truncate().dot(DVec2::from_angle(end.yaw));
+            let goes_on = !target.successors.is_empty() || proj.s < target.length() - 1.0;
+            if forward < SQUEEZED_CHANGE_MIN || !goes_on {
+                continue;
+            }
+            (proj.s, rest.max(0.0), 3.0)
+        } else {
+            continue;
+        };
+        let leg = Leg::Change {
+            from: spot.lane,
+            s0: spot.s,
+            to: n,
+            s1,
+            length,
+            left,
+        };
+        let cost = LANE_CHANGE_LENGTH + penalties * LANE_CHANGE_PENALTY;
+        out.push((LaneSpot { lane: n, s: s1 }, cost, leg));
+    }
+    out
 }
 
 /// Sample the legs at [`RESOLUTION`] and label every point.
