@@ -39,6 +39,22 @@ fn carriageway(map: &Map, lane: LaneIdx, at: DVec3, yaw: f64) -> (DVec3, DVec2, 
     (edge, right, across)
 }
 
+/// A crosser (`mover`: kind, speed, half size) waiting `offset` m outside the right edge of the
+/// road at route index `at`, facing across it; with that edge point and the rightward unit vector.
+fn crosser_at(
+    map: &Map,
+    route: &DenseRoute,
+    at: usize,
+    mover: (ActorKind, f64, DVec2),
+    offset: f64,
+    ids: &mut IdSource,
+) -> (Crosser, DVec3, DVec2) {
+    let c = route.points[at];
+    let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
+    let crosser = Crosser::waiting_to_cross(ids.next(), mover, edge, right, offset, across);
+    (crosser, edge, right)
+}
+
 /// S3 DynamicObjectCrossing: a walker waits behind a parked van on the right edge at route
 /// index `at` and crosses the whole road when the ego reaches index `trigger`.
 pub(super) fn s3_walker(
@@ -48,20 +64,17 @@ pub(super) fn s3_walker(
     ids: &mut IdSource,
     out: &mut Placement,
 ) {
-    let c = route.points[at];
-    let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
-    let forward = DVec2::from_angle(c.yaw);
-    let van_centre = edge.truncate() + right * 1.4 - forward * 3.5;
+    let walker = (ActorKind::Walker, WALKER_SPEED, DVec2::splat(0.3));
+    let (crosser, edge, right) = crosser_at(map, route, at, walker, 2.5, ids);
+    let yaw = route.points[at].yaw;
     out.statics.push(StaticProp {
         obb: Obb {
-            centre: van_centre,
-            yaw: c.yaw,
+            centre: edge.truncate() + right * 1.4 - DVec2::from_angle(yaw) * 3.5,
+            yaw,
             half: DVec2::new(2.5, 1.1),
         },
         z: edge.z,
     });
-    let walker = (ActorKind::Walker, WALKER_SPEED, DVec2::splat(0.3));
-    let crosser = Crosser::waiting_to_cross(ids.next(), walker, edge, right, 2.5, across);
     out.add_crossing(map, "Scenario3", trigger, crosser);
 }
 
@@ -74,10 +87,8 @@ pub(super) fn s4_cyclist(
     ids: &mut IdSource,
     out: &mut Placement,
 ) {
-    let c = route.points[at];
-    let (edge, right, across) = carriageway(map, c.lane, c.position, c.yaw);
     let cyclist = (ActorKind::Cyclist, CYCLIST_SPEED, DVec2::new(0.9, 0.35));
-    let crosser = Crosser::waiting_to_cross(ids.next(), cyclist, edge, right, 3.0, across);
+    let (crosser, _, _) = crosser_at(map, route, at, cyclist, 3.0, ids);
     out.add_crossing(map, "Scenario4", trigger, crosser);
 }
 
