@@ -8,7 +8,8 @@ use common::carla_dir;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
 use sim_bridge::map::{Map, MapOptions};
-use sim_bridge::route::scenario_file::{ScenarioFile, Trigger, Turn, match_to_route};
+use sim_bridge::route::scenario_file::{ScenarioFile, Trigger, Turn, match_to_route, write};
+use sim_bridge::route::scenario_triggers;
 use sim_bridge::route::sets::RouteSet;
 use sim_bridge::route::{DenseRoute, planner, xml};
 use sim_bridge::scoring::ScoringConfig;
@@ -45,28 +46,6 @@ fn trigger_at(route: &DenseRoute, k: usize, n: u8, side: f64, turn: f64) -> Trig
     }
 }
 
-/// A scenario file of one town in CARLA's frame (y and yaw flipped) from OpenDRIVE-frame
-/// triggers.
-fn file_text(town: &str, triggers: &[Trigger]) -> String {
-    let scenarios: Vec<String> = triggers
-        .iter()
-        .map(|t| {
-            format!(
-                r#"{{"scenario_type": "Scenario{}", "available_event_configurations": [{{"transform": {{"x": "{}", "y": "{}", "z": "{}", "yaw": "{}", "pitch": "0"}}}}]}}"#,
-                t.scenario,
-                t.position.x,
-                -t.position.y,
-                t.position.z,
-                -t.yaw.to_degrees()
-            )
-        })
-        .collect();
-    format!(
-        r#"{{"available_scenarios": [{{"{town}": [{}]}}]}}"#,
-        scenarios.join(",")
-    )
-}
-
 fn refusal(text: &str) -> String {
     ScenarioFile::parse(text, "test.json")
         .unwrap_err()
@@ -86,7 +65,7 @@ fn a_broken_scenario_file_is_refused_naming_the_problem() {
     let no_y = r#"{"available_scenarios": [{"Town01": [{"scenario_type": "Scenario1",
         "available_event_configurations": [{"transform": {"x": "1", "yaw": "0"}}]}]}]}"#;
     assert!(refusal(no_y).contains("Town01 Scenario1 event 0: its transform has no \"y\""));
-    let file = ScenarioFile::parse(&file_text("Town01", &[]), "t.json").unwrap();
+    let file = ScenarioFile::parse(&write("Town01", &[]), "t.json").unwrap();
     assert!(file.town("town01").is_ok(), "towns match in any case");
     let missing = file.town("Town02").unwrap_err().to_string();
     assert!(
@@ -120,7 +99,7 @@ fn triggers_match_the_route_within_two_metres_and_ten_degrees() {
     assert_eq!(on(0.0, 180.0), None, "the opposite lane's trigger");
     // The file's frame is CARLA's: a trigger read from a file lands where it was written.
     let file = ScenarioFile::parse(
-        &file_text("ssr_train_small", &[trigger_at(&route, k, 3, 0.0, 0.0)]),
+        &write("ssr_train_small", &[trigger_at(&route, k, 3, 0.0, 0.0)]),
         "t.json",
     )
     .unwrap();
@@ -212,7 +191,7 @@ fn scenario1_lays_debris_that_is_seen_and_driven_over() {
                     .all(|(p, _)| !map.lane(p.lane).in_junction())
         })
         .expect("80 m without a junction");
-    let text = file_text("ssr_train_small", &[trigger_at(&route, k, 1, 0.0, 0.0)]);
+    let text = write("ssr_train_small", &[trigger_at(&route, k, 1, 0.0, 0.0)]);
     let file = ScenarioFile::parse(&text, "t.json").unwrap();
     let config = WorldConfig {
         vehicles: 0,
@@ -273,7 +252,7 @@ fn the_public_scenario_file_gives_carla_long_routes_their_scenarios() {
 /// scenario `n` at route index `k`.
 fn world_with<'m>(map: &'m Map, town: &str, route: &DenseRoute, n: u8, k: usize) -> World<'m> {
     let file =
-        ScenarioFile::parse(&file_text(town, &[trigger_at(route, k, n, 0.0, 0.0)]), "t").unwrap();
+        ScenarioFile::parse(&write(town, &[trigger_at(route, k, n, 0.0, 0.0)]), "t").unwrap();
     let config = WorldConfig {
         vehicles: 0,
         parked_cars: false,
@@ -486,4 +465,85 @@ fn scenario10_a_vehicle_crosses_the_junction_without_lights_in_the_egos_way() {
         conflicts[&ego_connector].contains(&its_way),
         "its way crosses the ego's"
     );
+}
+
+#[test]
+fn triggers_placed_by_rule_stand_on_their_lanes_read_back_and_give_the_long_routes_their_kinds() {
+    let (map, _, _) = bundled_route("town05-long-style", 0);
+    let spacing = scenario_triggers::DEFAULT_SPACING_M;
+    let triggers = scenario_triggers::place(&map, spacing, 0);
+    assert_eq!(triggers, scenario_triggers::place(&map, spacing, 0));
+    assert_ne!(triggers, scenario_triggers::place(&map, spacing, 1));
+    for t in &triggers {
+        let (lane, at) = map.lane_for_pose(t.position, t.yaw).unwrap();
+        assert!(
+            at.distance < 0.01,
+            "{t:?} is {} m off its lane",
+            at.distance
+        );
+        assert!(!map.lane(lane).in_junction(), "{t:?}");
+    }
+    // The file reads back to the centimetre, grouped by type in placement order.
+    let text = write("ssr_town05", &triggers);
+    let file = ScenarioFile::parse(&text, "t").unwrap();
+    let back = file.town("ssr_town05").unwrap().triggers;
+    let mut by_type = triggers.clone();
+    by_type.sort_by_key(|t| t.scenario);
+    assert_eq!(back.len(), by_type.len());
+    for (a, b) in by_type.iter().zip(back.iter()) {
+        assert_eq!(a.scenario, b.scenario);
+        assert!((a.position - b.position).length() < 0.01, "{a:?} {b:?}");
+        assert!(
+            sim_bridge::map::angle_diff(a.yaw, b.yaw).abs() < 1e-3,
+            "{a:?} {b:?}"
+        );
+    }
+    // The committed file is what the rule writes (`sim-bridge routes generate`).
+    assert!(
+        text == include_str!("../routes/town05-style-scenarios.json"),
+        "sim-bridge/routes/town05-style-scenarios.json is stale: run `sim-bridge routes generate`"
+    );
+    // The long routes meet every kind the town has room for.
+    let set = RouteSet::find("town05-long-style").unwrap();
+    let mut counts = [0usize; 11];
+    for spec in xml::parse(set.name, set.bundled_xml()).unwrap() {
+        let dense = planner::plan_route(&map, &spec).unwrap();
+        for m in match_to_route(&triggers, &dense, 0) {
+            counts[m.trigger.scenario as usize] += 1;
+        }
+    }
+    eprintln!("Town05-style long routes: scenarios by number {counts:?}");
+    for n in [1, 2, 3, 4, 5, 6, 7] {
+        assert!(counts[n] > 0, "no Scenario{n}: {counts:?}");
+    }
+}
+
+#[test]
+fn triggers_placed_by_rule_are_about_as_dense_on_carla_long_routes_as_the_public_file() {
+    let Some(dir) = carla_dir() else { return };
+    let file = ScenarioFile::read(&dir.join("all_towns_traffic_scenarios_public.json")).unwrap();
+    for town in ["Town01", "Town03", "Town06"] {
+        let map = Map::load_file(&dir.join(format!("{town}.xodr")), MapOptions::default()).unwrap();
+        let public = file.town(town).unwrap().triggers;
+        let placed = scenario_triggers::place(&map, scenario_triggers::DEFAULT_SPACING_M, 0);
+        let routes = dir.join(format!(
+            "training_routes/transfuser/routes_{}_long.xml",
+            town.to_lowercase()
+        ));
+        let (mut km, mut from_public, mut from_rule) = (0.0, 0, 0);
+        for spec in &xml::read_file(&routes).unwrap() {
+            let dense = planner::plan_route(&map, spec).unwrap();
+            km += dense.length() / 1000.0;
+            from_public += match_to_route(&public, &dense, 0).len();
+            from_rule += match_to_route(&placed, &dense, 0).len();
+        }
+        let (public, rule) = (from_public as f64 / km, from_rule as f64 / km);
+        eprintln!(
+            "{town} long routes: {public:.1} scenarios/km from the public file, {rule:.1} by rule"
+        );
+        assert!(
+            (0.5..=2.0).contains(&(rule / public)),
+            "{town}: {rule:.1} vs {public:.1} per km"
+        );
+    }
 }

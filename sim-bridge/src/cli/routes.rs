@@ -8,6 +8,8 @@ use sim_bridge::map::MapOptions;
 use sim_bridge::route::DenseRoute;
 use sim_bridge::route::plan::global_plan;
 use sim_bridge::route::planner::plan_route;
+use sim_bridge::route::scenario_file;
+use sim_bridge::route::scenario_triggers;
 use sim_bridge::route::sets::{self, RandomRoutes, SETS, WalkStyle};
 use sim_bridge::route::xml::{RouteSpec, write};
 use ssrdrive_proto::command::RoadOption;
@@ -36,6 +38,33 @@ pub enum RoutesCommand {
     /// that prefer turns at junctions and sometimes change lanes, as the bundled sets are made.
     /// The same map, options and seed give the same file.
     Random(RandomArgs),
+    /// Place leaderboard scenario triggers on a town that no scenario file covers (the
+    /// Town05-style town, a generated town, your own map) and write them as a scenario file for
+    /// `eval --scenarios`: one at half the junction approaches (Scenario4, or 7 at a light and 10
+    /// without) and one every --spacing metres of road between (Scenario1, 2, 3, 5 or 6, where
+    /// each fits), drawn by --seed. The same map, options and seed give the same file.
+    Scenarios(ScenariosArgs),
+}
+
+/// `sim-bridge routes scenarios`.
+#[derive(Debug, Args)]
+pub struct ScenariosArgs {
+    /// The map: an .xodr file or a bundled town name.
+    #[arg(long)]
+    map: PathBuf,
+    /// Metres of road between two triggers on one lane (10 or more).
+    #[arg(long, default_value_t = scenario_triggers::DEFAULT_SPACING_M)]
+    spacing: f64,
+    /// Seed of the types drawn.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// The town the file names, as route files name it (default: the map file's name without
+    /// .xodr).
+    #[arg(long)]
+    town: Option<String>,
+    /// The scenario file to write.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 /// `sim-bridge routes random`.
@@ -126,6 +155,7 @@ pub fn run(cmd: RoutesCommand) -> anyhow::Result<()> {
             Ok(())
         }
         RoutesCommand::Random(args) => random(args),
+        RoutesCommand::Scenarios(args) => scenarios(args),
     }
 }
 
@@ -196,6 +226,50 @@ fn random(args: RandomArgs) -> anyhow::Result<()> {
         } else {
             String::new()
         }
+    );
+    Ok(())
+}
+
+/// `routes scenarios`: check the options, place, write, and count what was placed.
+fn scenarios(args: ScenariosArgs) -> anyhow::Result<()> {
+    let ScenariosArgs {
+        map: map_arg,
+        spacing,
+        seed,
+        town,
+        out,
+    } = args;
+    if !(scenario_triggers::MIN_SPACING_M..=10_000.0).contains(&spacing) {
+        bail!(
+            "--spacing {spacing}: give {} to 10000 m (closer triggers would share a position)",
+            scenario_triggers::MIN_SPACING_M
+        );
+    }
+    let map = super::load_map(&map_arg.to_string_lossy(), MapOptions::default())?;
+    let town = town.unwrap_or_else(|| map.name.clone());
+    let triggers = scenario_triggers::place(&map, spacing, seed);
+    if triggers.is_empty() {
+        bail!(
+            "{}: no lane outside junctions is {} m long, so no trigger fits",
+            map_arg.display(),
+            2.0 * scenario_triggers::EDGE_M
+        );
+    }
+    ssrdrive_proto::files::write_atomic(&out, scenario_file::write(&town, &triggers).as_bytes())
+        .with_context(|| format!("writing {}", out.display()))?;
+    let mut counts = std::collections::BTreeMap::new();
+    for t in &triggers {
+        *counts.entry(t.scenario).or_insert(0) += 1;
+    }
+    let counts: Vec<String> = counts
+        .iter()
+        .map(|(n, c)| format!("Scenario{n} {c}"))
+        .collect();
+    println!(
+        "wrote {} triggers on {town} to {} ({})",
+        triggers.len(),
+        out.display(),
+        counts.join(", ")
     );
     Ok(())
 }

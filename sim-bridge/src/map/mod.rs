@@ -199,6 +199,18 @@ impl Map {
         self.grid.within(&self.lanes, p, radius, keep)
     }
 
+    /// The driving lane outside junctions that runs against a pose, about one lane width
+    /// (`width`) to its left: the oncoming lane an overtake would borrow (heading more than
+    /// 2.5 rad, about 143 degrees, away from `yaw`).
+    pub fn oncoming_lane(&self, p: DVec2, yaw: f64, width: f64) -> Option<(LaneIdx, Projection)> {
+        let left = DVec2::from_angle(yaw).perp();
+        self.lanes_near(p + left * width, width, |l| {
+            l.kind == LaneKind::Driving && !l.in_junction()
+        })
+        .into_iter()
+        .find(|(l, proj)| angle_diff(self.lane(*l).pose_at(proj.s).yaw, yaw).abs() > 2.5)
+    }
+
     /// The driving lane that best matches a pose: nearest among those within 4 m whose heading
     /// agrees with `yaw` within 60 degrees, else simply the nearest driving lane.
     pub fn lane_for_pose(&self, p: DVec3, yaw: f64) -> Option<(LaneIdx, Projection)> {

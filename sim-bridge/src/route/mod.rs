@@ -1,12 +1,14 @@
 //! Routes: CARLA route files ([`xml`]), the dense 1 m route over the lane graph with a
 //! RoadOption per point ([`planner`]), the leaderboard's downsampled global plan and the
 //! TCP-style route follower that yields the target point and command every tick ([`plan`]), and
-//! the bundled route sets ([`sets`]), and the leaderboard's scenario files matched to a route
-//! ([`scenario_file`]).
+//! the bundled route sets ([`sets`]), the leaderboard's scenario files matched to a route
+//! ([`scenario_file`]) and scenario triggers placed by rule on a town no file covers
+//! ([`scenario_triggers`]).
 
 pub mod plan;
 pub mod planner;
 pub mod scenario_file;
+pub mod scenario_triggers;
 pub mod sets;
 pub mod xml;
 

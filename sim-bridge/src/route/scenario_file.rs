@@ -239,6 +239,40 @@ impl std::fmt::Debug for TownScenarios {
     }
 }
 
+/// The text of a scenario file holding `triggers` for `town`, in the leaderboard's layout and
+/// CARLA's frame, numbers written as the public files write them (strings, to the centimetre
+/// and the hundredth of a degree): what [`ScenarioFile::parse`] reads back.
+pub fn write(town: &str, triggers: &[Trigger]) -> String {
+    let mut by_type: BTreeMap<u8, Vec<Value>> = BTreeMap::new();
+    for t in triggers {
+        // `+ 0.0` turns -0.0 into 0.0 so that a zero prints without a sign.
+        let carla_yaw = crate::map::wrap_angle(-t.yaw).to_degrees() + 0.0;
+        by_type
+            .entry(t.scenario)
+            .or_default()
+            .push(serde_json::json!({
+                "transform": {
+                    "pitch": "0.0",
+                    "x": format!("{:.2}", t.position.x + 0.0),
+                    "y": format!("{:.2}", -t.position.y + 0.0),
+                    "yaw": format!("{carla_yaw:.2}"),
+                    "z": format!("{:.2}", t.position.z + 0.0),
+                }
+            }));
+    }
+    let scenarios: Vec<Value> = by_type
+        .into_iter()
+        .map(|(number, events)| {
+            serde_json::json!({
+                "available_event_configurations": events,
+                "scenario_type": format!("Scenario{number}"),
+            })
+        })
+        .collect();
+    let root = serde_json::json!({ "available_scenarios": [{ town: scenarios }] });
+    serde_json::to_string_pretty(&root).expect("a JSON value serialises") + "\n"
+}
+
 /// `"ScenarioN"` -> N for N in 1..=10.
 fn scenario_number(name: &str) -> Option<u8> {
     let n: u8 = name.strip_prefix("Scenario")?.parse().ok()?;

@@ -11,6 +11,9 @@
 //! - `heldout-radial`: 20 routes of 400 to 1,200 m on the held-out radial town, which no
 //!   training set drives (part of the held-out suite, `eval --suite unseen`).
 //!
+//! Beside them, `town05-style-scenarios.json`: a leaderboard scenario file for the Town05-style
+//! town ([`TOWN05_STYLE_SCENARIOS`]), which no public file covers.
+//!
 //! A route is a random walk over the lane graph (seeded by the set) that prefers turns at
 //! junctions and sometimes changes lanes; its keypoints are placed every [`KEYPOINT_SPACING`]
 //! metres, in every junction it crosses and on both sides of every lane change, so the planner
@@ -21,6 +24,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::planner::plan_route;
 use super::xml::{Keypoint, RouteSpec, write};
+use super::{scenario_file, scenario_triggers};
 use crate::map::{LaneIdx, LaneKind, Map};
 use crate::towngen::TownStyle;
 
@@ -290,8 +294,24 @@ pub fn write_bundled(dir: &std::path::Path) -> anyhow::Result<()> {
             write(&set.generate(&map)),
         )?;
     }
+    let town = TownStyle::Town05Style;
+    let map = Map::from_str(
+        town.name(),
+        crate::towngen::bundled(town),
+        Default::default(),
+    )?;
+    let triggers = scenario_triggers::place(&map, scenario_triggers::DEFAULT_SPACING_M, 0);
+    std::fs::write(
+        dir.join(TOWN05_STYLE_SCENARIOS),
+        scenario_file::write(town.name(), &triggers),
+    )?;
     Ok(())
 }
+
+/// The scenario file of the Town05-style town beside its route files: the triggers
+/// [`scenario_triggers::place`] puts there (default spacing, seed 0), for
+/// `eval --scenarios sim-bridge/routes/town05-style-scenarios.json`.
+pub const TOWN05_STYLE_SCENARIOS: &str = "town05-style-scenarios.json";
 
 /// A walked path: the lanes in order with the arc length entered at, and the total.
 struct Walk {

@@ -295,16 +295,7 @@ pub(super) fn s6_maneuver_opposite_direction(
     };
     let p = route.points[source];
     let lane_width = map.lane(p.lane).width;
-    let left = p.forward().perp();
-    let oncoming = map
-        .lanes_near(p.position.truncate() + left * lane_width, lane_width, |l| {
-            l.kind == LaneKind::Driving && !l.in_junction()
-        })
-        .into_iter()
-        .find(|(l, proj)| {
-            let yaw = map.lane(*l).pose_at(proj.s).yaw;
-            crate::map::angle_diff(yaw, p.yaw).abs() > 2.5
-        });
+    let oncoming = map.oncoming_lane(p.position.truncate(), p.yaw, lane_width);
     let Some((lane, projection)) = oncoming else {
         return;
     };

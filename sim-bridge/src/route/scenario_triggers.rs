@@ -1,0 +1,124 @@
+//! Scenario triggers for a town that no scenario file covers (the bundled Town05-style town, a
+//! generated town, a user's own map): placed by rule where the leaderboard's files put them, so
+//! that a route file on such a town can be scored with a scenario file as CARLA's towns are
+//! (`sim-bridge routes scenarios`, then `eval --scenarios`).
+//!
+//! The rule, over every driving lane outside junctions, in lane order (one road section in one
+//! direction is one lane):
+//! - **Junction approach.** Half the lanes ([`APPROACH_SHARE`]) that lead into a junction and
+//!   are at least [`APPROACH_M`] + [`EDGE_M`] long get one trigger [`APPROACH_M`] before their end, of a type
+//!   that plays at the junction: Scenario4 (a cyclist crossing the exit after a turn) or the
+//!   junction's crossing, Scenario7 where the junction has lights (a vehicle runs its red
+//!   across the ego's way) and Scenario10 where it has none (a vehicle crosses without giving
+//!   way). The leaderboard's files also hold Scenario8 and 9 (left and right only); Scenario7
+//!   plays on every turn, so no trigger is lost to a route that goes another way.
+//! - **Stretches.** From [`EDGE_M`] after the lane's start to [`APPROACH_M`] + [`EDGE_M`] before
+//!   its end, one trigger every `spacing` metres from a random first offset (so a lane shorter
+//!   than the spacing gets its share of one), of a type the place allows: Scenario1
+//!   (debris, control loss) and Scenario3 (a walker from behind a parked van) anywhere,
+//!   Scenario2 (a leading vehicle that stops short of the junction) with 45 m or more of lane
+//!   ahead, Scenario5 (two leading vehicles) beside a lane to the left in the same direction,
+//!   Scenario6 (barriers to pass on the oncoming lane) beside an oncoming lane.
+//!
+//! Each trigger's type is drawn uniformly among those its place allows, from `seed`; the same
+//! map, spacing and seed give the same triggers. A trigger stands on the lane's centre line
+//! (height included, as CARLA's do) heading along it, so a route on that lane matches it
+//! ([`super::scenario_file::match_to_route`]).
+
+use rand::{RngExt as _, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::scenario_file::Trigger;
+use crate::map::{LaneIdx, LaneKind, Map};
+
+/// How far before the end of a lane that leads into a junction its trigger stands, m.
+pub const APPROACH_M: f64 = 20.0;
+/// No stretch trigger within this many metres of a lane's start or of its approach trigger.
+pub const EDGE_M: f64 = 10.0;
+/// Lane ahead that Scenario2's leader needs (25 m ahead of the ego, stopping 20 m short of
+/// the junction), m.
+const S2_NEEDS_M: f64 = 45.0;
+/// The share of junction approaches that get a trigger.
+pub const APPROACH_SHARE: f64 = 0.5;
+/// Default distance between stretch triggers along a lane, m. With [`APPROACH_SHARE`], the
+/// TransFuser long routes of CARLA's Town01, 03 and 06 meet 7.1, 6.5 and 5.9 scenarios per km,
+/// where the public file gives them 8.7, 11.1 and 4.9 (its triggers: Scenario1, 3 and 4 only);
+/// the Town05-style long routes meet 6.1.
+pub const DEFAULT_SPACING_M: f64 = 100.0;
+/// Closest spacing accepted: two triggers within the leaderboard's 2 m would share a position.
+pub const MIN_SPACING_M: f64 = 10.0;
+
+/// Place triggers on every lane of `map`, one per junction approach and one every `spacing`
+/// metres of stretch (at least [`MIN_SPACING_M`]; less is raised to it).
+pub fn place(map: &Map, spacing: f64, seed: u64) -> Vec<Trigger> {
+    let spacing = spacing.max(MIN_SPACING_M);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut triggers = Vec::new();
+    for lane in &map.lanes {
+        if lane.kind != LaneKind::Driving || lane.in_junction() {
+            continue;
+        }
+        let length = lane.length();
+        let into_junction = lane
+            .successors
+            .iter()
+            .any(|&next| map.lane(next).in_junction());
+        let stretch_end = length
+            - if into_junction {
+                APPROACH_M + EDGE_M
+            } else {
+                EDGE_M
+            };
+        // The first at a random offset, so that a lane shorter than the spacing has its
+        // share of a trigger, not a whole one.
+        let mut s = EDGE_M + rng.random_range(0.0..spacing);
+        while s <= stretch_end {
+            let types = stretch_types(map, lane.idx, s, length);
+            triggers.push(trigger_at(
+                map,
+                lane.idx,
+                s,
+                types[rng.random_range(0..types.len())],
+            ));
+            s += spacing;
+        }
+        if into_junction && length >= APPROACH_M + EDGE_M && rng.random_bool(APPROACH_SHARE) {
+            let signalized = map.light_ending(lane.idx).is_some();
+            let types = [4, if signalized { 7 } else { 10 }];
+            let s = length - APPROACH_M;
+            triggers.push(trigger_at(map, lane.idx, s, types[rng.random_range(0..2)]));
+        }
+    }
+    triggers
+}
+
+/// The stretch scenarios that can play from arc length `s` of `lane` (of `length` m).
+fn stretch_types(map: &Map, lane: LaneIdx, s: f64, length: f64) -> Vec<u8> {
+    let l = map.lane(lane);
+    let pose = l.pose_at(s);
+    let mut types = vec![1, 3];
+    if length - s >= S2_NEEDS_M {
+        types.push(2);
+    }
+    if l.left
+        .is_some_and(|left| map.lane(left).kind == LaneKind::Driving)
+    {
+        types.push(5);
+    }
+    if map
+        .oncoming_lane(pose.position.truncate(), pose.yaw, l.width)
+        .is_some()
+    {
+        types.push(6);
+    }
+    types
+}
+
+fn trigger_at(map: &Map, lane: LaneIdx, s: f64, scenario: u8) -> Trigger {
+    let pose = map.lane(lane).pose_at(s);
+    Trigger {
+        scenario,
+        position: pose.position,
+        yaw: pose.yaw,
+    }
+}
