@@ -41,8 +41,8 @@ pub enum RoutesCommand {
     /// Place leaderboard scenario triggers on a town that no scenario file covers (the
     /// Town05-style town, a generated town, your own map) and write them as a scenario file for
     /// `eval --scenarios`: one at half the junction approaches (Scenario4, or 7 at a light and 10
-    /// without) and one every --spacing metres of road between (Scenario1, 2, 3, 5 or 6, where
-    /// each fits), drawn by --seed. The same map, options and seed give the same file.
+    /// without) and one every --spacing metres of road between (Scenario1 or 3), drawn by
+    /// --seed. The same map, options and seed give the same file.
     Scenarios(ScenariosArgs),
 }
 

@@ -14,13 +14,14 @@
 //!   plays on every turn, so no trigger is lost to a route that goes another way.
 //! - **Stretches.** From [`EDGE_M`] after the lane's start to [`APPROACH_M`] + [`EDGE_M`] before
 //!   its end, one trigger every `spacing` metres from a random first offset (so a lane shorter
-//!   than the spacing gets its share of one), of a type the place allows: Scenario1
-//!   (debris, control loss) and Scenario3 (a walker from behind a parked van) anywhere,
-//!   Scenario2 (a leading vehicle that stops short of the junction) with 45 m or more of lane
-//!   ahead, Scenario5 (two leading vehicles) beside a lane to the left in the same direction,
-//!   Scenario6 (barriers to pass on the oncoming lane) beside an oncoming lane.
+//!   than the spacing gets its share of one): Scenario1 (debris, control loss) or Scenario3 (a
+//!   walker from behind a parked van).
 //!
-//! Each trigger's type is drawn uniformly among those its place allows, from `seed`; the same
+//! These are the kinds the leaderboard 1.0 evaluated (its dense per-town files hold Scenario1,
+//! 3, 4, 7, 8, 9 and 10; the public one 1, 3 and 4). Scenario2, 5 and 6 play from a file that
+//! names them, but no leaderboard file of 1.0 placed them, so the rule does not either.
+//!
+//! Each trigger's type is drawn evenly between the two its place allows, from `seed`; the same
 //! map, spacing and seed give the same triggers. A trigger stands on the lane's centre line
 //! (height included, as CARLA's do) heading along it, so a route on that lane matches it
 //! ([`super::scenario_file::match_to_route`]).
@@ -35,15 +36,12 @@ use crate::map::{LaneIdx, LaneKind, Map};
 pub const APPROACH_M: f64 = 20.0;
 /// No stretch trigger within this many metres of a lane's start or of its approach trigger.
 pub const EDGE_M: f64 = 10.0;
-/// Lane ahead that Scenario2's leader needs (25 m ahead of the ego, stopping 20 m short of
-/// the junction), m.
-const S2_NEEDS_M: f64 = 45.0;
 /// The share of junction approaches that get a trigger.
 pub const APPROACH_SHARE: f64 = 0.5;
 /// Default distance between stretch triggers along a lane, m. With [`APPROACH_SHARE`], the
-/// TransFuser long routes of CARLA's Town01, 03 and 06 meet 7.1, 6.5 and 5.9 scenarios per km,
+/// TransFuser long routes of CARLA's Town01, 03 and 06 meet 9.5, 7.1 and 6.2 scenarios per km,
 /// where the public file gives them 8.7, 11.1 and 4.9 (its triggers: Scenario1, 3 and 4 only);
-/// the Town05-style long routes meet 6.1.
+/// the Town05-style long routes meet 5.9.
 pub const DEFAULT_SPACING_M: f64 = 100.0;
 /// Closest spacing accepted: two triggers within the leaderboard's 2 m would share a position.
 pub const MIN_SPACING_M: f64 = 10.0;
@@ -73,13 +71,8 @@ pub fn place(map: &Map, spacing: f64, seed: u64) -> Vec<Trigger> {
         // share of a trigger, not a whole one.
         let mut s = EDGE_M + rng.random_range(0.0..spacing);
         while s <= stretch_end {
-            let types = stretch_types(map, lane.idx, s, length);
-            triggers.push(trigger_at(
-                map,
-                lane.idx,
-                s,
-                types[rng.random_range(0..types.len())],
-            ));
+            let scenario = if rng.random_bool(0.5) { 1 } else { 3 };
+            triggers.push(trigger_at(map, lane.idx, s, scenario));
             s += spacing;
         }
         if into_junction && length >= APPROACH_M + EDGE_M && rng.random_bool(APPROACH_SHARE) {
@@ -90,28 +83,6 @@ pub fn place(map: &Map, spacing: f64, seed: u64) -> Vec<Trigger> {
         }
     }
     triggers
-}
-
-/// The stretch scenarios that can play from arc length `s` of `lane` (of `length` m).
-fn stretch_types(map: &Map, lane: LaneIdx, s: f64, length: f64) -> Vec<u8> {
-    let l = map.lane(lane);
-    let pose = l.pose_at(s);
-    let mut types = vec![1, 3];
-    if length - s >= S2_NEEDS_M {
-        types.push(2);
-    }
-    if l.left
-        .is_some_and(|left| map.lane(left).kind == LaneKind::Driving)
-    {
-        types.push(5);
-    }
-    if map
-        .oncoming_lane(pose.position.truncate(), pose.yaw, l.width)
-        .is_some()
-    {
-        types.push(6);
-    }
-    types
 }
 
 fn trigger_at(map: &Map, lane: LaneIdx, s: f64, scenario: u8) -> Trigger {

@@ -35,7 +35,9 @@ pub fn place_route_scenarios(
                 .iter()
                 .all(|q| q.option == RoadOption::LaneFollow && !map.lane(q.lane).in_junction());
         if route.cum[i] >= next_s3 && clear {
-            s3_walker(map, route, (i, i + ahead), ids, &mut out);
+            let mut one = Placement::default();
+            s3_walker(map, route, (i, i + ahead), ids, &mut one);
+            out.add_unless_in_the_way(map, route, i, one);
             next_s3 = route.cum[i] + rng.random_range(0.6..1.4) * S3_SPACING;
             i += ahead + 15;
             continue;
@@ -52,14 +54,21 @@ pub fn place_route_scenarios(
         };
         // Drawn whether or not there is a light, so the stream stays as it always was.
         let runner = rng.random_range(0.0..1.0) < 0.5;
-        if has_light && runner && red_light_runner(map, route, start, "Scenario7", &mut out) {
+        let mut one = Placement::default();
+        if has_light
+            && runner
+            && red_light_runner(map, route, start, "Scenario7", &mut one)
+            && out.add_unless_in_the_way(map, route, start, one)
+        {
             continue;
         }
         if matches!(option, RoadOption::Left | RoadOption::Right)
             && end + ahead < n
             && rng.random_range(0.0..1.0) < 0.5
         {
-            s4_cyclist(map, route, (start, (end + 10).min(n - 1)), ids, &mut out);
+            let mut one = Placement::default();
+            s4_cyclist(map, route, (start, (end + 10).min(n - 1)), ids, &mut one);
+            out.add_unless_in_the_way(map, route, start, one);
         }
     }
     out.scenarios.sort_by_key(|s| s.trigger);

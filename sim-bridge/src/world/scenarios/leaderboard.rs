@@ -92,12 +92,13 @@ pub fn place_from_file(
         let name = NAMES[matched.trigger.scenario as usize];
         // The junction of the route's next turn (the first junction at or after the trigger).
         let next_junction = runs.iter().find(|(start, _, _)| *start >= i);
+        let mut one = Placement::default();
         match matched.trigger.scenario {
-            1 => debris(map, route, i, &mut out),
+            1 => debris(map, route, i, &mut one),
             3 => {
                 let lanes = lanes_to_the_right(map, route.points[i].lane);
                 if let Some(at) = index_ahead(route, i, 12.0 + 1.5 * lanes as f64) {
-                    s3_walker(map, route, (i, at), ids, &mut out);
+                    s3_walker(map, route, (i, at), ids, &mut one);
                 }
             }
             4 => {
@@ -105,20 +106,21 @@ pub fn place_from_file(
                     && let Some(at) = index_ahead(route, end.min(n - 1), S4_PAST_JUNCTION)
                 {
                     let start = index_back(route, at, S4_START).max(i);
-                    s4_cyclist(map, route, (start, at), ids, &mut out);
+                    s4_cyclist(map, route, (start, at), ids, &mut one);
                 }
             }
             7..=9 => {
                 if let Some(&(start, _, _)) = next_junction {
-                    red_light_runner(map, route, start, name, &mut out);
+                    red_light_runner(map, route, start, name, &mut one);
                 }
             }
-            2 => s2_leading_vehicle(map, route, i, &mut out),
-            5 => s5_other_leading_vehicles(map, route, i, ids, &mut out),
-            6 => s6_maneuver_opposite_direction(map, route, i, &mut out),
-            10 => s10_junction_crosser(map, route, i, &mut out),
+            2 => s2_leading_vehicle(map, route, i, &mut one),
+            5 => s5_other_leading_vehicles(map, route, i, ids, &mut one),
+            6 => s6_maneuver_opposite_direction(map, route, i, &mut one),
+            10 => s10_junction_crosser(map, route, i, &mut one),
             _ => {}
         }
+        out.add_unless_in_the_way(map, route, i, one);
     }
     out.scenarios.sort_by_key(|s| s.trigger);
     out

@@ -30,10 +30,17 @@ use rand::{Rng, RngExt as _};
 
 use super::state::{ActorKind, Obb};
 use crate::map::{LaneIdx, LaneKind, Map};
+use crate::route::DenseRoute;
 use crate::world::ActorView;
 
 /// Metres of route between S3 walkers, on average.
 pub const S3_SPACING: f64 = 250.0;
+/// A standing scenario vehicle is in the way of a route that passes within this of its centre
+/// (the route runs along its lane), m.
+const SAME_LANE_M: f64 = 1.5;
+/// A prop is in the way of a route that passes within this of its box (the ego's half width
+/// and a margin), m.
+const EGO_CLEARANCE_M: f64 = 1.2;
 /// Metres past the trigger where the crossing happens.
 pub const CROSSING_AHEAD: f64 = 22.0;
 /// Walker speed, m/s.
@@ -269,6 +276,41 @@ impl Placement {
             action,
             fired: false,
         });
+    }
+
+    /// Adds `one` scenario's actors and scenarios, unless a prop or standing vehicle of it
+    /// stands on the part of `route` the ego drives before `trigger`: a route that comes back
+    /// past a later scenario's place would meet them first and stand behind them for good
+    /// (scenario_runner spawns them at the route's start too, but its occluders stand off the
+    /// road). Returns whether it was added.
+    fn add_unless_in_the_way(
+        &mut self,
+        map: &Map,
+        route: &DenseRoute,
+        trigger: usize,
+        one: Placement,
+    ) -> bool {
+        let before = |z: f64, near: &dyn Fn(DVec2) -> bool| {
+            route.points[..trigger]
+                .iter()
+                .any(|q| (q.position.z - z).abs() < 3.0 && near(q.position.truncate()))
+        };
+        let in_the_way = one.vehicles.iter().any(|v| {
+            let at = map.lane(v.lane).pose_at(v.s).position;
+            before(at.z, &|q| (q - at.truncate()).length() < SAME_LANE_M)
+        }) || one
+            .statics
+            .iter()
+            .any(|p| before(p.z, &|q| p.obb.distance_to(q) < EGO_CLEARANCE_M));
+        if in_the_way {
+            return false;
+        }
+        self.crossers.extend(one.crossers);
+        self.statics.extend(one.statics);
+        self.debris.extend(one.debris);
+        self.vehicles.extend(one.vehicles);
+        self.scenarios.extend(one.scenarios);
+        true
     }
 
     /// A crosser that starts when the ego reaches route index `trigger`, unless the place it
