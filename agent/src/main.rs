@@ -13,7 +13,10 @@ fn main() -> ExitCode {
     match cli::run(cli::Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            eprintln!("error: {}", ssrdrive_proto::error_text::error_text(&error));
+            eprintln!(
+                "error: {}",
+                ssrdrive_support::error_text::error_text(&error)
+            );
             ExitCode::FAILURE
         }
     }

@@ -14,8 +14,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error_text::clipped;
-use crate::files::{CappedReadError, read_capped_text};
+use ssrdrive_support::error_text::clipped;
+use ssrdrive_support::files::{CappedReadError, read_capped_text};
 
 /// Most cameras a rig may hold (the network keeps one learned embedding per camera slot).
 pub const MAX_CAMERAS: usize = 6;

@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::Rig;
 use crate::control::Control;
-use crate::files::{FileError, read_capped};
 use crate::image::{RgbImage, decode_png};
+use ssrdrive_support::files::{FileError, read_capped};
 
 /// Value of [`Manifest::format`].
 pub const FORMAT: &str = "ssrdrive-dataset";

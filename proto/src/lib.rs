@@ -9,8 +9,6 @@
 //!   one-hot encoding.
 //! - [`dataset`]: the on-disk format of driving datasets and its reader; [`image`]: RGB8
 //!   images in and out of PNG.
-//! - [`files`]: capped reads and atomic writes; [`error_text`]: how errors are printed;
-//!   [`logging`]: how both binaries log.
 //! - [`TICK_HZ`], [`TICK_S`]: the tick both sides step at; [`EPISODE_KEY_HEADER`],
 //!   [`REPLICA_HEADER`]: the metadata that keeps an episode on one replica behind a balancer.
 
@@ -35,10 +33,7 @@ pub mod camera;
 pub mod command;
 pub mod control;
 pub mod dataset;
-pub mod error_text;
-pub mod files;
 pub mod image;
-pub mod logging;
 pub mod wire;
 
 /// Package `ssrdrive.v1`: messages, `agent_service_client` and `agent_service_server`.

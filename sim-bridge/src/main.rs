@@ -13,7 +13,7 @@ fn main() -> std::process::ExitCode {
     match cli::run(args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", ssrdrive_proto::error_text::error_text(&e));
+            eprintln!("error: {}", ssrdrive_support::error_text::error_text(&e));
             std::process::ExitCode::FAILURE
         }
     }

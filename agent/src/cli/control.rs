@@ -13,7 +13,7 @@ use serde_json::Value;
 use ssr_agent::checkpoint;
 use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
-use ssrdrive_proto::files::read_capped_text;
+use ssrdrive_support::files::read_capped_text;
 
 /// The largest settings file `--set` reads.
 const MAX_PATCH_BYTES: u64 = 1 << 20;

@@ -61,7 +61,7 @@ pub enum Command {
 
 /// Logging for one run: `format` at info level unless `RUST_LOG` says otherwise.
 pub fn init_logs(format: LogFormat) {
-    ssrdrive_proto::logging::init("info", format == LogFormat::Json);
+    ssrdrive_support::logging::init("info", format == LogFormat::Json);
 }
 
 /// Run a parsed command line.

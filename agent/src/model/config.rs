@@ -8,7 +8,7 @@
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
-use ssrdrive_proto::files::read_capped_text;
+use ssrdrive_support::files::read_capped_text;
 
 use super::grid::BevGrid;
 

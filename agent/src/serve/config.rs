@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
-use ssrdrive_proto::error_text::clipped;
-use ssrdrive_proto::files::{CappedReadError, read_capped_text};
+use ssrdrive_support::error_text::clipped;
+use ssrdrive_support::files::{CappedReadError, read_capped_text};
 
 use crate::control::History;
 use crate::device::Backend;

@@ -5,9 +5,9 @@
 
 use ssrdrive_proto::camera::{CameraSpec, Rig};
 use ssrdrive_proto::command::RoadOption;
-use ssrdrive_proto::error_text::clipped;
 use ssrdrive_proto::image::RgbImage;
 use ssrdrive_proto::v1;
+use ssrdrive_support::error_text::clipped;
 
 use crate::policy::StepInput;
 use crate::pose::Pose2;

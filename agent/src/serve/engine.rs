@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 
 use ssrdrive_proto::camera::{CameraSpec, Rig};
 use ssrdrive_proto::command::RoadOption;
-use ssrdrive_proto::error_text::clipped;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::wire;
+use ssrdrive_support::error_text::clipped;
 use tokio::sync::oneshot;
 
 use super::batcher::{BatchSettings, BatchedStep, Batcher, StepJob, SubmitError};

@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use ssrdrive_proto::camera::Rig;
-use ssrdrive_proto::error_text::clipped;
+use ssrdrive_support::error_text::clipped;
 
 use crate::policy::EpisodeState;
 

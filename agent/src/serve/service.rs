@@ -13,10 +13,10 @@
 use std::pin::Pin;
 use std::sync::Arc;
 
-use ssrdrive_proto::error_text::clipped;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_server::AgentService;
 use ssrdrive_proto::v1::drive_request::Message;
+use ssrdrive_support::error_text::clipped;
 use tokio::sync::watch;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;

@@ -37,7 +37,7 @@ use super::loader::BatchLoader;
 use super::loss::{Losses, losses};
 use super::occupancy::confusion;
 use super::resume::{Progress, load_model, read_progress, save_weights};
-use super::validation::{ValidationMetrics, ValidationSums, spread};
+use super::validation::{HeadVerdicts, ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint;
 use crate::control::{ControlConfig, History};
 use crate::model::classifier::predicted_classes;
@@ -475,15 +475,12 @@ impl Trainer {
                 let predicted = predicted_classes(&float_values(logits), LightClass::ALL.len());
                 light_hits(&predicted, &light_labels(batch.lights()))
             });
-            sums.add(
-                &batch,
-                &head,
-                hazards.as_deref(),
-                [outputs.occupancy.map(cells), outputs.motion.map(cells)],
-                lights,
-                p,
-                float_values(terms.total)[0],
-            );
+            let verdicts = HeadVerdicts {
+                hazards,
+                cells: [outputs.occupancy.map(cells), outputs.motion.map(cells)],
+                light: lights,
+            };
+            sums.add(&batch, &head, verdicts, p, float_values(terms.total)[0]);
         }
         Ok(sums.finish(self.step, p))
     }

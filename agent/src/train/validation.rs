@@ -225,20 +225,33 @@ pub struct ValidationSums {
     light: Option<[usize; 4]>,
 }
 
+/// What a batch's optional heads said, each where the run has the head.
+#[derive(Default)]
+pub struct HeadVerdicts {
+    /// The hazard head's class per sample.
+    pub hazards: Option<Vec<Hazard>>,
+    /// The occupancy head's, then the motion head's, [`Confusion`] per channel.
+    pub cells: [Option<[Confusion; OCCUPANCY_CHANNELS.len()]>; 2],
+    /// The light head's hits: right, labelled, red called red, red.
+    pub light: Option<[usize; 4]>,
+}
+
 impl ValidationSums {
-    /// Adds a batch's head output (with `p` waypoints), the hazard head's classes, the
-    /// occupancy and motion heads' [`Confusion`] per channel (each where the run has it) and
+    /// Adds a batch's head output (with `p` waypoints), what its optional heads said and its
     /// mean loss.
     pub fn add(
         &mut self,
         batch: &Batch,
         head: &HeadOutput,
-        hazards: Option<&[Hazard]>,
-        cells: [Option<[Confusion; OCCUPANCY_CHANNELS.len()]>; 2],
-        light: Option<[usize; 4]>,
+        verdicts: HeadVerdicts,
         p: usize,
         loss: f32,
     ) {
+        let HeadVerdicts {
+            hazards,
+            cells,
+            light,
+        } = verdicts;
         if let Some(hits) = light {
             let sum = self.light.get_or_insert([0; 4]);
             for (s, h) in sum.iter_mut().zip(hits) {
@@ -276,8 +289,9 @@ impl ValidationSums {
             one.steer = f64::from((control.steer - expert.steer).abs());
             one.throttle = f64::from((control.throttle - expert.throttle).abs());
             one.brake = f64::from((control.brake - expert.brake).abs());
-            one.hazard_hits =
-                hazards.map(|h| usize::from(h[i] == Hazard::of(batch.brake_reason(i))));
+            one.hazard_hits = hazards
+                .as_ref()
+                .map(|h| usize::from(h[i] == Hazard::of(batch.brake_reason(i))));
             self.all.accumulate(&one);
             let speed = batch.speed_label(i);
             for group in situations(commands[i], speed, expert.throttle, batch.brake_reason(i)) {

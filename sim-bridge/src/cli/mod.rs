@@ -73,7 +73,7 @@ pub fn init_logging(verbose: u8) {
         1 => "info",
         _ => "debug",
     };
-    ssrdrive_proto::logging::init(level, false);
+    ssrdrive_support::logging::init(level, false);
 }
 
 /// Run a parsed command line.

@@ -105,7 +105,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         reports.push(report);
     }
     if let Some(out) = &args.out {
-        ssrdrive_proto::files::write_atomic(
+        ssrdrive_support::files::write_atomic(
             out,
             serde_json::to_string_pretty(&reports)?.as_bytes(),
         )

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use sim_bridge::eval::merge::{Part, merge};
 use sim_bridge::scoring::{Results, summary_table};
-use ssrdrive_proto::files::{read_capped_text, write_atomic};
+use ssrdrive_support::files::{read_capped_text, write_atomic};
 
 /// The largest results file read (a record is about 1 kB: room for 100,000 runs).
 const MAX_RESULTS_BYTES: u64 = 128 << 20;

@@ -211,7 +211,7 @@ fn random(args: RandomArgs) -> anyhow::Result<()> {
             sets::ATTEMPTS
         );
     }
-    ssrdrive_proto::files::write_atomic(&out, write(&specs).as_bytes())
+    ssrdrive_support::files::write_atomic(&out, write(&specs).as_bytes())
         .with_context(|| format!("writing {}", out.display()))?;
     let km: f64 = specs.iter().map(RouteSpec::keypoint_length).sum::<f64>() / 1000.0;
     println!(
@@ -255,7 +255,7 @@ fn scenarios(args: ScenariosArgs) -> anyhow::Result<()> {
             2.0 * scenario_triggers::EDGE_M
         );
     }
-    ssrdrive_proto::files::write_atomic(&out, scenario_file::write(&town, &triggers).as_bytes())
+    ssrdrive_support::files::write_atomic(&out, scenario_file::write(&town, &triggers).as_bytes())
         .with_context(|| format!("writing {}", out.display()))?;
     let mut counts = std::collections::BTreeMap::new();
     for t in &triggers {

@@ -173,7 +173,7 @@ pub async fn connect_when_serving(target: &str, timeout: Duration) -> Result<Cha
     loop {
         let attempt = async {
             let channel = endpoint.connect().await.map_err(|e| {
-                let e = ssrdrive_proto::error_text::error_text(&anyhow::Error::new(e));
+                let e = ssrdrive_support::error_text::error_text(&anyhow::Error::new(e));
                 format!("connecting: {e}")
             })?;
             let reply = HealthClient::new(channel.clone())

@@ -20,7 +20,7 @@ use ssrdrive_proto::dataset::{
     Dataset, DatasetError, EpisodeEntry, EpisodeInfo, EpisodeOutcome, FORMAT, FUTURE_COUNT,
     FUTURE_STEP, Manifest, NoiseConfig, TownCount, VERSION, read_json, safe_name,
 };
-use ssrdrive_proto::files::write_atomic;
+use ssrdrive_support::files::write_atomic;
 
 use super::recorder::EpisodeRecorder;
 use crate::driver::{Agent, AgentFactory};

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use ssrdrive_proto::files::{CappedReadError, read_capped_text, write_atomic};
+use ssrdrive_support::files::{CappedReadError, read_capped_text, write_atomic};
 use thiserror::Error;
 
 use super::shard::Shard;

@@ -218,6 +218,11 @@ fn to_pedals(accel: f64, speed: f64, p: &EgoParams) -> Control {
 }
 
 /// Pure pursuit towards the route point one look-ahead distance past the ego.
+///
+/// The law is the agent's ([`ssr_control::trajectory::pursuit_steer`]: the wheel angle
+/// `atan(2 L sin(alpha) / d)` from the rear axle, over the lock), kept here in `f64` on the world
+/// frame: the expert aims at its dense route, not at an ego-frame plan, and moving it onto the
+/// agent's `f32` function would shift every expert label of the recorded datasets by rounding.
 fn pure_pursuit(
     route: &DenseRoute,
     index: usize,

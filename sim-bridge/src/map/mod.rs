@@ -26,7 +26,7 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 pub use lanes::{JunctionIdx, Lane, LaneIdx, LaneKind, LanePose, Projection};
 use spatial::SegmentGrid;
-use ssrdrive_proto::files::{CappedReadError, read_capped_text};
+use ssrdrive_support::files::{CappedReadError, read_capped_text};
 pub use surface::Surface;
 pub use traffic_control::{Approach, Junction, StopLine, StopSign, TrafficLight};
 

@@ -23,7 +23,7 @@ const MIN_TICK_S: f64 = 0.001;
 const MAX_TICK_S: f64 = 1.0;
 
 /// Why a log cannot be read or written.
-pub type LogError = ssrdrive_proto::files::FileError;
+pub type LogError = ssrdrive_support::files::FileError;
 
 /// A log being written.
 pub struct LogWriter {

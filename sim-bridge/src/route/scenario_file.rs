@@ -28,7 +28,7 @@ use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::Value;
 use ssrdrive_proto::command::RoadOption;
-use ssrdrive_proto::files::read_capped_text;
+use ssrdrive_support::files::read_capped_text;
 
 use super::DenseRoute;
 

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use glam::DVec3;
-use ssrdrive_proto::files::{CappedReadError, read_capped_text};
+use ssrdrive_support::files::{CappedReadError, read_capped_text};
 
 /// Largest route file accepted.
 pub const MAX_ROUTE_FILE_BYTES: u64 = 32 * 1024 * 1024;
