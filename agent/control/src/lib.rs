@@ -27,6 +27,7 @@ pub use fusion::TurnLead;
 pub use safety::SafetyStop;
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
+use ssrdrive_support::ranges::first_outside;
 use trajectory::TrajectoryFollower;
 pub use unstick::Unstick;
 use unstick::UnstickState;
@@ -229,13 +230,7 @@ const MAX_WINDOW: usize = 10_000;
 /// Checks that each `(name, value, low, high)` has `value` in `low..=high`; the message names
 /// the first field outside its range.
 pub(crate) fn check_ranges(fields: &[(&str, f32, f32, f32)]) -> Result<(), String> {
-    match fields
-        .iter()
-        .find(|(_, value, low, high)| !(low..=high).contains(&value))
-    {
-        Some((name, value, low, high)) => Err(format!("{name} = {value} is outside {low}..{high}")),
-        None => Ok(()),
-    }
+    first_outside(fields.iter().copied()).map_or(Ok(()), |out| Err(out.to_string()))
 }
 
 /// The three controls of one tick: what the vehicle gets and where it came from.

@@ -9,6 +9,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use ssrdrive_support::files::read_capped_text;
+use ssrdrive_support::ranges::first_outside;
 
 use super::grid::BevGrid;
 
@@ -429,10 +430,8 @@ impl SsrConfig {
             .widths
             .iter()
             .map(|&n| ("backbone.widths", n, 1, MAX_WIDTH));
-        for (name, value, low, high) in sizes.into_iter().chain(stages).chain(widths) {
-            if !(low..=high).contains(&value) {
-                return fail(format!("{name} = {value} is outside {low}..={high}"));
-            }
+        if let Some(out) = first_outside(sizes.into_iter().chain(stages).chain(widths)) {
+            return fail(out.to_string());
         }
         // Each size may be sane and their product not: bound the largest weight groups (the
         // backbone's 3x3 convolutions, the attention layers' projections and FFNs).

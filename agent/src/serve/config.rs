@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use ssrdrive_proto::camera::{MAX_CAMERAS, MAX_IMAGE_PIXELS};
 use ssrdrive_support::error_text::clipped;
 use ssrdrive_support::files::{CappedReadError, read_capped_text};
+use ssrdrive_support::ranges::first_outside;
 
 use crate::control::History;
 use crate::device::Backend;
@@ -177,7 +178,7 @@ pub enum ServeConfigError {
         /// Its value, as text.
         value: String,
         /// The range or rule it breaks.
-        rule: &'static str,
+        rule: String,
     },
 }
 
@@ -205,12 +206,12 @@ impl ServeConfig {
         fn invalid(
             field: &'static str,
             value: impl ToString,
-            rule: &'static str,
+            rule: impl Into<String>,
         ) -> Result<(), ServeConfigError> {
             Err(ServeConfigError::Invalid {
                 field,
                 value: value.to_string(),
-                rule,
+                rule: rule.into(),
             })
         }
         // Durations stay far below what `Duration` and the clock can hold (1e308 s panics).
@@ -226,81 +227,59 @@ impl ServeConfig {
                 );
             }
         }
-        if !(1..=100_000).contains(&self.max_episodes) {
-            return invalid("max_episodes", self.max_episodes, "must be in 1..=100000");
-        }
-        if !timeout(self.idle_timeout_s) {
-            return invalid(
-                "idle_timeout_s",
-                format!("{:?}", self.idle_timeout_s),
-                TIMEOUT_RULE,
-            );
-        }
-        if !(1..=256).contains(&self.max_batch) {
-            return invalid("max_batch", self.max_batch, "must be in 1..=256");
-        }
-        if !(0.0..=1000.0).contains(&self.max_queue_delay_ms) {
-            return invalid(
-                "max_queue_delay_ms",
-                format!("{:?}", self.max_queue_delay_ms),
-                "must be in [0, 1000]",
-            );
-        }
-        if !(1..=64).contains(&self.model_threads) {
-            return invalid("model_threads", self.model_threads, "must be in 1..=64");
-        }
-        if self.compute_threads > 1024 {
-            return invalid(
-                "compute_threads",
-                self.compute_threads,
-                "must be in 0..=1024 (0: rayon's global pool)",
-            );
-        }
-        if !(1..=100_000).contains(&self.max_queue) {
-            return invalid("max_queue", self.max_queue, "must be in 1..=100000");
-        }
-        if !timeout(self.request_timeout_s) {
-            return invalid(
-                "request_timeout_s",
-                format!("{:?}", self.request_timeout_s),
-                TIMEOUT_RULE,
-            );
-        }
-        if !(1..=1024).contains(&self.max_message_mib) {
-            return invalid(
-                "max_message_mib",
-                self.max_message_mib,
-                "must be in 1..=1024",
-            );
-        }
-        let most_pixels = MAX_CAMERAS as u64 * MAX_IMAGE_PIXELS;
-        if !(1..=most_pixels).contains(&self.max_pixels_per_step) {
-            return invalid(
+        // Counts (usize widens to u64 without loss); compute_threads 0 is rayon's global pool.
+        let counts = [
+            ("max_episodes", self.max_episodes as u64, 1, 100_000),
+            ("max_batch", self.max_batch as u64, 1, 256),
+            ("model_threads", self.model_threads as u64, 1, 64),
+            ("compute_threads", self.compute_threads as u64, 0, 1024),
+            ("max_queue", self.max_queue as u64, 1, 100_000),
+            ("max_message_mib", self.max_message_mib as u64, 1, 1024),
+            (
                 "max_pixels_per_step",
                 self.max_pixels_per_step,
-                "must be in 1..=100663296 (6 cameras of 16 Mpx)",
-            );
+                1,
+                MAX_CAMERAS as u64 * MAX_IMAGE_PIXELS,
+            ),
+            ("max_decoded_mib", self.max_decoded_mib as u64, 1, 65_536),
+        ];
+        if let Some(out) = first_outside(counts) {
+            return invalid(out.name, out.value, format!("must be in {}", out.range));
         }
-        if !(1..=65_536).contains(&self.max_decoded_mib) {
-            return invalid(
-                "max_decoded_mib",
-                self.max_decoded_mib,
-                "must be in 1..=65536",
-            );
-        }
-        if !drain(self.drain_grace_s) {
-            return invalid(
+        let durations = [
+            (
+                "idle_timeout_s",
+                self.idle_timeout_s,
+                timeout(self.idle_timeout_s),
+                TIMEOUT_RULE,
+            ),
+            (
+                "max_queue_delay_ms",
+                self.max_queue_delay_ms,
+                (0.0..=1000.0).contains(&self.max_queue_delay_ms),
+                "must be in [0, 1000]",
+            ),
+            (
+                "request_timeout_s",
+                self.request_timeout_s,
+                timeout(self.request_timeout_s),
+                TIMEOUT_RULE,
+            ),
+            (
                 "drain_grace_s",
-                format!("{:?}", self.drain_grace_s),
+                self.drain_grace_s,
+                drain(self.drain_grace_s),
                 DRAIN_RULE,
-            );
-        }
-        if !drain(self.drain_timeout_s) {
-            return invalid(
+            ),
+            (
                 "drain_timeout_s",
-                format!("{:?}", self.drain_timeout_s),
+                self.drain_timeout_s,
+                drain(self.drain_timeout_s),
                 DRAIN_RULE,
-            );
+            ),
+        ];
+        if let Some((name, value, _, rule)) = durations.into_iter().find(|d| !d.2) {
+            return invalid(name, format!("{value:?}"), rule);
         }
         if self.checkpoint.is_some() && self.untrained_config.is_some() {
             return invalid(

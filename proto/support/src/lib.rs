@@ -1,10 +1,11 @@
 //! What every ssrdrive crate does alike and is not the simulator-agent contract
 //! (`ssrdrive-proto` is): [`files`], capped reads of untrusted files and atomic writes;
 //! [`error_text`], how errors are printed and how client-supplied values are clipped in them;
-//! [`logging`], how both binaries log.
+//! [`logging`], how both binaries log; [`ranges`], range checks of settings.
 
 #![forbid(unsafe_code)]
 
 pub mod error_text;
 pub mod files;
 pub mod logging;
+pub mod ranges;
