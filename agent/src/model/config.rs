@@ -386,23 +386,28 @@ impl SsrConfig {
 
     /// Checks that every size fits together; the message names the field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let fail = |problem: String| {
-            Err(ConfigError {
+        self.check_sizes()
+            .and_then(|()| self.check_geometry())
+            .and_then(|()| self.check_attention())
+            .map_err(|problem| ConfigError {
                 name: self.name.clone(),
                 problem,
             })
-        };
+    }
+
+    /// Every count and width within what a real network of this kind uses, and their product
+    /// (the weights) bounded: a checkpoint's config is untrusted, and `init` allocates what it
+    /// asks for before a weight is compared.
+    fn check_sizes(&self) -> Result<(), String> {
         let b = &self.backbone;
         if b.blocks.is_empty()
             || b.blocks.len() != b.widths.len()
             || b.blocks.len() != b.strides.len()
         {
-            return fail(
+            return Err(
                 "backbone.blocks, widths and strides must be non-empty and equally long".into(),
             );
         }
-        // A checkpoint's config is untrusted, and `init` allocates what it asks for before a
-        // weight is compared: every size stays within what a real network of this kind uses.
         let v = &self.bev;
         let t = &self.tokens;
         let h = &self.head;
@@ -431,7 +436,7 @@ impl SsrConfig {
             .iter()
             .map(|&n| ("backbone.widths", n, 1, MAX_WIDTH));
         if let Some(out) = first_outside(sizes.into_iter().chain(stages).chain(widths)) {
-            return fail(out.to_string());
+            return Err(out.to_string());
         }
         // Each size may be sane and their product not: bound the largest weight groups (the
         // backbone's 3x3 convolutions, the attention layers' projections and FFNs).
@@ -443,58 +448,73 @@ impl SsrConfig {
         let layer = 4 * c * c + 2 * c * v.ffn_dim.max(t.ffn_dim);
         let weights = backbone + attention_layers * layer;
         if weights > MAX_WEIGHTS {
-            return fail(format!(
+            return Err(format!(
                 "about {weights} weights, over the {MAX_WEIGHTS} a config may ask for"
             ));
         }
         if b.strides.iter().any(|s| !(1..=2).contains(s)) {
-            return fail("backbone strides must be 1 or 2".into());
+            return Err("backbone strides must be 1 or 2".into());
         }
+        Ok(())
+    }
+
+    /// The image, the BEV grid and its pillars: sizes in range, numbers finite.
+    fn check_geometry(&self) -> Result<(), String> {
         if self.image_width < 32
             || self.image_height < 32
             || self.image_width > 4096
             || self.image_height > 4096
         {
-            return fail(format!(
+            return Err(format!(
                 "image {}x{} is outside 32..4096 px per side",
                 self.image_width, self.image_height
             ));
         }
-        let g = &v.grid;
+        let g = &self.bev.grid;
         if g.rows == 0 || g.cols == 0 || g.cells() > 40_000 {
-            return fail(format!(
+            return Err(format!(
                 "bev {}x{} must have 1..40000 cells",
                 g.rows, g.cols
             ));
         }
         let ranges = [g.x_min, g.x_max, g.y_min, g.y_max];
         if !(ranges.iter().all(|r| r.is_finite()) && g.x_min < g.x_max && g.y_min < g.y_max) {
-            return fail("bev ranges must be finite with x_min < x_max and y_min < y_max".into());
+            return Err("bev ranges must be finite with x_min < x_max and y_min < y_max".into());
         }
-        if !v.pillar_heights.iter().all(|z| z.is_finite()) {
-            return fail("bev.pillar_heights must be finite".into());
+        if !self.bev.pillar_heights.iter().all(|z| z.is_finite()) {
+            return Err("beself.bev.pillar_heights must be finite".into());
         }
-        if !v.spatial_points.is_multiple_of(v.pillar_heights.len()) {
-            return fail(
-                "bev.spatial_points must be a multiple of the number of pillar heights".into(),
+        if !self
+            .bev
+            .spatial_points
+            .is_multiple_of(self.bev.pillar_heights.len())
+        {
+            return Err(
+                "beself.bev.spatial_points must be a multiple of the number of pillar heights"
+                    .into(),
             );
         }
+        Ok(())
+    }
+
+    /// Attention heads that divide the channels, channels even, a horizon the head can plan.
+    fn check_attention(&self) -> Result<(), String> {
         for (what, heads, dim) in [
-            ("bev.heads", v.heads, self.channels),
+            ("bev.heads", self.bev.heads, self.channels),
             ("tokens.heads", self.tokens.heads, self.channels),
         ] {
             if heads == 0 || dim % heads != 0 {
-                return fail(format!("{what} = {heads} must divide channels = {dim}"));
+                return Err(format!("{what} = {heads} must divide channels = {dim}"));
             }
         }
         if !self.channels.is_multiple_of(2) {
-            return fail(
+            return Err(
                 "channels must be even (half for rows, half for columns in the BEV position)"
                     .into(),
             );
         }
         if self.head.pred_len < 2 || self.head.pred_len > 12 {
-            return fail("head.pred_len must be in 2..=12".into());
+            return Err("head.pred_len must be in 2..=12".into());
         }
         Ok(())
     }
