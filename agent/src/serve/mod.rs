@@ -257,32 +257,8 @@ pub async fn run(
                 let _ = server_stopped.await;
             }),
     ));
-    let (stop_metrics, metrics_stopped) = tokio::sync::oneshot::channel::<()>();
-    let _metrics_task = metrics_listener.map(|listener| {
-        let metrics = Arc::clone(engine.metrics());
-        AbortOnDrop(tokio::spawn(async move {
-            let stopped = async {
-                let _ = metrics_stopped.await;
-            };
-            if let Err(error) = metrics::serve_metrics(listener, metrics, stopped).await {
-                tracing::error!("metrics endpoint failed: {error}");
-            }
-        }))
-    });
-    let _sweeper = {
-        let engine = Arc::clone(&engine);
-        let period = config
-            .idle_timeout()
-            .div_f64(4.0)
-            .clamp(Duration::from_millis(100), Duration::from_secs(5));
-        AbortOnDrop(tokio::spawn(async move {
-            let mut ticker = tokio::time::interval(period);
-            loop {
-                ticker.tick().await;
-                engine.expire_idle();
-            }
-        }))
-    };
+    let (_metrics_task, stop_metrics) = spawn_metrics(metrics_listener, &engine);
+    let _sweeper = spawn_sweeper(&engine, config.idle_timeout());
 
     // Warm up, then serve until the shutdown signal, unless the server fails first.
     let warm_up = tokio::select! {
@@ -306,31 +282,74 @@ pub async fn run(
     tracing::info!("refusing new connections; draining in-flight steps");
     let _ = draining.send(true);
     let _ = stop_server.send(());
-    // Wait for the steps being served, not for streams that carry none (a health watch, a
-    // reflection session, a Drive stream between steps): once no step is in flight and the
-    // answers had a moment to go out, whatever is still open is cut.
+    let drained = drain(&engine, &mut server, config.drain_timeout_s).await;
+    let _ = stop_metrics.send(());
+    drained?;
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// The metrics endpoint on its own task, where metrics are on; the sender stops it.
+fn spawn_metrics(
+    listener: Option<TcpListener>,
+    engine: &Arc<Engine>,
+) -> (Option<AbortOnDrop<()>>, tokio::sync::oneshot::Sender<()>) {
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let task = listener.map(|listener| {
+        let metrics = Arc::clone(engine.metrics());
+        AbortOnDrop(tokio::spawn(async move {
+            let stopped = async {
+                let _ = stopped.await;
+            };
+            if let Err(error) = metrics::serve_metrics(listener, metrics, stopped).await {
+                tracing::error!("metrics endpoint failed: {error}");
+            }
+        }))
+    });
+    (task, stop)
+}
+
+/// Ends idle episodes every quarter of the idle timeout (0.1 to 5 s).
+fn spawn_sweeper(engine: &Arc<Engine>, idle_timeout: Duration) -> AbortOnDrop<()> {
+    let engine = Arc::clone(engine);
+    let period = idle_timeout
+        .div_f64(4.0)
+        .clamp(Duration::from_millis(100), Duration::from_secs(5));
+    AbortOnDrop(tokio::spawn(async move {
+        let mut ticker = tokio::time::interval(period);
+        loop {
+            ticker.tick().await;
+            engine.expire_idle();
+        }
+    }))
+}
+
+/// After the server stopped taking connections: waits for the steps being served, not for
+/// streams that carry none (a health watch, a reflection session, a Drive stream between
+/// steps): once no step is in flight and the answers had a moment to go out, whatever is still
+/// open is cut; at most `timeout_s`.
+async fn drain(
+    engine: &Engine,
+    server: &mut AbortOnDrop<Result<(), tonic::transport::Error>>,
+    timeout_s: f64,
+) -> anyhow::Result<()> {
     let steps_done = async {
         while engine.steps_in_flight() > 0 {
             tokio::time::sleep(DRAIN_POLL).await;
         }
         tokio::time::sleep(DRAIN_FLUSH).await;
     };
-    let drained = tokio::time::timeout(Duration::from_secs_f64(config.drain_timeout_s), async {
+    let drained = tokio::time::timeout(Duration::from_secs_f64(timeout_s), async {
         tokio::select! {
             ended = &mut server.0 => Some(ended),
             () = steps_done => None,
         }
     })
     .await;
-    let _ = stop_metrics.send(());
     match drained {
         Ok(Some(ended)) => server_ended(ended)?,
         Ok(None) => tracing::info!("no step in flight; closing the streams still open"),
-        Err(_) => tracing::warn!(
-            "steps still in flight after {} s; exiting anyway",
-            config.drain_timeout_s
-        ),
+        Err(_) => tracing::warn!("steps still in flight after {timeout_s} s; exiting anyway"),
     }
-    tracing::info!("stopped");
     Ok(())
 }
