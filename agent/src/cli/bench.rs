@@ -13,7 +13,7 @@ use ssr_agent::control::{ControlConfig, History};
 use ssr_agent::device::Backend;
 use ssr_agent::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::model::{ModelInput, Navigation, float_tensor};
+use ssr_agent::model::{ModelInput, Navigation, SsrModel, float_tensor};
 use ssr_agent::policy::{SsrPolicy, StepInput};
 use ssr_agent::pose::{EgoMotion, Pose2};
 use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
@@ -213,54 +213,67 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
         ));
     }
     if batch == 1 {
-        // As served: a network with the occupancy head runs it every step for the safety stop.
-        let mut control = ControlConfig::default();
-        control.safety.enabled = model.occupancy.is_some();
-        let policy = SsrPolicy::new(model, config.clone(), control, device.clone());
-        let camera = CameraSpec::tcp_front();
-        let frame = RgbImage {
-            width: camera.width,
-            height: camera.height,
-            rgb: (0..camera.width * camera.height * 3)
-                .map(|k| ((k * 2654435761) >> 24) as u8)
-                .collect(),
-        };
-        // Timed in the steady state, where the episode has its history (the first steps of an
-        // episode encode one BEV; later ones three on the chain, two on the link, one on the
-        // recursion).
-        for (history, row) in [
-            (History::Chain, "policy_step_900x256_ms"),
-            (History::Link, "policy_step_900x256_link_ms"),
-            (History::Recursive, "policy_step_900x256_recursive_ms"),
-        ] {
-            let mut episode = policy.new_episode_with(ControlConfig {
-                history,
-                ..policy.control().clone()
-            });
-            let mut tick = 0;
-            let mut step_once = || {
-                tick += 1;
-                let input = StepInput {
-                    frames: vec![frame.clone()],
-                    rig: Rig::tcp(),
-                    pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
-                    speed: 6.0,
-                    command: RoadOption::LaneFollow,
-                    target_point: [12.0, 1.0],
-                    debug: false,
-                };
-                policy.step(&mut episode, &input).expect("valid input");
-            };
-            (0..HISTORY_TICKS).for_each(|_| step_once());
-            rows.push((row, time_ms(w, i, step_once)));
-        }
-        rows.push(("episode_state_bytes", policy.episode_state_bytes() as f64));
+        rows.extend(policy_step_rows(model, config, (w, i), device));
     }
     Report {
         config: config.name.clone(),
         batch,
         rows,
     }
+}
+
+/// A whole policy step (decode, encoders, heads, controller) as served, in the steady state
+/// of each history, and the memory an episode holds.
+fn policy_step_rows(
+    model: SsrModel,
+    config: &SsrConfig,
+    (w, i): (usize, usize),
+    device: &Device,
+) -> Vec<(&'static str, f64)> {
+    let mut rows = Vec::new();
+    // As served: a network with the occupancy head runs it every step for the safety stop.
+    let mut control = ControlConfig::default();
+    control.safety.enabled = model.occupancy.is_some();
+    let policy = SsrPolicy::new(model, config.clone(), control, device.clone());
+    let camera = CameraSpec::tcp_front();
+    let frame = RgbImage {
+        width: camera.width,
+        height: camera.height,
+        rgb: (0..camera.width * camera.height * 3)
+            .map(|k| ((k * 2654435761) >> 24) as u8)
+            .collect(),
+    };
+    // Timed in the steady state, where the episode has its history (the first steps of an
+    // episode encode one BEV; later ones three on the chain, two on the link, one on the
+    // recursion).
+    for (history, row) in [
+        (History::Chain, "policy_step_900x256_ms"),
+        (History::Link, "policy_step_900x256_link_ms"),
+        (History::Recursive, "policy_step_900x256_recursive_ms"),
+    ] {
+        let mut episode = policy.new_episode_with(ControlConfig {
+            history,
+            ..policy.control().clone()
+        });
+        let mut tick = 0;
+        let mut step_once = || {
+            tick += 1;
+            let input = StepInput {
+                frames: vec![frame.clone()],
+                rig: Rig::tcp(),
+                pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
+                speed: 6.0,
+                command: RoadOption::LaneFollow,
+                target_point: [12.0, 1.0],
+                debug: false,
+            };
+            policy.step(&mut episode, &input).expect("valid input");
+        };
+        (0..HISTORY_TICKS).for_each(|_| step_once());
+        rows.push((row, time_ms(w, i, step_once)));
+    }
+    rows.push(("episode_state_bytes", policy.episode_state_bytes() as f64));
+    rows
 }
 
 fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {

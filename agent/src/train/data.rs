@@ -113,6 +113,74 @@ fn is_validation(town: &str, route_set: &str, route_id: &str, fraction: f64) -> 
     (fnv1a(key.as_bytes()) % 10_000) as f64 / 10_000.0 < fraction
 }
 
+/// The manifest's timing, horizon and rig fit the network: (frames back to the history, frames
+/// ahead to the FFP target).
+fn check_manifest(
+    dataset: &Dataset,
+    root: &Path,
+    config: &SsrConfig,
+) -> Result<(usize, usize), DatasetError> {
+    let m = &dataset.manifest;
+    let refuse = |problem: String| Err(DatasetError::invalid(&root.join("manifest.json"), problem));
+    if (m.future_step_s - FUTURE_STEP).abs() > 1e-9 {
+        return refuse(format!(
+            "future_step_s = {} but the head plans every {FUTURE_STEP} s",
+            m.future_step_s
+        ));
+    }
+    let pred_len = config.head.pred_len;
+    if m.future_count < pred_len {
+        return refuse(format!(
+            "{} future waypoints per frame, the model plans {pred_len}",
+            m.future_count
+        ));
+    }
+    let frames_in = |seconds: f64| (seconds * m.rate_hz).round() as usize;
+    let (history_offset, future_offset) = (frames_in(HISTORY_S), frames_in(FUTURE_BEV_S));
+    if !(m.rate_hz.is_finite() && history_offset >= 1 && future_offset >= 1) {
+        return refuse(format!(
+            "rate_hz = {} gives no frame {HISTORY_S} s back (the history) or \
+             {FUTURE_BEV_S} s ahead (the FFP target)",
+            m.rate_hz
+        ));
+    }
+    if let Err(e) = m.rig.validate() {
+        return refuse(format!("its camera rig is unusable: {e}"));
+    }
+    Ok((history_offset, future_offset))
+}
+
+/// An episode's frames hold an image per camera and, to train on plans, the expert's plan.
+fn check_frames(
+    dataset: &Dataset,
+    episode: &str,
+    frames: &[FrameRecord],
+    labels: Labels,
+    pred_len: usize,
+) -> Result<(), DatasetError> {
+    let refuse = |problem: String| {
+        Err(DatasetError::invalid(
+            &dataset.episode_dir(episode).join("measurements.jsonl"),
+            problem,
+        ))
+    };
+    let cameras = dataset.manifest.rig.cameras.len();
+    if let Some(bad) = frames.iter().find(|f| f.images.len() != cameras) {
+        return refuse(format!(
+            "frame {} lists {} images, the rig has {cameras} cameras",
+            bad.index,
+            bad.images.len()
+        ));
+    }
+    if labels == Labels::Plan && frames.iter().any(|f| f.plan.len() < pred_len) {
+        return refuse(format!(
+            "frames without the expert's {pred_len}-step plan (recorded before plans were \
+             stored?): collect the data again, or train with --labels driven"
+        ));
+    }
+    Ok(())
+}
+
 impl TrainingData {
     /// Opens the dataset at `root` and indexes the samples `config` can train on.
     /// `progress` is called after each episode's measurements are read.
@@ -124,34 +192,9 @@ impl TrainingData {
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Self, DatasetError> {
         let dataset = Dataset::open(root)?;
-        let manifest_path = root.join("manifest.json");
+        let (history_offset, future_offset) = check_manifest(&dataset, root, config)?;
         let m = &dataset.manifest;
-        let refuse = |problem: String| Err(DatasetError::invalid(&manifest_path, problem));
-        if (m.future_step_s - FUTURE_STEP).abs() > 1e-9 {
-            return refuse(format!(
-                "future_step_s = {} but the head plans every {FUTURE_STEP} s",
-                m.future_step_s
-            ));
-        }
         let pred_len = config.head.pred_len;
-        if m.future_count < pred_len {
-            return refuse(format!(
-                "{} future waypoints per frame, the model plans {pred_len}",
-                m.future_count
-            ));
-        }
-        let frames_in = |seconds: f64| (seconds * m.rate_hz).round() as usize;
-        let (history_offset, future_offset) = (frames_in(HISTORY_S), frames_in(FUTURE_BEV_S));
-        if !(m.rate_hz.is_finite() && history_offset >= 1 && future_offset >= 1) {
-            return refuse(format!(
-                "rate_hz = {} gives no frame {HISTORY_S} s back (the history) or \
-                 {FUTURE_BEV_S} s ahead (the FFP target)",
-                m.rate_hz
-            ));
-        }
-        if let Err(e) = m.rig.validate() {
-            return refuse(format!("its camera rig is unusable: {e}"));
-        }
         let total = m.episode_list.len();
         let mut episodes = Vec::with_capacity(total);
         let (mut train, mut validation) = (Vec::new(), Vec::new());
@@ -162,17 +205,7 @@ impl TrainingData {
         );
         for (index, entry) in m.episode_list.iter().enumerate() {
             let frames = dataset.frames(&entry.name)?;
-            let cameras = m.rig.cameras.len();
-            if let Some(bad) = frames.iter().find(|f| f.images.len() != cameras) {
-                return Err(DatasetError::invalid(
-                    &dataset.episode_dir(&entry.name).join("measurements.jsonl"),
-                    format!(
-                        "frame {} lists {} images, the rig has {cameras} cameras",
-                        bad.index,
-                        bad.images.len()
-                    ),
-                ));
-            }
+            check_frames(&dataset, &entry.name, &frames, labels, pred_len)?;
             let held_out = is_validation(
                 &entry.town,
                 &entry.route_set,
@@ -185,15 +218,6 @@ impl TrainingData {
                 (&mut train, &mut routes.0)
             };
             side_routes.insert((&entry.town, &entry.route_set, &entry.route_id));
-            if labels == Labels::Plan && frames.iter().any(|f| f.plan.len() < pred_len) {
-                return Err(DatasetError::invalid(
-                    &dataset.episode_dir(&entry.name).join("measurements.jsonl"),
-                    format!(
-                        "frames without the expert's {pred_len}-step plan (recorded before plans were \
-                         stored?): collect the data again, or train with --labels driven"
-                    ),
-                ));
-            }
             let learner_drove = dataset.episode(&entry.name)?.driver.is_some();
             let usable = frames.iter().filter(|f| {
                 f.future_complete
@@ -217,10 +241,13 @@ impl TrainingData {
             progress(index + 1, total);
         }
         if train.is_empty() {
-            return refuse(format!(
-                "no training samples: {total} episodes, {} validation samples, none with a \
+            return Err(DatasetError::invalid(
+                &root.join("manifest.json"),
+                format!(
+                    "no training samples: {total} episodes, {} validation samples, none with a \
                  complete {pred_len}-step future outside the validation routes",
-                validation.len()
+                    validation.len()
+                ),
             ));
         }
         let (train_routes, validation_routes) = (routes.0.len(), routes.1.len());
