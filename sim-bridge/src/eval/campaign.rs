@@ -321,28 +321,55 @@ pub fn run_campaign<O: CampaignObserver>(
                 record: &record,
                 driven: dense.as_ref().ok().zip(driven.as_ref()),
             };
-            let mut scored = scored.lock().expect("no worker panics holding it");
-            if driven.as_ref().is_some_and(|d| d.agent_error.is_some()) {
-                scored.crashes += 1;
-            }
-            scored.records[index] = Some(record.clone());
-            write_atomic(&campaign.out, scored.results().to_json().as_bytes()).map_err(
-                |source| CampaignError::Write {
-                    path: campaign.out.clone(),
-                    source,
-                },
-            )?;
-            drop(scored);
+            let crashed = driven.as_ref().is_some_and(|d| d.agent_error.is_some());
+            store(campaign, &scored, index, &record, crashed)?;
             observer
                 .run_finished(run, &done)
                 .map_err(CampaignError::Observer)?;
         }
         Ok(())
     };
+    on_threads(jobs, &failed, worker)?;
+    let scored = scored.into_inner().expect("workers are done");
+    Ok(CampaignReport {
+        results: scored.results(),
+        kept,
+        crashes: scored.crashes,
+        unplannable: campaign.routes.iter().filter(|(_, d)| d.is_err()).count(),
+    })
+}
+
+/// Records run `index` (and whether its agent crashed) and rewrites the results file, so that
+/// an interrupted campaign loses no scored run.
+fn store(
+    campaign: &Campaign,
+    scored: &Mutex<Scored>,
+    index: usize,
+    record: &RouteRecord,
+    crashed: bool,
+) -> Result<(), CampaignError> {
+    let mut scored = scored.lock().expect("no worker panics holding it");
+    scored.crashes += usize::from(crashed);
+    scored.records[index] = Some(record.clone());
+    write_atomic(&campaign.out, scored.results().to_json().as_bytes()).map_err(|source| {
+        CampaignError::Write {
+            path: campaign.out.clone(),
+            source,
+        }
+    })
+}
+
+/// Runs `worker(job)` for each of `jobs` on its own thread; the first that fails raises
+/// `failed` (the others stop taking runs) and its error is returned.
+fn on_threads(
+    jobs: usize,
+    failed: &AtomicBool,
+    worker: impl Fn(usize) -> Result<(), CampaignError> + Sync,
+) -> Result<(), CampaignError> {
     std::thread::scope(|scope| {
         let workers: Vec<_> = (0..jobs)
             .map(|job| {
-                let (worker, failed) = (&worker, &failed);
+                let worker = &worker;
                 scope.spawn(move || {
                     let result = worker(job);
                     if result.is_err() {
@@ -355,13 +382,6 @@ pub fn run_campaign<O: CampaignObserver>(
         workers
             .into_iter()
             .try_for_each(|w| w.join().expect("campaign workers do not panic"))
-    })?;
-    let scored = scored.into_inner().expect("workers are done");
-    Ok(CampaignReport {
-        results: scored.results(),
-        kept,
-        crashes: scored.crashes,
-        unplannable: campaign.routes.iter().filter(|(_, d)| d.is_err()).count(),
     })
 }
 
