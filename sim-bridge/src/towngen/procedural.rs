@@ -297,21 +297,7 @@ pub fn build(seed: u64, bends: Bends) -> Town {
     let west = side(&mut t, "W", row_ends(-loop_x));
     let east = side(&mut t, "E", row_ends(loop_x));
 
-    // Inner stretches left out: each keeps both its junctions at three legs or more.
-    let mut legs = vec![4usize; cols * rows];
-    let mut gaps = BTreeSet::new();
-    for (a, b) in (0..cols)
-        .flat_map(|c| (0..rows).map(move |r| (c, r)))
-        .flat_map(|(c, r)| [((c, r), (c, r + 1)), ((c, r), (c + 1, r))])
-        .filter(|&(_, (c2, r2))| c2 < cols && r2 < rows)
-    {
-        let (a, b) = (inner(a.0, a.1), inner(b.0, b.1));
-        if rng.random_bool(0.15) && legs[a] == 4 && legs[b] == 4 {
-            legs[a] = 3;
-            legs[b] = 3;
-            gaps.insert((a, b));
-        }
-    }
+    let gaps = left_out_stretches(&mut rng, cols, rows);
 
     for c in 0..cols {
         let p = &col_profiles[c];
@@ -335,41 +321,89 @@ pub fn build(seed: u64, bends: Bends) -> Town {
         }
         t.street(inner(cols - 1, r), east[r], &[], 0.0, p);
     }
-    // The loop, counter-clockwise: up the east side, west along the north, down the west
-    // side, east along the south, corners rounded.
-    let corner = |x: f64, y: f64| DVec2::new(x * loop_x, y * loop_y);
-    let reversed = |v: &[usize]| v.iter().rev().copied().collect::<Vec<_>>();
-    let sides = [
-        (east.clone(), corner(1.0, 1.0)),
-        (reversed(&north), corner(-1.0, 1.0)),
-        (reversed(&west), corner(-1.0, -1.0)),
-        (south.clone(), corner(1.0, -1.0)),
-    ];
-    for (k, (nodes, turn)) in sides.iter().enumerate() {
-        for w in nodes.windows(2) {
-            t.street(w[0], w[1], &[], 0.0, &loop_profile);
-        }
-        let next = sides[(k + 1) % sides.len()].0[0];
-        t.street(
-            nodes[nodes.len() - 1],
-            next,
-            &[*turn],
-            corner_radius,
-            &loop_profile,
-        );
-    }
+    let ring = Ring {
+        sides: [east, north, west, south],
+        half_size: DVec2::new(loop_x, loop_y),
+        corner_radius,
+    };
+    ring.lay(&mut t, &loop_profile);
 
-    for n in 0..cols * rows {
+    control_junctions(&mut t, &mut rng, cols * rows);
+    t.b.build()
+}
+
+/// Inner stretches left out of a `cols` x `rows` grid (pairs of node indices, column-major):
+/// each drawn with chance 0.15 where both its junctions still have four legs, so every junction
+/// keeps three or more.
+fn left_out_stretches(rng: &mut ChaCha8Rng, cols: usize, rows: usize) -> BTreeSet<(usize, usize)> {
+    let inner = |c: usize, r: usize| c * rows + r;
+    let mut legs = vec![4usize; cols * rows];
+    let mut gaps = BTreeSet::new();
+    for (a, b) in (0..cols)
+        .flat_map(|c| (0..rows).map(move |r| (c, r)))
+        .flat_map(|(c, r)| [((c, r), (c, r + 1)), ((c, r), (c + 1, r))])
+        .filter(|&(_, (c2, r2))| c2 < cols && r2 < rows)
+    {
+        let (a, b) = (inner(a.0, a.1), inner(b.0, b.1));
+        if rng.random_bool(0.15) && legs[a] == 4 && legs[b] == 4 {
+            legs[a] = 3;
+            legs[b] = 3;
+            gaps.insert((a, b));
+        }
+    }
+    gaps
+}
+
+/// The loop road around the grid: its T-junction nodes per side (east, north, west, south,
+/// each in increasing coordinate), its half size and its corners' radius.
+struct Ring {
+    sides: [Vec<usize>; 4],
+    half_size: DVec2,
+    corner_radius: f64,
+}
+
+impl Ring {
+    /// The loop, counter-clockwise: up the east side, west along the north, down the west
+    /// side, east along the south, corners rounded.
+    fn lay(&self, t: &mut Layout, profile: &Profile) {
+        let corner = |x: f64, y: f64| DVec2::new(x, y) * self.half_size;
+        let reversed = |v: &[usize]| v.iter().rev().copied().collect::<Vec<_>>();
+        let [east, north, west, south] = &self.sides;
+        let sides = [
+            (east.clone(), corner(1.0, 1.0)),
+            (reversed(north), corner(-1.0, 1.0)),
+            (reversed(west), corner(-1.0, -1.0)),
+            (south.clone(), corner(1.0, -1.0)),
+        ];
+        for (k, (nodes, turn)) in sides.iter().enumerate() {
+            for w in nodes.windows(2) {
+                t.street(w[0], w[1], &[], 0.0, profile);
+            }
+            let next = sides[(k + 1) % sides.len()].0[0];
+            t.street(
+                nodes[nodes.len() - 1],
+                next,
+                &[*turn],
+                self.corner_radius,
+                profile,
+            );
+        }
+    }
+}
+
+/// Traffic control at every junction: the `inner` grid junctions get lights more often where
+/// they have four legs and more lanes; the loop's T-junctions rarely.
+fn control_junctions(t: &mut Layout, rng: &mut ChaCha8Rng, inner: usize) {
+    for n in 0..inner {
         let multi_lane = t.nodes[n].legs.iter().any(|l| l.1);
         let lights = match (t.nodes[n].legs.len(), multi_lane) {
             (4, true) => 0.75,
             (4, false) => 0.35,
             _ => 0.3,
         };
-        t.control(&mut rng, n, lights, 0.75);
+        t.control(rng, n, lights, 0.75);
     }
-    for n in cols * rows..t.nodes.len() {
-        t.control(&mut rng, n, 0.2, 0.65);
+    for n in inner..t.nodes.len() {
+        t.control(rng, n, 0.2, 0.65);
     }
-    t.b.build()
 }
