@@ -21,6 +21,7 @@ use ssrdrive_proto::command::RoadOption;
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 use ssrdrive_proto::wire;
+use ssrdrive_support::stats::percentile;
 use tonic::transport::Channel;
 
 #[derive(clap::Args, Debug)]
@@ -49,15 +50,6 @@ pub struct BenchServeArgs {
     /// Skip the overhead comparison.
     #[arg(long)]
     no_overhead: bool,
-}
-
-/// Percentile (0-100) of sorted samples.
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = ((p / 100.0) * (sorted.len() - 1) as f64).round() as usize;
-    sorted[rank.min(sorted.len() - 1)]
 }
 
 fn sorted(mut samples: Vec<f64>) -> Vec<f64> {
@@ -249,7 +241,7 @@ async fn overhead(
     }
     server.stop().await?;
     let (a, b) = (sorted(in_process), sorted(over_grpc));
-    let (a50, b50) = (percentile(&a, 50.0), percentile(&b, 50.0));
+    let (a50, b50) = (percentile(&a, 0.5), percentile(&b, 0.5));
     println!(
         "\nper-step latency, one episode, {} steps each (ms):",
         a.len()
@@ -259,13 +251,13 @@ async fn overhead(
         "  {:<12} {:>8.2} {:>8.2}",
         "in process",
         a50,
-        percentile(&a, 99.0)
+        percentile(&a, 0.99)
     );
     println!(
         "  {:<12} {:>8.2} {:>8.2}",
         "gRPC",
         b50,
-        percentile(&b, 99.0)
+        percentile(&b, 0.99)
     );
     println!(
         "  overhead: {:+.2} ms per step = {:+.1} % of the in-process median",
@@ -324,8 +316,8 @@ async fn throughput(
                 run.steps_per_second / base,
                 format!(
                     "{:.1}/{:.1}",
-                    percentile(&run.latencies, 50.0),
-                    percentile(&run.latencies, 99.0)
+                    percentile(&run.latencies, 0.5),
+                    percentile(&run.latencies, 0.99)
                 ),
                 run.mean_batch
             );

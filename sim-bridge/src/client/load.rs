@@ -95,13 +95,7 @@ impl Percentiles {
     /// Of unsorted samples (NaN when empty).
     pub fn of(mut samples: Vec<f64>) -> Self {
         samples.sort_by(f64::total_cmp);
-        let at = |p: f64| {
-            if samples.is_empty() {
-                f64::NAN
-            } else {
-                samples[((p * (samples.len() - 1) as f64).round() as usize).min(samples.len() - 1)]
-            }
-        };
+        let at = |fraction| ssrdrive_support::stats::percentile(&samples, fraction);
         Self {
             p50: at(0.5),
             p90: at(0.9),
