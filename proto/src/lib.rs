@@ -9,6 +9,7 @@
 //!   one-hot encoding.
 //! - [`dataset`]: the on-disk format of driving datasets and its reader; [`image`]: RGB8
 //!   images in and out of PNG.
+//! - [`vehicle`]: the sedan the simulator drives and the controller is set up for.
 //! - [`TICK_HZ`], [`TICK_S`]: the tick both sides step at; [`EPISODE_KEY_HEADER`],
 //!   [`REPLICA_HEADER`]: the metadata that keeps an episode on one replica behind a balancer.
 
@@ -34,6 +35,7 @@ pub mod command;
 pub mod control;
 pub mod dataset;
 pub mod image;
+pub mod vehicle;
 pub mod wire;
 
 /// Package `ssrdrive.v1`: messages, `agent_service_client` and `agent_service_server`.

@@ -27,14 +27,15 @@ pub use fusion::TurnLead;
 pub use safety::SafetyStop;
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
+use ssrdrive_proto::vehicle::SEDAN;
 use ssrdrive_support::ranges::first_outside;
 use trajectory::TrajectoryFollower;
 pub use unstick::Unstick;
 use unstick::UnstickState;
 
 /// The geometry of the vehicle being steered: what pure pursuit needs to turn a path into a
-/// steer value. Defaults are sim-bridge's sedan; CARLA's Lincoln MKZ 2017 has a 2.87 m wheelbase
-/// and a 70-degree `max_steer_angle`.
+/// steer value. Defaults are sim-bridge's sedan ([`SEDAN`]); CARLA's Lincoln MKZ 2017 has a
+/// 2.87 m wheelbase and a 70-degree `max_steer_angle`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Vehicle {
     /// Axle distance, m.
@@ -48,9 +49,9 @@ pub struct Vehicle {
 impl Default for Vehicle {
     fn default() -> Self {
         Self {
-            wheelbase: 2.85,
-            rear_axle: 1.425,
-            max_wheel_angle: 35.0,
+            wheelbase: SEDAN.wheelbase as f32,
+            rear_axle: (SEDAN.wheelbase / 2.0) as f32,
+            max_wheel_angle: SEDAN.max_wheel_angle_deg as f32,
         }
     }
 }

@@ -41,7 +41,8 @@ pub struct SafetyStop {
     /// of the frames where it saw one had one (an early checkpoint of the closed-loop recipe;
     /// the model card has the figures).
     pub threshold: f32,
-    /// Distance from the ego origin (the box centre) to its front bumper, m.
+    /// Distance from the ego origin (the box centre) to its front bumper, m (by default the
+    /// sedan's half length; checkpoints written before it carry 2.4).
     pub front: f32,
     /// Half width of the corridor around the path, m (the ego's half width plus a margin).
     pub half_width: f32,
@@ -66,7 +67,7 @@ impl Default for SafetyStop {
         Self {
             enabled: false,
             threshold: 0.98,
-            front: 2.4,
+            front: ssrdrive_proto::vehicle::SEDAN.half_length as f32,
             half_width: 1.6,
             margin: 1.5,
             reaction_s: 0.5,

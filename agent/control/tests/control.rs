@@ -457,8 +457,9 @@ fn the_safety_stop_brakes_for_what_lies_on_the_path_within_the_stopping_distance
         ..SafetyStop::default()
     };
     let straight = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]];
-    // At 4 m/s the check reaches front 2.4 + margin 1.5 + 2 m of reaction + 1.6 m of braking.
-    assert!(near(rule.reach(4.0), 7.5));
+    // At 4 m/s the check reaches front 2.45 (the sedan's) + margin 1.5 + 2 m of reaction + 1.6 m
+    // of braking.
+    assert!(near(rule.reach(4.0), 7.55));
     assert!(rule.blocked(&straight, 4.0, &[[6.0, 0.5]]));
     assert!(
         !rule.blocked(&straight, 4.0, &[[9.0, 0.0]]),

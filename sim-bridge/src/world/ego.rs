@@ -1,6 +1,7 @@
 //! The ego vehicle: a kinematic bicycle model of a mid-size sedan (CARLA's Lincoln MKZ class).
 //!
-//! Numbers (documented in sim-bridge/README.md): wheelbase 2.85 m, box 4.90 x 2.12 m, front-wheel lock
+//! Numbers (documented in sim-bridge/README.md; the geometry is `ssrdrive_proto::vehicle::SEDAN`,
+//! which the agent's controller defaults to): wheelbase 2.85 m, box 4.90 x 2.12 m, front-wheel lock
 //! 35 degrees reached at steer = 1 (steer +1 is full RIGHT, CARLA's convention), steering rate
 //! limited to full lock in 0.4 s; drive force gives 3.5 m/s^2 at rest falling linearly to 0 at
 //! 60 m/s (so ~2.9 m/s^2 at 10 m/s, 0-100 km/h in about 9 s); brake = 1 gives 8.0 m/s^2 (dry
@@ -9,6 +10,7 @@
 
 use glam::{DVec2, DVec3};
 use ssrdrive_proto::control::Control;
+use ssrdrive_proto::vehicle::SEDAN;
 
 use super::state::EgoState;
 use crate::map::wrap_angle;
@@ -39,9 +41,9 @@ pub struct EgoParams {
 impl Default for EgoParams {
     fn default() -> Self {
         Self {
-            wheelbase: 2.85,
-            half_extent: DVec2::new(2.45, 1.06),
-            max_wheel_angle: 35f64.to_radians(),
+            wheelbase: SEDAN.wheelbase,
+            half_extent: DVec2::new(SEDAN.half_length, SEDAN.half_width),
+            max_wheel_angle: SEDAN.max_wheel_angle_deg.to_radians(),
             steer_time: 0.4,
             max_accel: 3.5,
             top_speed: 60.0,
