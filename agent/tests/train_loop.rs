@@ -15,7 +15,7 @@ use ssr_agent::control::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::float_values;
 use ssr_agent::train::augment::Photometric;
-use ssr_agent::train::config::{Schedule, TrainConfig};
+use ssr_agent::train::config::{Head, Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, SampleDraw, TrainingData, action_of};
 use ssr_agent::train::run::{MetricsLine, StepMetrics, TrainError, TrainOptions, train};
 use ssrdrive_proto::control::Control;
@@ -401,6 +401,65 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
     };
     let error = train_error(missing, &data, &tmp.dir("init-missing"));
     assert!(error.to_string().contains("no-such.safetensors"), "{error}");
+}
+
+#[test]
+fn a_run_that_trains_only_a_head_keeps_the_rest_of_its_checkpoint() {
+    let _rng = device_rng();
+    let tmp = Scratch::new();
+    let data = tmp.fixture("head-only");
+    let base = config(3);
+    let init = train(
+        base.clone(),
+        options(&data, &tmp.dir("head-only-init")),
+        open(&data, &base),
+    )
+    .unwrap()
+    .checkpoint;
+    let mut only = TrainConfig {
+        init: Some(init.clone()),
+        train_only: vec![Head::Light],
+        ..base.clone()
+    };
+    only.loss.light = 1.0;
+    only.model.light_head = true;
+    let out = tmp.dir("head-only-run");
+    let done = train(only.clone(), options(&data, &out), open(&data, &only)).unwrap();
+    assert!(
+        step_lines(&out)
+            .iter()
+            .all(|s| s.light.is_some_and(f32::is_finite))
+    );
+
+    // The network drives as the checkpoint did (batch-norm statistics included), and has the
+    // light head it did not.
+    let device = Device::flex();
+    let (before, _) = checkpoint::load(&init, &device).unwrap();
+    let (after, _) = checkpoint::load(&done.checkpoint, &device).unwrap();
+    let input = common::model_input(&only.model, 2, 1, true, &device);
+    let plan =
+        |model: &ssr_agent::model::SsrModel| float_values(model.forward(&input).head.waypoints);
+    assert_eq!(common::max_abs_diff(plan(&before), plan(&after)), 0.0);
+    assert!(before.light.is_none() && after.light.is_some());
+
+    // It needs a checkpoint to keep, and heads the network has.
+    let error = train_error(
+        TrainConfig {
+            init: None,
+            ..only.clone()
+        },
+        &data,
+        &tmp.dir("head-only-fresh"),
+    );
+    assert!(
+        error.to_string().contains("train_only needs init"),
+        "{error}"
+    );
+    let mut missing = only.clone();
+    missing.model.light_head = false;
+    missing.loss.light = 0.0;
+    let error = train_error(missing, &data, &tmp.dir("head-only-missing"));
+    assert!(error.to_string().contains("Light head"), "{error}");
 }
 
 #[test]

@@ -8,7 +8,7 @@ use clap::{Args, ValueEnum};
 use ssr_agent::checkpoint;
 use ssr_agent::control::History;
 use ssr_agent::model::config::SsrConfig;
-use ssr_agent::train::config::{Schedule, TrainConfig};
+use ssr_agent::train::config::{Head, Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, TrainingData};
 use ssr_agent::train::run::{self, TrainOptions};
 use ssr_agent::train::validation::format_l2;
@@ -123,6 +123,11 @@ pub struct TrainArgs {
     /// and its checkpoints. Fine-tuning a checkpoint without the head adds one; 0 = no head.
     #[arg(long, default_value_t = 0.0)]
     light_weight: f32,
+    /// Train only these heads (comma-separated: hazard, occupancy, motion, light); the rest of
+    /// the network keeps the weights of --init, so it drives as that checkpoint did while the
+    /// new heads feed the controller (a light head for the unstick rule's light hold, say).
+    #[arg(long, value_enum, value_delimiter = ',', requires = "init")]
+    train_only: Vec<Head>,
     /// Ablation: no Scenes TokenLearner; the head attends over every BEV cell.
     #[arg(long)]
     no_stl: bool,
@@ -206,6 +211,7 @@ impl TrainArgs {
         config.balanced = !self.uniform_sampling;
         config.init = self.init.clone();
         config.init_perception = self.init_perception.clone();
+        config.train_only = self.train_only.clone();
         config.loss.bev = self.bev_weight;
         config.loss.hazard = self.hazard_weight;
         config.loss.occupancy = self.occupancy_weight;

@@ -26,6 +26,32 @@ pub enum Schedule {
     },
 }
 
+/// A head of the network that a run can train alone ([`TrainConfig::train_only`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Head {
+    /// What the expert brakes for.
+    Hazard,
+    /// Where the road users are.
+    Occupancy,
+    /// Where they will be.
+    Motion,
+    /// The state of the light ahead.
+    Light,
+}
+
+impl Head {
+    /// Whether `model` has this head.
+    pub fn in_model(self, model: &SsrConfig) -> bool {
+        match self {
+            Head::Hazard => model.hazard_head,
+            Head::Occupancy => model.occupancy_head,
+            Head::Motion => model.motion_head,
+            Head::Light => model.light_head,
+        }
+    }
+}
+
 /// Everything a run is defined by (the dataset path is given separately).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
@@ -76,6 +102,11 @@ pub struct TrainConfig {
     /// networks whose tokens, gate or head differ from the checkpoint's. Exclusive with `init`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_perception: Option<std::path::PathBuf>,
+    /// Train only these heads; the rest of the network keeps the weights `init` gave it (its
+    /// driving stays that checkpoint's, the heads feed the controller). Empty: everything
+    /// trains.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub train_only: Vec<Head>,
     /// Fraction of routes held out for validation.
     pub validation_fraction: f64,
     /// Validate every this many steps (and at the end); 0 = only at the end.
@@ -111,6 +142,7 @@ impl TrainConfig {
             balanced: true,
             init: None,
             init_perception: None,
+            train_only: Vec::new(),
             validation_fraction: 0.05,
             validate_every: 1000,
             validation_samples: 1024,
@@ -161,6 +193,15 @@ impl TrainConfig {
             return Err(
                 "init and init_perception are exclusive: a run starts from one checkpoint".into(),
             );
+        }
+        if !self.train_only.is_empty() && self.init.is_none() {
+            return Err("train_only needs init: the rest of the network keeps its weights".into());
+        }
+        if let Some(head) = self.train_only.iter().find(|h| !h.in_model(&self.model)) {
+            return Err(format!(
+                "train_only names the {head:?} head, which the network does not have (give its \
+                 loss a weight)"
+            ));
         }
         if self.history == History::Recursive {
             return Err("history must be chain or link: training gives no recursion".into());

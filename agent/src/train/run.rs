@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use burn::module::Module;
+use burn::module::{Module, ParamId, list_param_ids};
 use burn::optim::{
     AdamWConfig, GradientsParams, ModuleOptimizer, OptimizerRecord,
     grad_clipping::GradientClippingConfig,
@@ -29,7 +29,7 @@ use burn::tensor::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use super::auxiliary::AuxiliaryOutputs;
-use super::config::TrainConfig;
+use super::config::{Head, TrainConfig};
 use super::data::{Batch, SampleDraw, TrainingData};
 pub use super::error::TrainError;
 use super::light::{light_hits, light_labels};
@@ -434,7 +434,13 @@ impl Trainer {
             });
         }
         let mut grads = terms.total.backward();
-        let model_grads = GradientsParams::from_module(&mut grads, self.model());
+        let model_grads = match self.config.train_only.as_slice() {
+            [] => GradientsParams::from_module(&mut grads, self.model()),
+            heads => {
+                let trained = trained_params(self.model(), heads);
+                GradientsParams::from_params(&mut grads, self.model(), &trained)
+            }
+        };
         let model = self
             .model
             .take()
@@ -505,7 +511,7 @@ impl Trainer {
         };
         let rig = serde_json::to_string(self.data.rig()).expect("rigs serialise");
         checkpoint::save(
-            &self.model().valid(),
+            &self.exported_model()?,
             &self.config.model,
             &[
                 (checkpoint::RIG_KEY, rig),
@@ -525,6 +531,26 @@ impl Trainer {
             path,
         )?;
         Ok(())
+    }
+
+    /// The network a checkpoint holds: the trained one, or, where only some heads train, the
+    /// `init` checkpoint's with those heads, so that its trunk is exactly that checkpoint's
+    /// (training-mode passes move the batch-norm statistics even where no weight trains).
+    fn exported_model(&self) -> Result<SsrModel, TrainError> {
+        let trained = self.model().valid();
+        let (false, Some(init)) = (self.config.train_only.is_empty(), &self.config.init) else {
+            return Ok(trained);
+        };
+        let (mut model, _) = checkpoint::load(init, &self.inner)?;
+        for head in &self.config.train_only {
+            match head {
+                Head::Hazard => model.hazard = trained.hazard.clone(),
+                Head::Occupancy => model.occupancy = trained.occupancy.clone(),
+                Head::Motion => model.motion = trained.motion.clone(),
+                Head::Light => model.light = trained.light.clone(),
+            }
+        }
+        Ok(model)
     }
 
     /// A checkpoint plus the resume state (weights with ids, optimiser, progress).
@@ -663,4 +689,21 @@ fn progress_bar(visible: bool, position: u64, steps: u64) -> indicatif::Progress
         .progress_chars("=> "),
     );
     bar
+}
+
+/// The parameters of `heads` in `model`: all a run with [`TrainConfig::train_only`] updates.
+fn trained_params(model: &SsrModel, heads: &[Head]) -> Vec<ParamId> {
+    let mut ids = Vec::new();
+    for head in heads {
+        ids.extend(
+            match head {
+                Head::Hazard => model.hazard.as_ref().map(list_param_ids),
+                Head::Occupancy => model.occupancy.as_ref().map(list_param_ids),
+                Head::Motion => model.motion.as_ref().map(list_param_ids),
+                Head::Light => model.light.as_ref().map(list_param_ids),
+            }
+            .unwrap_or_default(),
+        );
+    }
+    ids
 }
