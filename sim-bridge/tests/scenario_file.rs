@@ -551,19 +551,9 @@ fn triggers_placed_by_rule_are_about_as_dense_on_carla_long_routes_as_the_public
 #[test]
 fn a_scenario_whose_vehicles_stand_where_the_route_passes_before_its_trigger_is_left_out() {
     // Town05-style long route 24 starts on the ring and comes back along it at its end.
-    let set = RouteSet::find("town05-long-style").unwrap();
-    let map = Map::from_str(
-        set.town.name(),
-        towngen::bundled(set.town),
-        MapOptions::default(),
-    )
-    .unwrap();
-    let spec = xml::parse(set.name, set.bundled_xml())
-        .unwrap()
-        .into_iter()
-        .find(|s| s.id == "24")
-        .unwrap();
-    let route = planner::plan_route(&map, &spec).unwrap();
+    let (map, spec, route) = bundled_route("town05-long-style", 8);
+    assert_eq!(spec.id, "24");
+    let town = map.name.clone();
     let driven_before = |k: usize, j: usize| {
         let p = route.points[j];
         route.points[..k].iter().any(|q| {
@@ -588,15 +578,14 @@ fn a_scenario_whose_vehicles_stand_where_the_route_passes_before_its_trigger_is_
             .unwrap()
     };
     let (fresh, passed) = (place(false), place(true));
-    let town = set.town.name();
     assert!(
-        !world_with(&map, town, &route, 5, fresh)
+        !world_with(&map, &town, &route, 5, fresh)
             .traffic
             .vehicles
             .is_empty()
     );
     assert!(
-        world_with(&map, town, &route, 5, passed)
+        world_with(&map, &town, &route, 5, passed)
             .traffic
             .vehicles
             .is_empty(),
