@@ -606,9 +606,10 @@ fn a_road_of_unusable_length_is_named_in_a_warning() {
 }
 
 /// `routes random` writes a route file that `routes show` and `eval --maps` read back (the town
-/// named after the map file), and refuses bad options and maps with the problem named.
+/// named after the map file), `routes scenarios` a scenario file `eval --scenarios` reads for
+/// them, and both refuse bad options and maps with the problem named.
 #[test]
-fn random_routes_on_any_map_are_written_and_driven() {
+fn random_routes_and_scenario_files_on_any_map_are_written_and_driven() {
     let tmp = tempfile::tempdir().unwrap();
     let maps = tmp.path().join("maps");
     std::fs::create_dir(&maps).unwrap();
@@ -667,6 +668,56 @@ fn random_routes_on_any_map_are_written_and_driven() {
     let records = &results["_checkpoint"]["records"];
     assert_eq!(records.as_array().map(Vec::len), Some(3), "{results}");
 
+    let scenarios = tmp.path().join("scenarios.json");
+    let placed = sim_bridge(&[
+        "routes",
+        "scenarios",
+        "--map",
+        map.to_str().unwrap(),
+        "--out",
+        scenarios.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&placed.stdout);
+    assert!(
+        placed.status.success() && stdout.contains("triggers on mytown"),
+        "{stdout} {}",
+        String::from_utf8_lossy(&placed.stderr)
+    );
+    let eval = sim_bridge(&[
+        "eval",
+        "--agent",
+        "expert",
+        "--routes",
+        out.to_str().unwrap(),
+        "--maps",
+        maps.to_str().unwrap(),
+        "--scenarios",
+        scenarios.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        tmp.path().join("with-scenarios.json").to_str().unwrap(),
+    ]);
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let close = sim_bridge(&[
+        "routes",
+        "scenarios",
+        "--map",
+        map.to_str().unwrap(),
+        "--spacing",
+        "3",
+        "--out",
+        scenarios.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&close.stderr);
+    assert!(
+        !close.status.success() && stderr.contains("--spacing 3: give 10 to 10000 m"),
+        "{stderr}"
+    );
+
     for (args, expected) in [
         (vec!["--count", "0"], "--count 0"),
         (vec!["--length", "5,10"], "--length 5,10"),
@@ -698,6 +749,20 @@ fn random_routes_on_any_map_are_written_and_driven() {
         "{stderr}"
     );
     assert!(!tmp.path().join("none.xml").exists());
+    let run = sim_bridge(&[
+        "routes",
+        "scenarios",
+        "--map",
+        broken.to_str().unwrap(),
+        "--out",
+        tmp.path().join("none.json").to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && stderr.contains("map broken is not valid OpenDRIVE"),
+        "{stderr}"
+    );
+    assert!(!tmp.path().join("none.json").exists());
 }
 
 /// Every file of a dataset's episodes, by path relative to `root`, with its bytes; the
