@@ -646,23 +646,27 @@ fn random_routes_and_scenario_files_on_any_map_are_written_and_driven() {
     let text = std::fs::read_to_string(&out).unwrap();
     assert_eq!(text.matches(r#"town="mytown""#).count(), 3, "{text}");
 
-    let eval = sim_bridge(&[
-        "eval",
-        "--agent",
-        "expert",
-        "--routes",
-        out.to_str().unwrap(),
-        "--maps",
-        maps.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        tmp.path().join("results.json").to_str().unwrap(),
-    ]);
-    assert!(
-        eval.status.success(),
-        "{}",
-        String::from_utf8_lossy(&eval.stderr)
-    );
+    // The expert drives the file's routes, found by town in --maps, with `extra` options.
+    let drive = |extra: &[&str], results: &str| {
+        let results = tmp.path().join(results);
+        let mut args = vec![
+            "eval",
+            "--agent",
+            "expert",
+            "--routes",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(&["--maps", maps.to_str().unwrap(), "--quiet", "--out"]);
+        args.push(results.to_str().unwrap());
+        args.extend_from_slice(extra);
+        let eval = sim_bridge(&args);
+        assert!(
+            eval.status.success(),
+            "{}",
+            String::from_utf8_lossy(&eval.stderr)
+        );
+    };
+    drive(&[], "results.json");
     let results: serde_json::Value =
         serde_json::from_slice(&std::fs::read(tmp.path().join("results.json")).unwrap()).unwrap();
     let records = &results["_checkpoint"]["records"];
@@ -683,24 +687,9 @@ fn random_routes_and_scenario_files_on_any_map_are_written_and_driven() {
         "{stdout} {}",
         String::from_utf8_lossy(&placed.stderr)
     );
-    let eval = sim_bridge(&[
-        "eval",
-        "--agent",
-        "expert",
-        "--routes",
-        out.to_str().unwrap(),
-        "--maps",
-        maps.to_str().unwrap(),
-        "--scenarios",
-        scenarios.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        tmp.path().join("with-scenarios.json").to_str().unwrap(),
-    ]);
-    assert!(
-        eval.status.success(),
-        "{}",
-        String::from_utf8_lossy(&eval.stderr)
+    drive(
+        &["--scenarios", scenarios.to_str().unwrap()],
+        "with-scenarios.json",
     );
     let close = sim_bridge(&[
         "routes",
