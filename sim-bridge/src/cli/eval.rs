@@ -205,8 +205,7 @@ fn run_suite(args: &EvalArgs, suite: &Suite) -> anyhow::Result<()> {
     };
     let path = dir.join("suite.json");
     let text = serde_json::to_string_pretty(&summary).context("serializing the suite summary")?;
-    ssrdrive_support::files::write_atomic(&path, text.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
+    super::write_output(&path, &text)?;
     println!("{}", suite_table(&summary));
     println!("suite summary written to {}", path.display());
     if !failures.is_empty() {

@@ -203,8 +203,7 @@ fn write_report(path: &Path, report: &LoadReport, memory: &[(f64, u64)]) -> anyh
             .map(|(at, bytes)| serde_json::json!({"at_s": at, "bytes": bytes}))
             .collect::<Vec<_>>(),
     });
-    ssrdrive_support::files::write_atomic(path, serde_json::to_string_pretty(&json)?.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))
+    super::write_output(path, &serde_json::to_string_pretty(&json)?)
 }
 
 /// How often the server's memory is read during a run.

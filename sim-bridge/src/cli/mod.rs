@@ -163,6 +163,13 @@ fn town_map(specs: &[RouteSpec], dir: &std::path::Path, routes: &str) -> anyhow:
     Ok(path.to_string_lossy().into_owned())
 }
 
+/// Writes a command's output file whole (atomically: a reader never sees half of it), the
+/// error naming the file.
+pub fn write_output(path: &std::path::Path, text: &str) -> anyhow::Result<()> {
+    ssrdrive_support::files::write_atomic(path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
+}
+
 /// A map from an .xodr path or a bundled town name.
 pub fn load_map(arg: &str, options: MapOptions) -> anyhow::Result<Map> {
     if let Some(style) = TownStyle::from_name(arg) {

@@ -105,11 +105,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         reports.push(report);
     }
     if let Some(out) = &args.out {
-        ssrdrive_support::files::write_atomic(
-            out,
-            serde_json::to_string_pretty(&reports)?.as_bytes(),
-        )
-        .with_context(|| format!("writing {}", out.display()))?;
+        super::write_output(out, &serde_json::to_string_pretty(&reports)?)?;
     }
     Ok(())
 }

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use sim_bridge::eval::merge::{Part, merge};
 use sim_bridge::scoring::{Results, summary_table};
-use ssrdrive_support::files::{read_capped_text, write_atomic};
+use ssrdrive_support::files::read_capped_text;
 
 /// The largest results file read (a record is about 1 kB: room for 100,000 runs).
 const MAX_RESULTS_BYTES: u64 = 128 << 20;
@@ -62,8 +62,7 @@ fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
         );
     }
     let merged = merge(&parts, args.allow_missing)?;
-    write_atomic(&args.out, merged.results.to_json().as_bytes())
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    super::write_output(&args.out, &merged.results.to_json())?;
     println!("{}", summary_table(&merged.results));
     let runs = merged.results.plan.as_ref().map_or(0, |p| p.runs);
     if merged.missing.is_empty() {

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use clap::{Args, Subcommand};
 use sim_bridge::map::MapOptions;
 use sim_bridge::route::DenseRoute;
@@ -211,8 +211,7 @@ fn random(args: RandomArgs) -> anyhow::Result<()> {
             sets::ATTEMPTS
         );
     }
-    ssrdrive_support::files::write_atomic(&out, write(&specs).as_bytes())
-        .with_context(|| format!("writing {}", out.display()))?;
+    super::write_output(&out, &write(&specs))?;
     let km: f64 = specs.iter().map(RouteSpec::keypoint_length).sum::<f64>() / 1000.0;
     println!(
         "wrote {} routes ({km:.2} km) on {town} to {}{}",
@@ -255,8 +254,7 @@ fn scenarios(args: ScenariosArgs) -> anyhow::Result<()> {
             2.0 * scenario_triggers::EDGE_M
         );
     }
-    ssrdrive_support::files::write_atomic(&out, scenario_file::write(&town, &triggers).as_bytes())
-        .with_context(|| format!("writing {}", out.display()))?;
+    super::write_output(&out, &scenario_file::write(&town, &triggers))?;
     let mut counts = std::collections::BTreeMap::new();
     for t in &triggers {
         *counts.entry(t.scenario).or_insert(0) += 1;

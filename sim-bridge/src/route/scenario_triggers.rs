@@ -85,6 +85,7 @@ pub fn place(map: &Map, spacing: f64, seed: u64) -> Vec<Trigger> {
     triggers
 }
 
+/// A trigger of `scenario` on `lane`'s centre line at arc length `s`, heading along it.
 fn trigger_at(map: &Map, lane: LaneIdx, s: f64, scenario: u8) -> Trigger {
     let pose = map.lane(lane).pose_at(s);
     Trigger {
