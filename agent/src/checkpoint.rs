@@ -14,6 +14,7 @@ use burn::tensor::Device;
 use ssrdrive_proto::camera::Rig;
 
 use crate::control::ControlConfig;
+use crate::history::History;
 use crate::model::SsrModel;
 use crate::model::config::SsrConfig;
 
@@ -22,6 +23,9 @@ pub const CONFIG_KEY: &str = "ssr_config";
 /// Metadata key of the controller settings JSON (the vehicle the network was trained to drive,
 /// look-ahead, PID gains, fusion); a checkpoint without it gets [`ControlConfig::default`].
 pub const CONTROL_KEY: &str = "control";
+/// Metadata key of how the network was trained to get its history BEV (a JSON string:
+/// `"chain"`, `"link"` or `"recursive"`); see [`history`] for checkpoints without it.
+pub const HISTORY_KEY: &str = "history";
 /// Metadata key of the rig the network was trained with (JSON); a checkpoint without it gets
 /// the config's default rig.
 pub const RIG_KEY: &str = "rig";
@@ -154,13 +158,20 @@ pub fn with_control(
             reason,
         })?;
     let (model, info) = load(from, device)?;
+    // Checkpoints written before the history had a key of its own kept it in the controller
+    // settings, which are replaced here: the copy names it under its own key.
+    let history = history(&info).map_err(|reason| CheckpointError::BadControl {
+        path: from.to_path_buf(),
+        reason,
+    })?;
     let control_json = serde_json::to_string(control).expect("configs serialise");
+    let history_json = serde_json::to_string(&history).expect("modes serialise");
     let metadata: Vec<(&str, String)> = info
         .metadata
         .iter()
-        .filter(|(key, _)| key.as_str() != CONTROL_KEY)
+        .filter(|(key, _)| ![CONTROL_KEY, HISTORY_KEY].contains(&key.as_str()))
         .map(|(key, value)| (key.as_str(), value.clone()))
-        .chain([(CONTROL_KEY, control_json)])
+        .chain([(CONTROL_KEY, control_json), (HISTORY_KEY, history_json)])
         .collect();
     let mut partial = to.as_os_str().to_owned();
     partial.push(".partial");
@@ -190,6 +201,26 @@ pub fn control_config(info: &CheckpointInfo) -> Result<ControlConfig, String> {
         .validate()
         .map_err(|e| format!("its '{CONTROL_KEY}' metadata: {e}"))?;
     Ok(config)
+}
+
+/// How a checkpoint's network gets its history BEV: its [`HISTORY_KEY`]; else the `history`
+/// its controller settings carried before the mode had a key of its own; else
+/// [`History::Recursive`], the mode checkpoints were validated on before there was a choice.
+pub fn history(info: &CheckpointInfo) -> Result<History, String> {
+    if let Some(json) = info.metadata.get(HISTORY_KEY) {
+        return serde_json::from_str(json)
+            .map_err(|e| format!("its '{HISTORY_KEY}' metadata is not a history mode: {e}"));
+    }
+    let Some(control) = info.metadata.get(CONTROL_KEY) else {
+        return Ok(History::Recursive);
+    };
+    #[derive(serde::Deserialize)]
+    struct Before {
+        history: Option<History>,
+    }
+    let before: Before = serde_json::from_str(control)
+        .map_err(|e| format!("its '{CONTROL_KEY}' metadata names no history mode: {e}"))?;
+    Ok(before.history.unwrap_or(History::Recursive))
 }
 
 /// The rig a checkpoint carries (checked), if any.

@@ -4,6 +4,7 @@
 //! - [`pose`]: ego poses and the ego motion between ticks.
 //! - [`model`]: the network (backbone, BEV encoder, Scenes TokenLearner, TCP head, FFP).
 //! - [`control`]: pure pursuit, speed PID, Beta rules and fusion (crate `ssr-control`).
+//! - [`history`]: how the network gets its history BEV (a setting training and serving share).
 //! - [`policy`]: per-episode state and the step / batched-step API.
 //! - [`checkpoint`]: weights with their config in one safetensors file.
 //! - [`train`]: losses (imitation + future-BEV) used by training.
@@ -19,6 +20,7 @@
 pub mod checkpoint;
 pub use ssr_control as control;
 pub mod device;
+pub mod history;
 pub mod model;
 pub mod policy;
 pub mod pose;

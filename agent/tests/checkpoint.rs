@@ -9,9 +9,11 @@ use burn::tensor::Device;
 
 use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::checkpoint::{
-    CONTROL_KEY, CheckpointError, control_config, inspect, load, save, with_control,
+    CONTROL_KEY, CheckpointError, HISTORY_KEY, control_config, history, inspect, load, save,
+    with_control,
 };
 use ssr_agent::control::ControlConfig;
+use ssr_agent::history::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::{SsrModel, float_values};
 
@@ -45,6 +47,55 @@ fn assert_same_outputs(a: &SsrModel, b: &SsrModel, config: &SsrConfig, device: &
         0.0
     );
     assert_eq!(max_abs_diff(float_values(a.bev), float_values(b.bev)), 0.0);
+}
+
+#[test]
+fn a_checkpoint_names_its_history_mode_or_is_served_as_it_was_validated() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let model = config.init(&device);
+    let dir = tempfile::tempdir().unwrap();
+    let written = |name: &str, metadata: &[(&str, String)]| {
+        let path = dir.path().join(name);
+        save(&model, &config, metadata, &path).unwrap();
+        path
+    };
+    let mode = |path: &std::path::Path| history(&inspect(path).unwrap());
+    // Its own key.
+    let link = written("link.safetensors", &[(HISTORY_KEY, "\"link\"".into())]);
+    assert_eq!(mode(&link), Ok(History::Link));
+    // Written before the key: the controller settings carried it.
+    let older = written(
+        "older.safetensors",
+        &[(CONTROL_KEY, r#"{"alpha": 0.3, "history": "chain"}"#.into())],
+    );
+    assert_eq!(mode(&older), Ok(History::Chain));
+    // Written before there was a choice: the recursion it was validated on.
+    let oldest = written(
+        "oldest.safetensors",
+        &[(CONTROL_KEY, r#"{"alpha": 0.3}"#.into())],
+    );
+    assert_eq!(mode(&oldest), Ok(History::Recursive));
+    assert_eq!(
+        mode(&written("none.safetensors", &[])),
+        Ok(History::Recursive)
+    );
+    let bad = written("bad.safetensors", &[(HISTORY_KEY, "\"sideways\"".into())]);
+    let error = mode(&bad).unwrap_err();
+    assert!(
+        error.contains("'history' metadata") && error.contains("sideways"),
+        "{error}"
+    );
+    // New controller settings for an older checkpoint keep the mode it carried.
+    with_control(&older, &older, &ControlConfig::default(), &device).unwrap();
+    assert_eq!(mode(&older), Ok(History::Chain));
+    assert_eq!("link".parse(), Ok(History::Link));
+    assert!(
+        "sideways"
+            .parse::<History>()
+            .unwrap_err()
+            .contains("sideways")
+    );
 }
 
 #[test]

@@ -4,7 +4,8 @@
 mod common;
 
 use common::{policy_of, rig, step_input, tiny_config};
-use ssr_agent::control::{ControlConfig, ControlDecision, History, SafetyStop, Unstick};
+use ssr_agent::control::{ControlConfig, ControlDecision, SafetyStop, Unstick};
+use ssr_agent::history::History;
 use ssr_agent::model::bev::HISTORY_TICKS;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::policy::{InputError, SsrPolicy, StepError, StepInput, StepOutput};
@@ -71,10 +72,7 @@ fn a_step_sees_the_history_chain_training_gives_it_and_nothing_older() {
     let t = 3 * HISTORY_TICKS as u32;
     let chain = [t - 2 * HISTORY_TICKS as u32, t - HISTORY_TICKS as u32, t];
     let plan_at_t = |history: History, seed_of: &dyn Fn(u32) -> u32| {
-        let mut episode = policy.new_episode_with(ControlConfig {
-            history,
-            ..ControlConfig::default()
-        });
+        let mut episode = policy.new_episode_with_history(history);
         let mut last = None;
         for tick in 0..=t {
             let input = step_input(&rig, tick, seed_of(tick));
@@ -125,12 +123,7 @@ fn episodes_of_every_history_mode_step_in_one_batch_as_alone() {
     let policy = policy();
     let rig = rig(1, 900, 256);
     let modes = [History::Link, History::Chain, History::Recursive];
-    let episode = |history| {
-        policy.new_episode_with(ControlConfig {
-            history,
-            ..ControlConfig::default()
-        })
-    };
+    let episode = |history| policy.new_episode_with_history(history);
     let mut alone: Vec<_> = modes.iter().map(|&m| episode(m)).collect();
     let mut together: Vec<_> = modes.iter().map(|&m| episode(m)).collect();
     for tick in 0..=2 * HISTORY_TICKS as u32 + 1 {

@@ -11,7 +11,7 @@ use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use ssr_agent::checkpoint;
-use ssr_agent::control::History;
+use ssr_agent::history::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::float_values;
 use ssr_agent::train::augment::Photometric;
@@ -612,8 +612,7 @@ fn a_link_trains_without_the_frame_1_s_back_and_its_checkpoints_are_served_so() 
     let out = tmp.dir("link-run");
     let summary = train(config.clone(), options(&data, &out), set).unwrap();
     let info = checkpoint::inspect(&summary.checkpoint).unwrap();
-    let control = checkpoint::control_config(&info).unwrap();
-    assert_eq!(control.history, History::Link);
+    assert_eq!(checkpoint::history(&info), Ok(History::Link));
 
     config.history = History::Recursive;
     let error = config.validate().unwrap_err();

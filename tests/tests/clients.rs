@@ -348,6 +348,7 @@ fn a_recorded_run_replays_without_drift() {
         String::from_utf8_lossy(&run.stderr)
     );
     let out = dir.join("replay.json");
+    let ticks = dir.join("ticks.jsonl");
     let run = Command::new(binary("sim-bridge"))
         .args([
             "replay",
@@ -356,6 +357,8 @@ fn a_recorded_run_replays_without_drift() {
             "--out",
         ])
         .arg(&out)
+        .arg("--ticks")
+        .arg(&ticks)
         .arg(&logs)
         .output()
         .unwrap();
@@ -375,4 +378,20 @@ fn a_recorded_run_replays_without_drift() {
         assert_eq!(report[field]["max"], 0.0, "{field}: {report}");
     }
     assert!(report["open_loop"][0]["samples"].as_u64().unwrap() > 0);
+    // Per tick, what the network believed: cpu-default has a hazard head and no light head.
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&ticks)
+        .unwrap()
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 31);
+    for (i, line) in lines.iter().enumerate() {
+        assert_eq!(line["frame"], i as u64, "{line}");
+        assert_eq!(line["control"], line["recorded"], "{line}");
+        assert!(line["log"].as_str().unwrap().ends_with(".ssrlog"), "{line}");
+        let hazard: Vec<f64> = serde_json::from_value(line["hazard"].clone()).unwrap();
+        assert_eq!(hazard.len(), 5);
+        assert!((hazard.iter().sum::<f64>() - 1.0).abs() < 1e-3, "{line}");
+        assert!(line["light"].is_null(), "{line}");
+    }
 }

@@ -101,52 +101,6 @@ pub struct ControlConfig {
     pub unstick: Unstick,
     /// The safety stop on the network's occupancy (off by default).
     pub safety: SafetyStop,
-    /// How the serving policy gives the network its history. Not the controller's, but an
-    /// episode's serving setting like the rules above, carried with them so that each
-    /// checkpoint is served as it was validated; checkpoints without it were validated on
-    /// [`History::Recursive`].
-    #[serde(default = "History::validated_before_the_chain")]
-    pub history: History,
-}
-
-/// How the serving policy (`ssr_agent::policy`) gives the network its history BEV.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum History {
-    /// Two links: the step's BEV attends to the BEV of the frame 0.5 s back, which attended to
-    /// the first-frame BEV of the frame 1 s back, and nothing older (three BEV passes a step;
-    /// checkpoints trained with `--history chain`).
-    #[default]
-    Chain,
-    /// One link: the step's BEV attends to the first-frame BEV of the frame 0.5 s back, which
-    /// attended to nothing (two BEV passes a step; checkpoints trained with
-    /// `--history link`).
-    Link,
-    /// The BEV each step plans from is the history of the step 0.5 s later: a recursion of
-    /// unbounded depth (one BEV pass a step).
-    Recursive,
-}
-
-impl History {
-    /// The mode of checkpoints whose settings do not name one.
-    fn validated_before_the_chain() -> Self {
-        History::Recursive
-    }
-}
-
-impl std::str::FromStr for History {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, Self::Err> {
-        match text {
-            "chain" => Ok(History::Chain),
-            "link" => Ok(History::Link),
-            "recursive" => Ok(History::Recursive),
-            other => Err(format!(
-                "unknown history mode '{other}' (chain, link or recursive)"
-            )),
-        }
-    }
 }
 
 impl Default for ControlConfig {
@@ -171,7 +125,6 @@ impl Default for ControlConfig {
             turn_count: 10,
             unstick: Unstick::default(),
             safety: SafetyStop::default(),
-            history: History::default(),
         }
     }
 }

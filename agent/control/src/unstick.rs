@@ -10,13 +10,22 @@
 //! A light the network sees red or yellow (the light head's [`Beliefs::light`], probability at
 //! least [`Unstick::light_hold_probability`]) holds the car: no creep starts and both waits
 //! count again from the last tick it saw one, for at most [`Unstick::after_s`] of seeing it in
-//! one standstill (no light stays red that long; on Town02 a green lamp cut by the top of the
-//! frame held a car for good). The plain wait is for the network's inertia, not
-//! for a light: a car that did not start on green, held past [`Unstick::after_s`], would
+//! one standstill (no light stays red that long). The plain wait is for the network's inertia,
+//! not for a light: a car that did not start on green, held past [`Unstick::after_s`], would
 //! otherwise creep into the next red (seen on Town02, where the head stands beside the line in
-//! full view). The other way round, a light the light head sees green counts as nothing to
-//! wait for: the hazard head's "light" weighs in [`Unstick::free_to_go`] by the probability of
-//! green. Without the light head the rule is as before.
+//! full view). A standstill ends when the car drives faster than the creep; a creep that has
+//! started runs to its end.
+//!
+//! The other way round, a light the light head sees green counts as nothing to wait for: the
+//! hazard head's "light" weighs in [`Unstick::free_to_go`] by the probability of green. And a
+//! stopped car that sees its light green (probability at least [`Unstick::clear_probability`])
+//! trusts that sighting for [`Unstick::green_latch_s`]: no light holds it and the hazard head's
+//! "light" counts as clear, so a car that stops again after a metre, its lamp now cut by the
+//! top of the frame and read as red, creeps on after the early wait. (Seen on Town02, where
+//! the heads stand beside the line: the car started on green, stopped a metre on, and stood
+//! blind until the route timed out.) The latch is as long as CARLA's default green, 10 s,
+//! which a car that waited at the red sees from its first second. Without the light head the
+//! rule is as before.
 //!
 //! TransFuser++'s rule creeps only when a LiDAR safety box is empty; here the [`super::safety`]
 //! stop, where it is on, plays that part from the network's own occupancy head, and overrides
@@ -65,6 +74,9 @@ pub struct Unstick {
     /// (no creep; the waits count from the last such tick), for at most [`Unstick::after_s`]
     /// of seeing it in one standstill.
     pub light_hold_probability: f32,
+    /// Seconds a stopped car trusts a light it saw green: no light holds it and the hazard
+    /// head's "light" counts as clear (0 turns the latch off).
+    pub green_latch_s: f32,
 }
 
 impl Default for Unstick {
@@ -79,6 +91,7 @@ impl Default for Unstick {
             creep_speed: 2.0,
             creep_throttle: 0.5,
             light_hold_probability: 0.5,
+            green_latch_s: 10.0,
         }
     }
 }
@@ -104,22 +117,25 @@ impl Unstick {
                 0.0,
                 1.0,
             ),
+            ("unstick.green_latch_s", self.green_latch_s, 0.0, 120.0),
         ];
         super::check_ranges(&fields)
     }
 
     /// The probability, for a stopped car, that nothing holds it: the hazard head's "clear",
     /// plus its "stop sign" where [`Unstick::served_stop_signs`] says so, plus its "light"
-    /// times the light head's "green"; `None` without the hazard head.
-    pub fn free_to_go(&self, beliefs: &Beliefs) -> Option<f32> {
+    /// times the light head's "green" (the whole "light" while `green_latched`); `None`
+    /// without the hazard head.
+    pub fn free_to_go(&self, beliefs: &Beliefs, green_latched: bool) -> Option<f32> {
         let served = beliefs
             .stop_sign
             .filter(|_| self.served_stop_signs)
             .unwrap_or(0.0);
-        let green = beliefs
-            .light_hazard
-            .zip(beliefs.light)
-            .map_or(0.0, |(hazard, light)| hazard * light.green);
+        let green = match (beliefs.light_hazard, beliefs.light) {
+            (Some(hazard), _) if green_latched => hazard,
+            (Some(hazard), Some(light)) => hazard * light.green,
+            _ => 0.0,
+        };
         beliefs.clear.map(|p| p + served + green)
     }
 
@@ -128,6 +144,13 @@ impl Unstick {
         beliefs
             .light
             .is_some_and(|light| light.stop >= self.light_hold_probability)
+    }
+
+    /// Whether the light head sees the light ahead green, sure enough to start on.
+    fn sees_green(&self, beliefs: &Beliefs) -> bool {
+        beliefs
+            .light
+            .is_some_and(|light| light.green >= self.clear_probability)
     }
 }
 
@@ -139,6 +162,8 @@ pub struct UnstickState {
     creep_ticks_left: u32,
     /// Ticks of this standstill in which the light head saw a light to stop for.
     light_ticks: u32,
+    /// Ticks left of trusting a green light seen from standstill.
+    green_ticks_left: u32,
 }
 
 impl UnstickState {
@@ -156,27 +181,39 @@ impl UnstickState {
         if !rule.enabled {
             return (control, false);
         }
+        let stopped = speed < STOPPED_SPEED;
+        let creeping = self.creep_ticks_left > 0;
+        // Faster than the creep, the car drives on its own: the standstill is over.
+        let driving = speed >= rule.creep_speed;
+        self.green_ticks_left = if driving {
+            0
+        } else if self.green_ticks_left == 0 && stopped && rule.sees_green(beliefs) {
+            (rule.green_latch_s * TICKS_PER_SECOND).round() as u32
+        } else {
+            self.green_ticks_left.saturating_sub(1)
+        };
+        let green_latched = self.green_ticks_left > 0;
         // A light seen red for longer than the plain wait in one standstill (flicker or not)
         // is longer than any light stays red: a lamp half out of the frame, or another
         // approach's; the waits then go on.
-        let holds = rule.light_holds(beliefs);
-        self.light_ticks = if speed >= STOPPED_SPEED {
+        let holds = !green_latched && rule.light_holds(beliefs);
+        self.light_ticks = if driving {
             0
         } else {
             self.light_ticks + u32::from(holds)
         };
-        if holds && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
+        if holds && !creeping && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
             *self = Self {
                 light_ticks: self.light_ticks,
+                green_ticks_left: self.green_ticks_left,
                 ..Self::default()
             };
             return (control, false);
         }
-        if self.creep_ticks_left == 0 {
-            let stopped = speed < STOPPED_SPEED;
+        if !creeping {
             let clear = stopped
                 && rule
-                    .free_to_go(beliefs)
+                    .free_to_go(beliefs, green_latched)
                     .is_some_and(|p| p >= rule.clear_probability);
             self.stopped_ticks = if stopped { self.stopped_ticks + 1 } else { 0 };
             self.clear_ticks = if clear { self.clear_ticks + 1 } else { 0 };

@@ -7,7 +7,7 @@ use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
 use ssr_control::unstick::TICKS_PER_SECOND;
 use ssr_control::{
-    Beliefs, ControlConfig, EpisodeController, History, LightBelief, SafetyStop, Unstick, Vehicle,
+    Beliefs, ControlConfig, EpisodeController, LightBelief, SafetyStop, Unstick, Vehicle,
 };
 use ssrdrive_proto::control::Control;
 
@@ -575,12 +575,116 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
         clear: Some(0.3),
         ..Beliefs::default()
     };
-    assert_eq!(rule.free_to_go(&clear_only), Some(0.3));
+    assert_eq!(rule.free_to_go(&clear_only, false), Some(0.3));
     let sign_only = Beliefs {
         stop_sign: Some(0.65),
         ..Beliefs::default()
     };
-    assert_eq!(rule.free_to_go(&sign_only), None, "no head, no early creep");
+    assert_eq!(
+        rule.free_to_go(&sign_only, false),
+        None,
+        "no head, no early creep"
+    );
+}
+
+#[test]
+fn a_green_seen_from_standstill_is_trusted_when_the_lamp_leaves_the_frame() {
+    let hold = [[0.0, 0.0]; 4];
+    let light = |green: f32, stop: f32| Beliefs {
+        clear: Some(0.02),
+        light_hazard: Some(0.95),
+        light: Some(LightBelief { green, stop }),
+        ..Beliefs::default()
+    };
+    let green = light(0.97, 0.02);
+    let red = light(0.01, 0.98);
+    // Stopped at red, sees green, starts; a metre on it stops, the lamp cut by the frame
+    // and read as red. The tick of the first creep after that stop, if any within `ticks`.
+    let creep_after_cut = |config: &ControlConfig, ticks: usize| {
+        let mut controller = EpisodeController::new(config.clone());
+        for _ in 0..40 {
+            controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, red);
+        }
+        controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, green);
+        for _ in 0..20 {
+            controller.act_with_branch(&hold, [10.0, 0.0], 1.0, None, red);
+        }
+        (0..ticks).find(|_| {
+            controller
+                .act_with_branch(&hold, [10.0, 0.0], 0.0, None, red)
+                .unsticking
+        })
+    };
+    let config = ControlConfig::default();
+    let rule = &config.unstick;
+    let early = ticks(rule.clear_after_s);
+    assert!(ticks(rule.green_latch_s) > 20 + early);
+    assert_eq!(
+        creep_after_cut(&config, ticks(rule.after_s)),
+        Some(early - 1),
+        "the latch lets the early creep come"
+    );
+    let off = ControlConfig {
+        unstick: Unstick {
+            green_latch_s: 0.0,
+            ..Unstick::default()
+        },
+        ..ControlConfig::default()
+    };
+    assert_eq!(
+        creep_after_cut(&off, ticks(rule.after_s)),
+        None,
+        "without the latch the red holds it"
+    );
+    // Once the car drives on its own (faster than the creep) the latch is gone: a red
+    // at the next light holds.
+    let mut controller = EpisodeController::new(config.clone());
+    controller.act_with_branch(&hold, [10.0, 0.0], 0.0, None, green);
+    controller.act_with_branch(&hold, [10.0, 0.0], rule.creep_speed + 1.0, None, red);
+    assert!(
+        (0..ticks(rule.after_s)).all(|_| {
+            !controller
+                .act_with_branch(&hold, [10.0, 0.0], 0.0, None, red)
+                .unsticking
+        }),
+        "a red after driving on holds"
+    );
+}
+
+#[test]
+fn a_creep_that_started_runs_to_its_end_through_a_light_seen_red() {
+    let config = ControlConfig::default();
+    let rule = config.unstick.clone();
+    let hold = [[0.0, 0.0]; 4];
+    let red = Beliefs {
+        clear: Some(0.02),
+        light_hazard: Some(0.95),
+        light: Some(LightBelief {
+            green: 0.01,
+            stop: 0.98,
+        }),
+        ..Beliefs::default()
+    };
+    let mut controller = EpisodeController::new(config);
+    // The hold lifts after the plain wait of seeing red, then the plain wait runs.
+    let plain = ticks(rule.after_s);
+    let first = (0..3 * plain)
+        .find(|_| {
+            controller
+                .act_with_branch(&hold, [10.0, 0.0], 0.0, None, red)
+                .unsticking
+        })
+        .expect("a creep starts");
+    assert_eq!(first, 2 * plain - 2);
+    // The car rolls (below the creep speed) and still sees red: the creep goes on.
+    let creep = ticks(rule.creep_s);
+    for tick in 1..creep {
+        let d = controller.act_with_branch(&hold, [10.0, 0.0], 0.5, None, red);
+        assert!(
+            d.unsticking && d.control.throttle > 0.0,
+            "tick {tick}: {d:?}"
+        );
+    }
 }
 
 #[test]
@@ -778,17 +882,4 @@ fn a_belief_that_flickers_does_not_restart_the_safety_stops_count() {
     });
     let through = through.expect("a creep gets through");
     assert!(through >= yield_ticks, "yielded at tick {through}");
-}
-
-#[test]
-fn settings_without_a_history_mode_are_served_as_they_were_validated() {
-    assert_eq!(ControlConfig::default().history, History::Chain);
-    let mut json = serde_json::to_value(ControlConfig::default()).unwrap();
-    json.as_object_mut().unwrap().remove("history");
-    let older: ControlConfig = serde_json::from_value(json).unwrap();
-    assert_eq!(older.history, History::Recursive);
-    assert_eq!("chain".parse(), Ok(History::Chain));
-    assert_eq!("recursive".parse(), Ok(History::Recursive));
-    let error = "sideways".parse::<History>().unwrap_err();
-    assert!(error.contains("sideways"), "{error}");
 }

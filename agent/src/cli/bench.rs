@@ -9,8 +9,9 @@ use anyhow::Context as _;
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
-use ssr_agent::control::{ControlConfig, History};
+use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
+use ssr_agent::history::History;
 use ssr_agent::model::bev::{GeometryTensors, HISTORY_TICKS, SampleGeometry};
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::{ModelInput, Navigation, SsrModel, float_tensor};
@@ -251,10 +252,7 @@ fn policy_step_rows(
         (History::Link, "policy_step_900x256_link_ms"),
         (History::Recursive, "policy_step_900x256_recursive_ms"),
     ] {
-        let mut episode = policy.new_episode_with(ControlConfig {
-            history,
-            ..policy.control().clone()
-        });
+        let mut episode = policy.new_episode_with_history(history);
         let mut tick = 0;
         let mut step_once = || {
             tick += 1;

@@ -5,8 +5,8 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::Args;
-use ssr_agent::control::History;
 use ssr_agent::device::Backend;
+use ssr_agent::history::History;
 use ssr_agent::serve::{self, LogFormat, ServeConfig};
 
 #[derive(Debug, Args)]

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use ssr_agent::checkpoint;
-use ssr_agent::control::History;
+use ssr_agent::history::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::train::config::{Head, Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, TrainingData};

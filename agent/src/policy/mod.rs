@@ -22,7 +22,8 @@ use ssrdrive_proto::camera::{Rig, RigError};
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::image::RgbImage;
 
-use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController, History};
+use crate::control::{Beliefs, ControlConfig, ControlDecision, EpisodeController, LightBelief};
+use crate::history::History;
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_TICKS, ImageFeatures, SampleGeometry};
 use crate::model::config::SsrConfig;
@@ -158,6 +159,8 @@ pub struct EpisodeState {
     /// The chain links of the last [`HISTORY_TICKS`] steps, oldest first: the oldest is the
     /// history of the next step once the queue is full.
     recent: VecDeque<ChainLinks>,
+    /// How the network gets its history in this episode.
+    history: History,
     controller: EpisodeController,
     ticks: u64,
 }
@@ -171,10 +174,10 @@ impl EpisodeState {
     /// Whether the next step has a history BEV (from [`HISTORY_TICKS`] steps before it) to
     /// attend to; the first steps of an episode have none.
     pub fn has_previous_bev(&self) -> bool {
-        self.history().is_some()
+        self.previous_links().is_some()
     }
 
-    fn history(&self) -> Option<&ChainLinks> {
+    fn previous_links(&self) -> Option<&ChainLinks> {
         self.recent
             .front()
             .filter(|_| self.recent.len() == HISTORY_TICKS)
@@ -210,6 +213,11 @@ pub struct StepDebug {
     /// `[channels][rows * cols]` the occupancy head's probabilities (vehicle, walker; see
     /// `OCCUPANCY_CHANNELS`); empty for a network without the head.
     pub occupancy: Vec<Vec<f32>>,
+    /// The hazard head's probability of each class, in [`Hazard::ALL`]'s order; `None` for
+    /// a network without the head.
+    pub hazard: Option<[f32; Hazard::ALL.len()]>,
+    /// The light head's belief; `None` for a network without the head.
+    pub light: Option<LightBelief>,
 }
 
 /// What one step returns.
@@ -232,6 +240,7 @@ pub struct SsrPolicy {
     model: SsrModel,
     config: SsrConfig,
     control: ControlConfig,
+    history: History,
     device: Device,
 }
 
@@ -297,14 +306,22 @@ fn check_input(input: &StepInput) -> Result<(), InputError> {
 }
 
 impl SsrPolicy {
-    /// Wraps a network for inference (batch norm in evaluation mode, no autodiff).
+    /// Wraps a network for inference (batch norm in evaluation mode, no autodiff), fed its
+    /// history as [`History::Chain`] (see [`SsrPolicy::with_history`]).
     pub fn new(model: SsrModel, config: SsrConfig, control: ControlConfig, device: Device) -> Self {
         Self {
             model: model.valid(),
             config,
             control,
+            history: History::default(),
             device,
         }
+    }
+
+    /// The same policy feeding its network the history as `history` (a checkpoint's mode,
+    /// [`crate::checkpoint::history`]).
+    pub fn with_history(self, history: History) -> Self {
+        Self { history, ..self }
     }
 
     /// The network's model config.
@@ -317,6 +334,11 @@ impl SsrPolicy {
         &self.control
     }
 
+    /// How new episodes give the network its history.
+    pub fn history(&self) -> History {
+        self.history
+    }
+
     /// A fresh episode: no previous BEV, empty controller windows.
     pub fn new_episode(&self) -> EpisodeState {
         self.new_episode_with(self.control.clone())
@@ -326,8 +348,17 @@ impl SsrPolicy {
     pub fn new_episode_with(&self, control: ControlConfig) -> EpisodeState {
         EpisodeState {
             recent: VecDeque::with_capacity(HISTORY_TICKS),
+            history: self.history,
             controller: EpisodeController::new(control),
             ticks: 0,
+        }
+    }
+
+    /// A fresh episode fed its history as `history` (to compare the modes on one network).
+    pub fn new_episode_with_history(&self, history: History) -> EpisodeState {
+        EpisodeState {
+            history,
+            ..self.new_episode()
         }
     }
 
@@ -426,7 +457,7 @@ impl SsrPolicy {
             .zip(states.iter())
             .map(|(input, state)| {
                 let motion = state
-                    .history()
+                    .previous_links()
                     .map(|links| EgoMotion::between(links.pose, input.pose));
                 self.geometry(input, motion)
             })
@@ -455,7 +486,7 @@ impl SsrPolicy {
         let mut results = Vec::with_capacity(inputs.len());
         for (i, (state, input)) in states.iter_mut().zip(inputs).enumerate() {
             results.push(self.decide(state, input, outputs.episode(i)));
-            state.remember(bevs.links(i, state.controller.config().history, input.pose));
+            state.remember(bevs.links(i, state.history, input.pose));
         }
         results
     }
@@ -476,15 +507,15 @@ impl SsrPolicy {
         let history = |link: fn(&ChainLinks) -> &Tensor<3>| {
             let bevs = states
                 .iter()
-                .map(|s| s.history().map_or_else(zeros, |l| link(l).clone()));
+                .map(|s| s.previous_links().map_or_else(zeros, |l| link(l).clone()));
             Tensor::cat(bevs.collect(), 0)
         };
         // The history the BEV each step plans from attends to (zeros before there is one).
         let previous_bev = Tensor::cat(
             states
                 .iter()
-                .map(|s| match s.history() {
-                    Some(links) => match s.controller.config().history {
+                .map(|s| match s.previous_links() {
+                    Some(links) => match s.history {
                         History::Chain | History::Recursive => links.context.clone(),
                         History::Link => links.deep.clone(),
                     },
@@ -496,7 +527,7 @@ impl SsrPolicy {
         let with_history = |mode: History| {
             states
                 .iter()
-                .any(|s| s.has_previous_bev() && s.controller.config().history == mode)
+                .any(|s| s.has_previous_bev() && s.history == mode)
         };
         // Chained episodes keep the context BEV (the step's BEV attending to the deep one
         // before it); chained and linked ones the deep BEV (the step's first-frame BEV).
@@ -572,6 +603,8 @@ impl SsrPolicy {
             beta: out.beta,
             predicted_speed: out.predicted_speed,
             occupancy: out.occupancy_maps(),
+            hazard: out.hazards.copied(),
+            light: out.light(),
         });
         StepOutput {
             decision,

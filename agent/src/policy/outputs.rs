@@ -25,7 +25,7 @@ pub(super) struct Needs {
     pub occupancy: bool,
     /// Motion for the safety stop's motion rule.
     pub motion: bool,
-    /// Hazard and light probabilities for the unstick rule.
+    /// Hazard and light probabilities for the unstick rule (and debug outputs).
     pub hazard: bool,
 }
 
@@ -108,8 +108,8 @@ impl GroupOutputs {
                 .filter(|_| needs.debug || needs.occupancy)
                 .map(cells_of),
             motion: model.motion.as_ref().filter(|_| needs.motion).map(cells_of),
-            hazards: classes(model.hazard.as_ref(), needs.hazard, scene),
-            lights: classes(model.light.as_ref(), needs.hazard, scene),
+            hazards: classes(model.hazard.as_ref(), needs.hazard || needs.debug, scene),
+            lights: classes(model.light.as_ref(), needs.hazard || needs.debug, scene),
         }
     }
 

@@ -12,8 +12,8 @@ use ssrdrive_support::error_text::clipped;
 use ssrdrive_support::files::{CappedReadError, read_capped_text};
 use ssrdrive_support::ranges::first_outside;
 
-use crate::control::History;
 use crate::device::Backend;
+use crate::history::History;
 
 /// Largest config file read, bytes.
 const MAX_CONFIG_BYTES: u64 = 1 << 20;
@@ -97,7 +97,7 @@ pub struct ServeConfig {
     /// be (`ssr_control::safety`); `None` keeps the checkpoint's setting. On needs a checkpoint
     /// with the head.
     pub safety_motion: Option<bool>,
-    /// How the network gets its history (`ssr_control::History`: training's chain, or the
+    /// How the network gets its history ([`History`]: training's chain, or the
     /// recursion of checkpoints validated before it) for every episode; `None` keeps the
     /// checkpoint's setting.
     pub history: Option<History>,

@@ -18,6 +18,7 @@ use super::decode;
 use super::episodes::{Driver, EpisodeError, EpisodeTable};
 use super::metrics::{Metrics, StepPhases};
 use crate::model::config::SsrConfig;
+use crate::model::hazard::Hazard;
 use crate::policy::{SsrPolicy, StepOutput};
 
 /// What the server runs, for `GetAgentInfo`.
@@ -424,5 +425,21 @@ fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
         branch_control: Some(wire::control_to_proto(output.decision.branch)),
         beta_params: vec![debug.alpha[0], debug.beta[0], debug.alpha[1], debug.beta[1]],
         predicted_speed_mps: debug.predicted_speed.into(),
+        hazard: debug.hazard.map(|p| v1::HazardBelief {
+            clear: p[Hazard::Clear.index()],
+            light: p[Hazard::Light.index()],
+            stop_sign: p[Hazard::Sign.index()],
+            road_user: p[Hazard::RoadUser.index()],
+            lane_change: p[Hazard::LaneChange.index()],
+        }),
+        light: debug.light.map(|light| v1::LightBelief {
+            green: light.green,
+            stop: light.stop,
+        }),
+        controller: Some(v1::ControllerState {
+            turning: output.decision.turning,
+            unsticking: output.decision.unsticking,
+            safety_stop: output.decision.safety_stop,
+        }),
     })
 }

@@ -38,6 +38,7 @@ use tonic_health::ServingStatus;
 
 use crate::checkpoint;
 use crate::control::ControlConfig;
+use crate::history::History;
 use crate::model::SsrModel;
 use crate::model::config::SsrConfig;
 use crate::policy::SsrPolicy;
@@ -60,9 +61,11 @@ pub fn load_policy(
         let rig = checkpoint::rig(&info).map_err(|e| anyhow::anyhow!("checkpoint {name}: {e}"))?;
         let control = checkpoint::control_config(&info)
             .map_err(|e| anyhow::anyhow!("checkpoint {name}: {e}"))?;
-        anyhow::Ok((model, info.config, name, rig, control))
+        let history =
+            checkpoint::history(&info).map_err(|e| anyhow::anyhow!("checkpoint {name}: {e}"))?;
+        anyhow::Ok((model, info.config, name, rig, (control, history)))
     };
-    let (model, model_config, checkpoint, rig, control) =
+    let (model, model_config, checkpoint, rig, (control, history)) =
         match (&config.checkpoint, &config.untrained_config) {
             (Some(path), _) => {
                 trained(checkpoint::load(path, device)?, path.display().to_string())?
@@ -79,7 +82,7 @@ pub fn load_policy(
                     model_config,
                     "untrained (random weights)".to_string(),
                     None,
-                    ControlConfig::default(),
+                    (ControlConfig::default(), History::default()),
                 )
             }
             (None, None) => trained(
@@ -97,7 +100,7 @@ pub fn load_policy(
     control.unstick.enabled = config.unstick.unwrap_or(control.unstick.enabled);
     control.safety.enabled = config.safety_stop.unwrap_or(control.safety.enabled);
     control.safety.motion = config.safety_motion.unwrap_or(control.safety.motion);
-    control.history = config.history.unwrap_or(control.history);
+    let history = config.history.unwrap_or(history);
     if control.safety.enabled && model.occupancy.is_none() {
         anyhow::bail!(
             "the safety stop reads the network's occupancy head, and {} has none \
@@ -117,12 +120,12 @@ pub fn load_policy(
         safety_stop = control.safety.enabled,
         safety_motion = control.safety.motion,
         unstick = control.unstick.enabled,
-        history = ?control.history,
+        ?history,
         wheelbase_m = control.vehicle.wheelbase,
         max_wheel_angle_deg = control.vehicle.max_wheel_angle,
         "controller"
     );
-    let policy = SsrPolicy::new(model, model_config, control, device.clone());
+    let policy = SsrPolicy::new(model, model_config, control, device.clone()).with_history(history);
     Ok((policy, info))
 }
 

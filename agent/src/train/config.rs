@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::data::Labels;
 use super::loss::LossWeights;
-use crate::control::History;
+use crate::history::History;
 use crate::model::config::SsrConfig;
 
 /// How the learning rate decays after the warm-up.

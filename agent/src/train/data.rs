@@ -30,7 +30,7 @@ use ssrdrive_proto::dataset::{
 use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
 use super::occupancy::actors_in_frame_of;
-use crate::control::History;
+use crate::history::History;
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
 use crate::model::config::SsrConfig;

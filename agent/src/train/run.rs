@@ -39,7 +39,8 @@ use super::occupancy::confusion;
 use super::resume::{Progress, load_model, read_progress, save_weights};
 use super::validation::{HeadVerdicts, ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint;
-use crate::control::{ControlConfig, History};
+use crate::control::ControlConfig;
+use crate::history::History;
 use crate::model::classifier::predicted_classes;
 use crate::model::config::SsrConfig;
 use crate::model::hazard::Hazard;
@@ -517,11 +518,11 @@ impl Trainer {
                 (checkpoint::RIG_KEY, rig),
                 (
                     checkpoint::CONTROL_KEY,
-                    serde_json::to_string(&ControlConfig {
-                        history: self.config.history,
-                        ..ControlConfig::default()
-                    })
-                    .expect("configs serialise"),
+                    serde_json::to_string(&ControlConfig::default()).expect("configs serialise"),
+                ),
+                (
+                    checkpoint::HISTORY_KEY,
+                    serde_json::to_string(&self.config.history).expect("modes serialise"),
                 ),
                 (
                     checkpoint::TRAINING_KEY,

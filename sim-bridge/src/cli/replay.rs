@@ -26,6 +26,11 @@ pub struct ReplayArgs {
     /// Also write the reports as a JSON list here.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Ask the server for its debug outputs and write one JSON line per replayed tick here: the
+    /// log, frame, time, speed, replayed and recorded control, the hazard and light heads'
+    /// probabilities and which controller rule acted (turning, unsticking, safety_stop).
+    #[arg(long, value_name = "FILE.jsonl")]
+    ticks: Option<PathBuf>,
 }
 
 /// The log files named, folders expanded (sorted).
@@ -91,6 +96,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let files = log_files(&args.logs)?;
     let (target, _local) = server_target(&args.agent, LocalRole::Driving { runs: 1 })?;
     let mut reports = Vec::new();
+    let mut tick_lines = String::new();
     for path in &files {
         let log = read_log(path)?;
         if log.truncated {
@@ -100,12 +106,21 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
                 log.ticks.len()
             );
         }
-        let report = replay(&log, &target, args.call_timeout)?;
+        let (report, traces) = replay(&log, &target, args.call_timeout, args.ticks.is_some())?;
+        for trace in traces {
+            let mut line = serde_json::to_value(trace)?;
+            line["log"] = serde_json::json!(path);
+            tick_lines.push_str(&line.to_string());
+            tick_lines.push('\n');
+        }
         print(&report, path);
         reports.push(report);
     }
     if let Some(out) = &args.out {
         super::write_output(out, &serde_json::to_string_pretty(&reports)?)?;
+    }
+    if let Some(ticks) = &args.ticks {
+        super::write_output(ticks, &tick_lines)?;
     }
     Ok(())
 }

@@ -9,6 +9,9 @@
 //! trajectories (zero drift from a log of the same server and checkpoint means the server is
 //! deterministic; from a log of the expert it is the control error against the expert), and
 //! the open-loop metrics of the server's trajectories against what the recorded ego did.
+//! Asked to trace, it also asks the server for its debug outputs and keeps, per tick, what the
+//! network believed and which of the controller's rules acted ([`TickTrace`]): the way to read
+//! why a recorded car stood where it stood.
 
 pub mod log;
 pub mod logging_agent;
@@ -73,24 +76,81 @@ pub struct ReplayReport {
     pub open_loop: Vec<HorizonMetrics>,
 }
 
-/// Replays `log` to the server at `target` (see the module doc).
+/// One replayed tick, as the server answered it with its debug outputs.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TickTrace {
+    /// The request's frame index.
+    pub frame: u64,
+    /// Simulation time, seconds.
+    pub t: f64,
+    /// The ego's speed the request gave, m/s.
+    pub speed: f64,
+    /// The replayed answer's control: steer, throttle, brake.
+    pub control: [f64; 3],
+    /// The recorded answer's control, where the log has one.
+    pub recorded: Option<[f64; 3]>,
+    /// The speed head's prediction, m/s.
+    pub predicted_speed: f64,
+    /// The hazard head's probabilities: clear, light, stop sign, road user, lane change.
+    pub hazard: Option<[f32; 5]>,
+    /// The light head's probabilities: green, red or yellow.
+    pub light: Option<[f32; 2]>,
+    /// The fusion trusted the control branch ("turning").
+    pub turning: bool,
+    /// The unstick rule's creep drove.
+    pub unsticking: bool,
+    /// The safety stop braked.
+    pub safety_stop: bool,
+}
+
+impl TickTrace {
+    fn of(
+        request: &v1::StepRequest,
+        answer: &v1::StepResponse,
+        recorded: Option<&v1::Control>,
+    ) -> Self {
+        let control = |c: &v1::Control| [c.steer, c.throttle, c.brake];
+        let debug = answer.debug.clone().unwrap_or_default();
+        let state = debug.controller.unwrap_or_default();
+        Self {
+            frame: request.frame_index,
+            t: request.timestamp_s,
+            speed: request.speed_mps,
+            control: answer.control.as_ref().map_or([0.0; 3], control),
+            recorded: recorded.map(control),
+            predicted_speed: debug.predicted_speed_mps,
+            hazard: debug
+                .hazard
+                .map(|h| [h.clear, h.light, h.stop_sign, h.road_user, h.lane_change]),
+            light: debug.light.map(|l| [l.green, l.stop]),
+            turning: state.turning,
+            unsticking: state.unsticking,
+            safety_stop: state.safety_stop,
+        }
+    }
+}
+
+/// Replays `log` to the server at `target` (see the module doc); with `trace`, also asks for
+/// debug outputs and returns a [`TickTrace`] per answered tick (none without it).
 pub fn replay(
     log: &StepLog,
     target: &str,
     call_timeout: Duration,
-) -> Result<ReplayReport, AgentError> {
+    trace: bool,
+) -> Result<(ReplayReport, Vec<TickTrace>), AgentError> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .map_err(|e| AgentError(format!("starting the client runtime: {e}")))?;
-    runtime.block_on(replay_async(log, target, call_timeout))
+    runtime.block_on(replay_async(log, target, call_timeout, trace))
 }
 
 async fn replay_async(
     log: &StepLog,
     target: &str,
     call_timeout: Duration,
-) -> Result<ReplayReport, AgentError> {
+    trace: bool,
+) -> Result<(ReplayReport, Vec<TickTrace>), AgentError> {
     let channel = connect_when_serving(target, Duration::from_secs(120)).await?;
     let mut client = AgentServiceClient::new(channel);
     let episode_id = client
@@ -106,6 +166,7 @@ async fn replay_async(
     let mut latencies = Vec::with_capacity(log.ticks.len());
     let mut codes = BTreeMap::new();
     let mut predictions = Vec::with_capacity(log.ticks.len());
+    let mut traces = Vec::new();
     let (mut steer, mut throttle, mut brake, mut drift) = (vec![], vec![], vec![], vec![]);
     for tick in &log.ticks {
         let Some(mut request) = tick.request.clone() else {
@@ -113,7 +174,8 @@ async fn replay_async(
             continue;
         };
         request.episode_id = episode_id.clone();
-        let mut call = tonic::Request::new(request);
+        request.debug = trace;
+        let mut call = tonic::Request::new(request.clone());
         call.set_timeout(call_timeout);
         let started = Instant::now();
         let answer = client.step(call).await;
@@ -127,6 +189,9 @@ async fn replay_async(
             }
         };
         *codes.entry("Ok".to_string()).or_default() += 1;
+        if trace {
+            traces.push(TickTrace::of(&request, &answer, tick.control.as_ref()));
+        }
         if let (Some(now), Some(then)) = (&answer.control, &tick.control) {
             steer.push((now.steer - then.steer).abs());
             throttle.push((now.throttle - then.throttle).abs());
@@ -152,7 +217,7 @@ async fn replay_async(
     let _ = client
         .end_episode(v1::EndEpisodeRequest { episode_id })
         .await;
-    Ok(ReplayReport {
+    let report = ReplayReport {
         recorded_agent: log.header.agent.clone(),
         route_id: log.header.route_id.clone(),
         ticks: log.ticks.len(),
@@ -164,5 +229,6 @@ async fn replay_async(
         brake_diff: Spread::of(&brake),
         trajectory_drift_m: Spread::of(&drift),
         open_loop: open_loop(log, &predictions),
-    })
+    };
+    Ok((report, traces))
 }
