@@ -4,6 +4,7 @@
 //! counter-clockwise from +x. Ego frame: x forward, y left.
 
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::frames::{world_to_ego, wrap_angle};
 
 /// The ego's planar pose in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -37,11 +38,11 @@ pub struct EgoMotion {
 impl EgoMotion {
     /// The motion that takes the ego from `previous` to `current`.
     pub fn between(previous: Pose2, current: Pose2) -> Self {
-        let (s, c) = previous.yaw.sin_cos();
-        let (wx, wy) = (current.x - previous.x, current.y - previous.y);
+        let offset = [current.x - previous.x, current.y - previous.y];
+        let [dx, dy] = world_to_ego(offset, previous.yaw);
         Self {
-            dx: c * wx + s * wy,
-            dy: -s * wx + c * wy,
+            dx,
+            dy,
             dyaw: wrap_angle(current.yaw - previous.yaw),
         }
     }
@@ -54,9 +55,4 @@ impl EgoMotion {
             s * point[0] + c * point[1] + self.dy,
         ]
     }
-}
-
-/// An angle wrapped to [-pi, pi).
-pub fn wrap_angle(angle: f32) -> f32 {
-    (angle + std::f32::consts::PI).rem_euclid(std::f32::consts::TAU) - std::f32::consts::PI
 }

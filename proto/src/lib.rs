@@ -10,6 +10,7 @@
 //! - [`dataset`]: the on-disk format of driving datasets and its reader; [`image`]: RGB8
 //!   images in and out of PNG.
 //! - [`vehicle`]: the sedan the simulator drives and the controller is set up for.
+//! - [`frames`]: the world and ego frames, angle wrapping and world-to-ego.
 //! - [`TICK_HZ`], [`TICK_S`]: the tick both sides step at; [`EPISODE_KEY_HEADER`],
 //!   [`REPLICA_HEADER`]: the metadata that keeps an episode on one replica behind a balancer.
 
@@ -34,6 +35,7 @@ pub mod camera;
 pub mod command;
 pub mod control;
 pub mod dataset;
+pub mod frames;
 pub mod image;
 pub mod vehicle;
 pub mod wire;

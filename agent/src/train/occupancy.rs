@@ -10,6 +10,7 @@
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 use ssrdrive_proto::dataset::{ActorClass, ActorRecord};
+use ssrdrive_proto::frames::world_to_ego;
 
 use crate::model::bev::BevGrid;
 use crate::model::float_tensor;
@@ -60,7 +61,6 @@ pub fn actors_in_frame_of(
     to_yaw: f64,
 ) -> Vec<ActorRecord> {
     let (sin, cos) = yaw.sin_cos();
-    let (to_sin, to_cos) = to_yaw.sin_cos();
     actors
         .iter()
         .map(|actor| {
@@ -70,10 +70,7 @@ pub fn actors_in_frame_of(
                 position[1] + x * sin + y * cos - to_position[1],
             ];
             ActorRecord {
-                centre: [
-                    world[0] * to_cos + world[1] * to_sin,
-                    -world[0] * to_sin + world[1] * to_cos,
-                ],
+                centre: world_to_ego(world, to_yaw),
                 yaw: actor.yaw + yaw - to_yaw,
                 ..*actor
             }

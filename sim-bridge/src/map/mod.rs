@@ -26,6 +26,7 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 pub use lanes::{JunctionIdx, Lane, LaneIdx, LaneKind, LanePose, Projection};
 use spatial::SegmentGrid;
+use ssrdrive_proto::frames::wrap_angle;
 use ssrdrive_support::files::{CappedReadError, read_capped_text};
 pub use surface::Surface;
 pub use traffic_control::{Approach, Junction, StopLine, StopSign, TrafficLight};
@@ -238,20 +239,9 @@ fn report_dropped(name: &str, warnings: &[xodr::Warning]) {
     }
 }
 
-/// Signed difference `a - b` wrapped to (-pi, pi].
+/// Signed difference `a - b` wrapped to (-pi, pi] ([`wrap_angle`]).
 pub fn angle_diff(a: f64, b: f64) -> f64 {
-    let mut d = (a - b) % std::f64::consts::TAU;
-    if d > std::f64::consts::PI {
-        d -= std::f64::consts::TAU;
-    } else if d <= -std::f64::consts::PI {
-        d += std::f64::consts::TAU;
-    }
-    d
-}
-
-/// `angle` wrapped into `(-π, π]`.
-pub fn wrap_angle(angle: f64) -> f64 {
-    angle_diff(angle, 0.0)
+    wrap_angle(a - b)
 }
 
 /// Bake xodr lanes into travel-ordered [`Lane`]s; returns them and the OpenDRIVE junction id of

@@ -7,6 +7,7 @@ use std::collections::VecDeque;
 
 use glam::{DVec2, DVec3};
 use ssrdrive_proto::command::RoadOption;
+use ssrdrive_proto::frames::world_to_ego;
 
 use super::DenseRoute;
 
@@ -123,6 +124,6 @@ impl RouteFollower {
 /// A world point in the ego frame (x forward, y left, z up), ego at `position` heading `yaw`.
 pub fn to_ego_frame(point: DVec3, position: DVec3, yaw: f64) -> DVec3 {
     let d = point - position;
-    let (s, c) = yaw.sin_cos();
-    DVec3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z)
+    let [forward, left] = world_to_ego([d.x, d.y], yaw);
+    DVec3::new(forward, left, d.z)
 }

@@ -246,7 +246,7 @@ pub fn write(town: &str, triggers: &[Trigger]) -> String {
     let mut by_type: BTreeMap<u8, Vec<Value>> = BTreeMap::new();
     for t in triggers {
         // `+ 0.0` turns -0.0 into 0.0 so that a zero prints without a sign.
-        let carla_yaw = crate::map::wrap_angle(-t.yaw).to_degrees() + 0.0;
+        let carla_yaw = ssrdrive_proto::frames::wrap_angle(-t.yaw).to_degrees() + 0.0;
         by_type
             .entry(t.scenario)
             .or_default()

@@ -27,6 +27,7 @@
 //! lane-aligned.
 
 use glam::{DVec2, DVec3};
+use ssrdrive_proto::frames::world_to_ego;
 
 use crate::map::{Lane, Map, StopLine, TrafficLight};
 use crate::world::state::{EgoState, LightState, Obb};
@@ -125,9 +126,8 @@ fn red_light_context(map: &Map, light: &TrafficLight, ego: &EgoState, tail: &Lan
         .iter()
         .position(|&(_, mine)| mine)
         .map_or("?".to_string(), |k| (k + 1).to_string());
-    let (sin, cos) = ego.yaw.sin_cos();
     let d = light.head.truncate() - ego.position.truncate();
-    let (ahead, left) = (d.x * cos + d.y * sin, -d.x * sin + d.y * cos);
+    let [ahead, left] = world_to_ego([d.x, d.y], ego.yaw);
     let side = if left >= 0.0 { "left" } else { "right" };
     format!(
         "{} light, lane {lane} of {lanes}, head {ahead:.0} m ahead {:.0} m {side}, ego {:.1} m/s",

@@ -7,7 +7,7 @@ use super::geometry::Shape;
 use super::profile::{Mark, Side};
 use super::town::{Controller, Junction, Link, Road, Signal, SignalKind, Town};
 use super::xml::{Xml, ang, attr, coef, curve, len};
-use crate::map::wrap_angle;
+use ssrdrive_proto::frames::wrap_angle;
 
 /// The PROJ string of the towns' local transverse Mercator frame.
 const GEO_REFERENCE: &str =

@@ -6,7 +6,7 @@
 use glam::DVec2;
 use std::f64::consts::PI;
 
-use crate::map::wrap_angle;
+use ssrdrive_proto::frames::wrap_angle;
 
 /// Below this, a length or an angle counts as zero.
 const EPS: f64 = 1e-9;

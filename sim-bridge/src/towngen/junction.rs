@@ -7,7 +7,7 @@ use std::f64::consts::PI;
 use super::geometry::Pose;
 use super::profile::{Profile, Side};
 use super::town::Contact;
-use crate::map::wrap_angle;
+use ssrdrive_proto::frames::wrap_angle;
 
 /// One road end in a junction.
 #[derive(Debug, Clone, Copy)]

@@ -13,7 +13,7 @@ use ssrdrive_proto::control::Control;
 use ssrdrive_proto::vehicle::SEDAN;
 
 use super::state::EgoState;
-use crate::map::wrap_angle;
+use ssrdrive_proto::frames::wrap_angle;
 
 /// Physical parameters of the ego.
 #[derive(Debug, Clone, Copy, PartialEq)]

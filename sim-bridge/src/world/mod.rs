@@ -25,6 +25,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use scenarios::{Crosser, IdSource, Scenario, StaticProp};
 use ssrdrive_proto::control::Control;
+use ssrdrive_proto::frames::{world_to_ego, wrap_angle};
 use state::{ActorKind, CollisionEvent, ContactGeometry, EgoState, LightState, Obb};
 use traffic::{REQUEST_DISTANCE, Traffic, standing_time};
 use vehicle::Script;
@@ -373,17 +374,13 @@ impl<'m> World<'m> {
             }
             if let Some(face) = ego_box.contact_face_of(&a.obb) {
                 kept -= kept.dot(face).min(0.0) * face;
-                let (sin, cos) = ego.yaw.sin_cos();
                 events.push(CollisionEvent {
                     other_id: a.id,
                     class: a.kind.collision_class(),
                     location: ego.position,
                     contact: Some(ContactGeometry {
-                        relative_yaw: crate::map::wrap_angle(a.obb.yaw - ego.yaw),
-                        other_offset: DVec2::new(
-                            offset.x * cos + offset.y * sin,
-                            -offset.x * sin + offset.y * cos,
-                        ),
+                        relative_yaw: wrap_angle(a.obb.yaw - ego.yaw),
+                        other_offset: DVec2::from(world_to_ego([offset.x, offset.y], ego.yaw)),
                         other_speed: a.velocity.length(),
                         ego_speed: ego.speed,
                     }),
