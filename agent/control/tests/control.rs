@@ -15,6 +15,16 @@ fn near(a: f32, b: f32) -> bool {
     (a - b).abs() < 1e-4
 }
 
+/// The hazard head sure a light holds the car, and the light head's `green` and `stop`.
+fn light(green: f32, stop: f32) -> Beliefs<'static> {
+    Beliefs {
+        clear: Some(0.02),
+        light_hazard: Some(0.95),
+        light: Some(LightBelief { green, stop }),
+        ..Beliefs::default()
+    }
+}
+
 /// Control ticks in `seconds`.
 fn ticks(seconds: f32) -> usize {
     (seconds * TICKS_PER_SECOND) as usize
@@ -590,12 +600,6 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
 #[test]
 fn a_green_seen_from_standstill_is_trusted_when_the_lamp_leaves_the_frame() {
     let hold = [[0.0, 0.0]; 4];
-    let light = |green: f32, stop: f32| Beliefs {
-        clear: Some(0.02),
-        light_hazard: Some(0.95),
-        light: Some(LightBelief { green, stop }),
-        ..Beliefs::default()
-    };
     let green = light(0.97, 0.02);
     let red = light(0.01, 0.98);
     // Stopped at red, sees green, starts; a metre on it stops, the lamp cut by the frame
@@ -656,15 +660,7 @@ fn a_creep_that_started_runs_to_its_end_through_a_light_seen_red() {
     let config = ControlConfig::default();
     let rule = config.unstick.clone();
     let hold = [[0.0, 0.0]; 4];
-    let red = Beliefs {
-        clear: Some(0.02),
-        light_hazard: Some(0.95),
-        light: Some(LightBelief {
-            green: 0.01,
-            stop: 0.98,
-        }),
-        ..Beliefs::default()
-    };
+    let red = light(0.01, 0.98);
     let mut controller = EpisodeController::new(config);
     // The hold lifts after the plain wait of seeing red, then the plain wait runs.
     let plain = ticks(rule.after_s);
@@ -692,13 +688,6 @@ fn a_light_seen_red_holds_the_car_and_one_seen_green_is_nothing_to_wait_for() {
     let config = ControlConfig::default();
     let rule = config.unstick.clone();
     let hold = [[0.0, 0.0]; 4];
-    // The hazard head is sure a light holds the car.
-    let light = |green: f32, stop: f32| Beliefs {
-        clear: Some(0.02),
-        light_hazard: Some(0.95),
-        light: Some(LightBelief { green, stop }),
-        ..Beliefs::default()
-    };
     // The first tick that creeps within `ticks`, with the beliefs given by the tick.
     let first_creep = |ticks: usize, beliefs: &dyn Fn(usize) -> Beliefs<'static>| {
         let mut controller = EpisodeController::new(config.clone());
