@@ -16,16 +16,16 @@
 //! full view). A standstill ends when the car drives faster than the creep; a creep that has
 //! started runs to its end.
 //!
-//! The other way round, a light the light head sees green counts as nothing to wait for: the
-//! hazard head's "light" weighs in [`Unstick::free_to_go`] by the probability of green. And a
-//! stopped car that sees its light green (probability at least [`Unstick::clear_probability`])
-//! trusts that sighting for [`Unstick::green_latch_s`]: no light holds it and the hazard head's
-//! "light" counts as clear, so a car that stops again after a metre, its lamp now cut by the
-//! top of the frame and read as red, creeps on after the early wait. (Seen on Town02, where
-//! the heads stand beside the line: the car started on green, stopped a metre on, and stood
-//! blind until the route timed out.) The latch is as long as CARLA's default green, 10 s,
-//! which a car that waited at the red sees from its first second. Without the light head the
-//! rule is as before.
+//! The other way round, a stopped car that sees its light green (probability at least [`Unstick::clear_probability`])
+//! trusts that sighting for [`Unstick::green_latch_s`]: no light holds it, and while the
+//! network brakes for nothing but a light (the hazard head's "clear" and "light" together at
+//! least [`Unstick::clear_probability`]) the car goes on at the creep's speed along its plan.
+//! (Seen on Town02, where the heads stand beside the line: the car started on green, braked a
+//! metre on with the lamp now cut by the top of the frame and read as red, and stood blind; a
+//! creep of a few metres only moved it to a blind stop nearer the junction.) The latch is as
+//! long as CARLA's default green, 10 s, which a car that waited at the red sees from its first
+//! second; a car that sees green a few metres before its line crosses it within the green or
+//! the yellow after it. Without the light head the rule is as before.
 //!
 //! TransFuser++'s rule creeps only when a LiDAR safety box is empty; here the [`super::safety`]
 //! stop, where it is on, plays that part from the network's own occupancy head, and overrides
@@ -74,8 +74,8 @@ pub struct Unstick {
     /// (no creep; the waits count from the last such tick), for at most [`Unstick::after_s`]
     /// of seeing it in one standstill.
     pub light_hold_probability: f32,
-    /// Seconds a stopped car trusts a light it saw green: no light holds it and the hazard
-    /// head's "light" counts as clear (0 turns the latch off).
+    /// Seconds a stopped car trusts a light it saw green: no light holds it, and braking for
+    /// nothing but a light gives way to the creep's speed (0 turns the latch off).
     pub green_latch_s: f32,
 }
 
@@ -124,18 +124,16 @@ impl Unstick {
 
     /// The probability, for a stopped car, that nothing holds it: the hazard head's "clear",
     /// plus its "stop sign" where [`Unstick::served_stop_signs`] says so, plus its "light"
-    /// times the light head's "green" (the whole "light" while `green_latched`); `None`
-    /// without the hazard head.
+    /// where the car trusts a green it saw (`green_latched`); `None` without the hazard head.
     pub fn free_to_go(&self, beliefs: &Beliefs, green_latched: bool) -> Option<f32> {
         let served = beliefs
             .stop_sign
             .filter(|_| self.served_stop_signs)
             .unwrap_or(0.0);
-        let green = match (beliefs.light_hazard, beliefs.light) {
-            (Some(hazard), _) if green_latched => hazard,
-            (Some(hazard), Some(light)) => hazard * light.green,
-            _ => 0.0,
-        };
+        let green = beliefs
+            .light_hazard
+            .filter(|_| green_latched)
+            .unwrap_or(0.0);
         beliefs.clear.map(|p| p + served + green)
     }
 
@@ -202,6 +200,26 @@ impl UnstickState {
         } else {
             self.light_ticks + u32::from(holds)
         };
+        let creep = Control {
+            steer: plan_steer,
+            throttle: if speed < rule.creep_speed {
+                rule.creep_throttle
+            } else {
+                0.0
+            },
+            brake: 0.0,
+        };
+        // A trusted green: while the network brakes for nothing but a light, the car goes on
+        // at the creep's speed for as long as the latch lasts, not a creep's length (a creep
+        // of a few metres left the car blind and braked short of the junction).
+        let only_a_light = rule
+            .free_to_go(beliefs, true)
+            .is_some_and(|p| p >= rule.clear_probability);
+        if green_latched && control.brake > 0.0 && only_a_light {
+            self.stopped_ticks = 0;
+            self.clear_ticks = 0;
+            return (creep, true);
+        }
         if holds && !creeping && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
             *self = Self {
                 light_ticks: self.light_ticks,
@@ -228,16 +246,6 @@ impl UnstickState {
             self.creep_ticks_left = (rule.creep_s * TICKS_PER_SECOND).ceil() as u32;
         }
         self.creep_ticks_left -= 1;
-        let throttle = if speed < rule.creep_speed {
-            rule.creep_throttle
-        } else {
-            0.0
-        };
-        let creep = Control {
-            steer: plan_steer,
-            throttle,
-            brake: 0.0,
-        };
         (creep, true)
     }
 }
