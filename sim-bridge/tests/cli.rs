@@ -972,3 +972,41 @@ fn collect_selects_route_ids_across_every_route_set() {
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(stderr.contains("no-such-id not in train-small"), "{stderr}");
 }
+
+#[test]
+fn a_step_log_keeps_the_lights_around_the_ego_as_ground_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let logs = tmp.path().join("logs");
+    let run = sim_bridge(&[
+        "eval",
+        "--routes",
+        "town05-short-style",
+        "--route-ids",
+        "0",
+        "--timeout",
+        "5",
+        "--quiet",
+        "--out",
+        tmp.path().join("results.json").to_str().unwrap(),
+        "--record",
+        logs.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let log = std::fs::read_dir(&logs).unwrap().next().unwrap().unwrap();
+    let log = sim_bridge::replay::log::read_log(&log.path()).unwrap();
+    let mut seen = 0;
+    for tick in &log.ticks {
+        let ego = tick.ego.unwrap();
+        for light in &tick.lights {
+            let distance = (light.head_x - ego.x).hypot(light.head_y - ego.y);
+            assert!(distance <= 60.0, "{light:?} is {distance:.1} m away");
+            assert!(["green", "yellow", "red"].contains(&light.state.as_str()));
+            seen += 1;
+        }
+    }
+    assert!(seen > 0, "the route starts among the town's signalised junctions");
+}

@@ -393,5 +393,6 @@ fn a_recorded_run_replays_without_drift() {
         assert_eq!(hazard.len(), 5);
         assert!((hazard.iter().sum::<f64>() - 1.0).abs() < 1e-3, "{line}");
         assert!(line["light"].is_null(), "{line}");
+        assert!(line["lights"].is_array(), "{line}");
     }
 }

@@ -28,7 +28,8 @@ pub struct ReplayArgs {
     out: Option<PathBuf>,
     /// Ask the server for its debug outputs and write one JSON line per replayed tick here: the
     /// log, frame, time, speed, replayed and recorded control, the hazard and light heads'
-    /// probabilities and which controller rule acted (turning, unsticking, safety_stop).
+    /// probabilities, which controller rule acted (turning, unsticking, safety_stop) and the
+    /// log's lights within 60 m in the ego's frame (state, ahead, left, faces_ego).
     #[arg(long, value_name = "FILE.jsonl")]
     ticks: Option<PathBuf>,
 }

@@ -1,6 +1,6 @@
 //! Road maps: an OpenDRIVE file baked by the `xodr` crate into the lane graph the simulator
 //! drives on ([`lanes`]), a spatial index over it ([`spatial`]), the drawable road surface
-//! ([`surface`]), and the traffic control the world enforces: junctions, traffic lights and stop signs ([`control`]).
+//! ([`surface`]), and the traffic control the world enforces: junctions, traffic lights and stop signs ([`traffic_control`]).
 //!
 //! Frame: the OpenDRIVE map frame (right-handed, x east, y north, z up, metres). Guarantees:
 //! a loaded [`Map`] has at least one driving lane; a file over [`MAX_MAP_BYTES`] or one that is

@@ -1,7 +1,7 @@
 //! [`LoggingAgent`]: wraps any agent and writes one step log per route run into a folder:
 //! each tick's request (as an agent server would get it, images PNG-encoded), the wrapped
 //! agent's control and planned trajectory, the time it took, and privileged ground truth (ego
-//! pose, actors within 60 m) for open-loop metrics. An agent without cameras (the expert) is
+//! pose, actors and light heads within 60 m) for open-loop metrics and failure analysis. An agent without cameras (the expert) is
 //! shown the recording rig, so its logs can be replayed to a server as "the recorded expert".
 
 use std::path::PathBuf;
@@ -14,7 +14,7 @@ use ssrdrive_proto::{v1, wire};
 use super::log::{LOG_FORMAT, LOG_VERSION, LogWriter};
 use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
-use crate::world::state::ActorKind;
+use crate::world::state::{ActorKind, LightState};
 
 /// Actors farther than this from the ego are left out of the ground truth, metres.
 const TRUTH_RADIUS: f64 = 60.0;
@@ -51,6 +51,14 @@ fn kind_name(kind: ActorKind) -> &'static str {
         ActorKind::Walker => "walker",
         ActorKind::Static => "static",
         ActorKind::Debris => "debris",
+    }
+}
+
+fn light_name(state: LightState) -> &'static str {
+    match state {
+        LightState::Green => "green",
+        LightState::Yellow => "yellow",
+        LightState::Red => "red",
     }
 }
 
@@ -146,6 +154,22 @@ impl Agent for LoggingAgent {
                 half_width: a.obb.half.y,
             })
             .collect();
+        let lights = world
+            .map
+            .lights
+            .iter()
+            .zip(world.light_states())
+            .filter(|(light, _)| {
+                light.head.truncate().distance(ego.position.truncate()) <= TRUTH_RADIUS
+            })
+            .map(|(light, state)| v1::LightTruth {
+                id: light.id as u32,
+                head_x: light.head.x,
+                head_y: light.head.y,
+                head_yaw: light.head_yaw,
+                state: light_name(*state).into(),
+            })
+            .collect();
         let tick = v1::LogTick {
             request: Some(request),
             control: Some(wire::control_to_proto(control)),
@@ -163,6 +187,7 @@ impl Agent for LoggingAgent {
             }),
             actors,
             agent_ms,
+            lights,
         };
         if let Some(log) = self.log.as_mut()
             && let Err(e) = log.tick(tick)

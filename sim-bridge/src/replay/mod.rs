@@ -10,8 +10,8 @@
 //! deterministic; from a log of the expert it is the control error against the expert), and
 //! the open-loop metrics of the server's trajectories against what the recorded ego did.
 //! Asked to trace, it also asks the server for its debug outputs and keeps, per tick, what the
-//! network believed and which of the controller's rules acted ([`TickTrace`]): the way to read
-//! why a recorded car stood where it stood.
+//! network believed and which of the controller's rules acted, beside the log's ground truth of
+//! the lights around ([`TickTrace`]): the way to read why a recorded car stood where it stood.
 
 pub mod log;
 pub mod logging_agent;
@@ -21,6 +21,7 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use glam::DVec2;
+use ssrdrive_proto::frames::{world_to_ego, wrap_angle};
 use ssrdrive_proto::v1;
 use ssrdrive_proto::v1::agent_service_client::AgentServiceClient;
 
@@ -101,14 +102,48 @@ pub struct TickTrace {
     pub unsticking: bool,
     /// The safety stop braked.
     pub safety_stop: bool,
+    /// The log's ground truth: the traffic lights within 60 m, in the recorded ego's frame.
+    pub lights: Vec<LightInView>,
+}
+
+/// A traffic light of the log's ground truth, seen from the recorded ego.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LightInView {
+    /// "green", "yellow" or "red".
+    pub state: String,
+    /// Metres its head stands ahead of the ego's centre.
+    pub ahead: f64,
+    /// Metres its head stands to the ego's left.
+    pub left: f64,
+    /// Whether the head faces the ego's way (its lamps point within 45 degrees of straight
+    /// back at the ego's heading): a light for traffic going the ego's way.
+    pub faces_ego: bool,
+}
+
+impl LightInView {
+    fn all(tick: &v1::LogTick) -> Vec<Self> {
+        let Some(ego) = &tick.ego else {
+            return Vec::new();
+        };
+        tick.lights
+            .iter()
+            .map(|light| {
+                let offset = [light.head_x - ego.x, light.head_y - ego.y];
+                let [ahead, left] = world_to_ego(offset, ego.yaw);
+                let towards_ego = wrap_angle(light.head_yaw - ego.yaw - std::f64::consts::PI);
+                Self {
+                    state: light.state.clone(),
+                    ahead,
+                    left,
+                    faces_ego: towards_ego.abs() <= std::f64::consts::FRAC_PI_4,
+                }
+            })
+            .collect()
+    }
 }
 
 impl TickTrace {
-    fn of(
-        request: &v1::StepRequest,
-        answer: &v1::StepResponse,
-        recorded: Option<&v1::Control>,
-    ) -> Self {
+    fn of(tick: &v1::LogTick, request: &v1::StepRequest, answer: &v1::StepResponse) -> Self {
         let control = |c: &v1::Control| [c.steer, c.throttle, c.brake];
         let debug = answer.debug.clone().unwrap_or_default();
         let state = debug.controller.unwrap_or_default();
@@ -117,7 +152,7 @@ impl TickTrace {
             t: request.timestamp_s,
             speed: request.speed_mps,
             control: answer.control.as_ref().map_or([0.0; 3], control),
-            recorded: recorded.map(control),
+            recorded: tick.control.as_ref().map(control),
             predicted_speed: debug.predicted_speed_mps,
             hazard: debug
                 .hazard
@@ -126,6 +161,7 @@ impl TickTrace {
             turning: state.turning,
             unsticking: state.unsticking,
             safety_stop: state.safety_stop,
+            lights: LightInView::all(tick),
         }
     }
 }
@@ -190,7 +226,7 @@ async fn replay_async(
         };
         *codes.entry("Ok".to_string()).or_default() += 1;
         if trace {
-            traces.push(TickTrace::of(&request, &answer, tick.control.as_ref()));
+            traces.push(TickTrace::of(tick, &request, &answer));
         }
         if let (Some(now), Some(then)) = (&answer.control, &tick.control) {
             steer.push((now.steer - then.steer).abs());
