@@ -1008,5 +1008,8 @@ fn a_step_log_keeps_the_lights_around_the_ego_as_ground_truth() {
             seen += 1;
         }
     }
-    assert!(seen > 0, "the route starts among the town's signalised junctions");
+    assert!(
+        seen > 0,
+        "the route starts among the town's signalised junctions"
+    );
 }

@@ -10,22 +10,15 @@
 //! A light the network sees red or yellow (the light head's [`Beliefs::light`], probability at
 //! least [`Unstick::light_hold_probability`]) holds the car: no creep starts and both waits
 //! count again from the last tick it saw one, for at most [`Unstick::after_s`] of seeing it in
-//! one standstill (no light stays red that long). The plain wait is for the network's inertia,
-//! not for a light: a car that did not start on green, held past [`Unstick::after_s`], would
+//! one standstill (no light stays red that long; on Town02 a green lamp cut by the top of the
+//! frame held a car for good). The plain wait is for the network's inertia, not
+//! for a light: a car that did not start on green, held past [`Unstick::after_s`], would
 //! otherwise creep into the next red (seen on Town02, where the head stands beside the line in
-//! full view). A standstill ends when the car drives faster than the creep; a creep that has
-//! started runs to its end.
-//!
-//! The other way round, a stopped car that sees its light green (probability at least [`Unstick::clear_probability`])
-//! trusts that sighting for [`Unstick::green_latch_s`]: no light holds it, and while the
-//! network brakes for nothing but a light (the hazard head's "clear" and "light" together at
-//! least [`Unstick::clear_probability`]) the car goes on at the creep's speed along its plan.
-//! (Seen on Town02, where the heads stand beside the line: the car started on green, braked a
-//! metre on with the lamp now cut by the top of the frame and read as red, and stood blind; a
-//! creep of a few metres only moved it to a blind stop nearer the junction.) The latch is as
-//! long as CARLA's default green, 10 s, which a car that waited at the red sees from its first
-//! second; a car that sees green a few metres before its line crosses it within the green or
-//! the yellow after it. Without the light head the rule is as before.
+//! full view). A standstill ends when the car drives faster than the creep, and a creep that
+//! has started runs to its end (stopped at the first tick it moved, a creep never got a car
+//! anywhere). The other way round, a light the light head sees green counts as nothing to
+//! wait for: the hazard head's "light" weighs in [`Unstick::free_to_go`] by the probability of
+//! green. Without the light head the rule is as before.
 //!
 //! TransFuser++'s rule creeps only when a LiDAR safety box is empty; here the [`super::safety`]
 //! stop, where it is on, plays that part from the network's own occupancy head, and overrides
@@ -74,9 +67,6 @@ pub struct Unstick {
     /// (no creep; the waits count from the last such tick), for at most [`Unstick::after_s`]
     /// of seeing it in one standstill.
     pub light_hold_probability: f32,
-    /// Seconds a stopped car trusts a light it saw green: no light holds it, and braking for
-    /// nothing but a light gives way to the creep's speed (0 turns the latch off).
-    pub green_latch_s: f32,
 }
 
 impl Default for Unstick {
@@ -91,7 +81,6 @@ impl Default for Unstick {
             creep_speed: 2.0,
             creep_throttle: 0.5,
             light_hold_probability: 0.5,
-            green_latch_s: 10.0,
         }
     }
 }
@@ -117,23 +106,22 @@ impl Unstick {
                 0.0,
                 1.0,
             ),
-            ("unstick.green_latch_s", self.green_latch_s, 0.0, 120.0),
         ];
         super::check_ranges(&fields)
     }
 
     /// The probability, for a stopped car, that nothing holds it: the hazard head's "clear",
     /// plus its "stop sign" where [`Unstick::served_stop_signs`] says so, plus its "light"
-    /// where the car trusts a green it saw (`green_latched`); `None` without the hazard head.
-    pub fn free_to_go(&self, beliefs: &Beliefs, green_latched: bool) -> Option<f32> {
+    /// times the light head's "green"; `None` without the hazard head.
+    pub fn free_to_go(&self, beliefs: &Beliefs) -> Option<f32> {
         let served = beliefs
             .stop_sign
             .filter(|_| self.served_stop_signs)
             .unwrap_or(0.0);
         let green = beliefs
             .light_hazard
-            .filter(|_| green_latched)
-            .unwrap_or(0.0);
+            .zip(beliefs.light)
+            .map_or(0.0, |(hazard, light)| hazard * light.green);
         beliefs.clear.map(|p| p + served + green)
     }
 
@@ -142,13 +130,6 @@ impl Unstick {
         beliefs
             .light
             .is_some_and(|light| light.stop >= self.light_hold_probability)
-    }
-
-    /// Whether the light head sees the light ahead green, sure enough to start on.
-    fn sees_green(&self, beliefs: &Beliefs) -> bool {
-        beliefs
-            .light
-            .is_some_and(|light| light.green >= self.clear_probability)
     }
 }
 
@@ -160,8 +141,6 @@ pub struct UnstickState {
     creep_ticks_left: u32,
     /// Ticks of this standstill in which the light head saw a light to stop for.
     light_ticks: u32,
-    /// Ticks left of trusting a green light seen from standstill.
-    green_ticks_left: u32,
 }
 
 impl UnstickState {
@@ -179,59 +158,28 @@ impl UnstickState {
         if !rule.enabled {
             return (control, false);
         }
-        let stopped = speed < STOPPED_SPEED;
-        let creeping = self.creep_ticks_left > 0;
-        // Faster than the creep, the car drives on its own: the standstill is over.
-        let driving = speed >= rule.creep_speed;
-        self.green_ticks_left = if driving {
-            0
-        } else if self.green_ticks_left == 0 && stopped && rule.sees_green(beliefs) {
-            (rule.green_latch_s * TICKS_PER_SECOND).round() as u32
-        } else {
-            self.green_ticks_left.saturating_sub(1)
-        };
-        let green_latched = self.green_ticks_left > 0;
         // A light seen red for longer than the plain wait in one standstill (flicker or not)
         // is longer than any light stays red: a lamp half out of the frame, or another
         // approach's; the waits then go on.
-        let holds = !green_latched && rule.light_holds(beliefs);
-        self.light_ticks = if driving {
+        let holds = rule.light_holds(beliefs);
+        let creeping = self.creep_ticks_left > 0;
+        self.light_ticks = if speed >= rule.creep_speed {
             0
         } else {
             self.light_ticks + u32::from(holds)
         };
-        let creep = Control {
-            steer: plan_steer,
-            throttle: if speed < rule.creep_speed {
-                rule.creep_throttle
-            } else {
-                0.0
-            },
-            brake: 0.0,
-        };
-        // A trusted green: while the network brakes for nothing but a light, the car goes on
-        // at the creep's speed for as long as the latch lasts, not a creep's length (a creep
-        // of a few metres left the car blind and braked short of the junction).
-        let only_a_light = rule
-            .free_to_go(beliefs, true)
-            .is_some_and(|p| p >= rule.clear_probability);
-        if green_latched && control.brake > 0.0 && only_a_light {
-            self.stopped_ticks = 0;
-            self.clear_ticks = 0;
-            return (creep, true);
-        }
         if holds && !creeping && (self.light_ticks as f32) < rule.after_s * TICKS_PER_SECOND {
             *self = Self {
                 light_ticks: self.light_ticks,
-                green_ticks_left: self.green_ticks_left,
                 ..Self::default()
             };
             return (control, false);
         }
         if !creeping {
+            let stopped = speed < STOPPED_SPEED;
             let clear = stopped
                 && rule
-                    .free_to_go(beliefs, green_latched)
+                    .free_to_go(beliefs)
                     .is_some_and(|p| p >= rule.clear_probability);
             self.stopped_ticks = if stopped { self.stopped_ticks + 1 } else { 0 };
             self.clear_ticks = if clear { self.clear_ticks + 1 } else { 0 };
@@ -246,6 +194,16 @@ impl UnstickState {
             self.creep_ticks_left = (rule.creep_s * TICKS_PER_SECOND).ceil() as u32;
         }
         self.creep_ticks_left -= 1;
+        let throttle = if speed < rule.creep_speed {
+            rule.creep_throttle
+        } else {
+            0.0
+        };
+        let creep = Control {
+            steer: plan_steer,
+            throttle,
+            brake: 0.0,
+        };
         (creep, true)
     }
 }
