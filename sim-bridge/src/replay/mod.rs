@@ -143,21 +143,23 @@ impl LightInView {
 }
 
 impl TickTrace {
-    fn of(tick: &v1::LogTick, request: &v1::StepRequest, answer: &v1::StepResponse) -> Self {
+    /// The trace of the log's `tick` (which has a request) as the server `answer`ed it.
+    fn of(tick: &v1::LogTick, answer: &v1::StepResponse) -> Self {
         let control = |c: &v1::Control| [c.steer, c.throttle, c.brake];
-        let debug = answer.debug.clone().unwrap_or_default();
-        let state = debug.controller.unwrap_or_default();
+        let request = tick.request.as_ref();
+        let debug = answer.debug.as_ref();
+        let state = debug.and_then(|d| d.controller).unwrap_or_default();
         Self {
-            frame: request.frame_index,
-            t: request.timestamp_s,
-            speed: request.speed_mps,
+            frame: request.map_or(0, |r| r.frame_index),
+            t: request.map_or(0.0, |r| r.timestamp_s),
+            speed: request.map_or(0.0, |r| r.speed_mps),
             control: answer.control.as_ref().map_or([0.0; 3], control),
             recorded: tick.control.as_ref().map(control),
-            predicted_speed: debug.predicted_speed_mps,
+            predicted_speed: debug.map_or(0.0, |d| d.predicted_speed_mps),
             hazard: debug
-                .hazard
+                .and_then(|d| d.hazard)
                 .map(|h| [h.clear, h.light, h.stop_sign, h.road_user, h.lane_change]),
-            light: debug.light.map(|l| [l.green, l.stop]),
+            light: debug.and_then(|d| d.light).map(|l| [l.green, l.stop]),
             turning: state.turning,
             unsticking: state.unsticking,
             safety_stop: state.safety_stop,
@@ -211,7 +213,7 @@ async fn replay_async(
         };
         request.episode_id = episode_id.clone();
         request.debug = trace;
-        let mut call = tonic::Request::new(request.clone());
+        let mut call = tonic::Request::new(request);
         call.set_timeout(call_timeout);
         let started = Instant::now();
         let answer = client.step(call).await;
@@ -226,7 +228,7 @@ async fn replay_async(
         };
         *codes.entry("Ok".to_string()).or_default() += 1;
         if trace {
-            traces.push(TickTrace::of(tick, &request, &answer));
+            traces.push(TickTrace::of(tick, &answer));
         }
         if let (Some(now), Some(then)) = (&answer.control, &tick.control) {
             steer.push((now.steer - then.steer).abs());
