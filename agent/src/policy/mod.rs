@@ -334,11 +334,6 @@ impl SsrPolicy {
         &self.control
     }
 
-    /// How new episodes give the network its history.
-    pub fn history(&self) -> History {
-        self.history
-    }
-
     /// A fresh episode: no previous BEV, empty controller windows.
     pub fn new_episode(&self) -> EpisodeState {
         self.new_episode_with(self.control.clone())
