@@ -1,8 +1,9 @@
 //! [`LoggingAgent`]: wraps any agent and writes one step log per route run into a folder:
 //! each tick's request (as an agent server would get it, images PNG-encoded), the wrapped
 //! agent's control and planned trajectory, the time it took, and privileged ground truth (ego
-//! pose, actors and light heads within 60 m) for open-loop metrics and failure analysis. An agent without cameras (the expert) is
-//! shown the recording rig, so its logs can be replayed to a server as "the recorded expert".
+//! pose, actors and light heads within 60 m) for open-loop metrics and failure analysis. An
+//! agent without cameras (the expert) is shown the recording rig, so its logs can be replayed
+//! to a server as "the recorded expert".
 
 use std::path::PathBuf;
 use std::time::Instant;
