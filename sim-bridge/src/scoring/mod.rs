@@ -99,8 +99,9 @@ pub enum Rules {
     /// plus the minimum-speed test (4 checkpoints; each value p < 100 % multiplies IS by
     /// 1 - 0.3 (1 - p / 100), "min_speed_infractions") and the status "Perfect" for a route
     /// completed with no infraction. Not applied: 2.0's progress-based route timeout (our maps
-    /// carry no speed limits; LB1.0's timeout stays), scenario timeouts (no scenario placed
-    /// here blocks the route) and yielding to emergency vehicles (none drive here).
+    /// carry no speed limits; LB1.0's timeout stays), scenario timeouts (only Scenario6's
+    /// barriers, from a scenario file, block the route; a car that does not go round them is
+    /// "blocked" after 180 s as in LB1.0) and yielding to emergency vehicles (none drive here).
     Lb2,
 }
 
