@@ -23,6 +23,16 @@ pub enum History {
     Recursive,
 }
 
+impl std::fmt::Display for History {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            History::Chain => "chain",
+            History::Link => "link",
+            History::Recursive => "recursive",
+        })
+    }
+}
+
 impl std::str::FromStr for History {
     type Err = String;
 

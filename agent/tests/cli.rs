@@ -52,6 +52,13 @@ fn control_prints_and_changes_only_the_named_settings() {
         serde_json::from_str::<ControlConfig>(&stdout).unwrap()
     };
     assert_eq!(printed(path), ControlConfig::default());
+    // The history mode is not a controller setting, but what it is is said beside them: a
+    // checkpoint that names none is served on the recursion it was validated on.
+    let (_, _, stderr) = ssr_agent(&["control", path]);
+    assert!(
+        stderr.contains("served with its history as: recursive"),
+        "{stderr}"
+    );
 
     let patch = r#"{"safety": {"enabled": true}, "vehicle": {"max_wheel_angle": 70},
         "turn_lead": "plan"}"#;

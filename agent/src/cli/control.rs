@@ -41,6 +41,12 @@ pub fn run(args: &ControlArgs) -> anyhow::Result<()> {
             "{}",
             serde_json::to_string_pretty(&current).expect("configs serialise")
         );
+        let history = checkpoint::history(&info)
+            .map_err(|e| anyhow::anyhow!("checkpoint {}: {e}", args.checkpoint.display()))?;
+        eprintln!(
+            "served with its history as: {history} (not a controller setting; \
+             `ssr-agent serve --history` overrides it)"
+        );
         return Ok(());
     };
     let patch = read_patch(set)?;

@@ -99,8 +99,8 @@ pub struct ServeArgs {
     /// as its history; three BEV passes a step), `link` (the frame 0.5 s back on its own; two
     /// passes) or `recursive` (each step's BEV is the history of the step 0.5 s later; one
     /// pass). Serve a checkpoint with the history it was trained with (`ssr-agent train
-    /// --history`) [default: the checkpoint's setting (`ssr-agent control`); `recursive` for
-    /// checkpoints from before the chain].
+    /// --history`) [default: the checkpoint's own (its `history` metadata, which `ssr-agent
+    /// control` prints); `recursive` for checkpoints from before the chain].
     #[arg(long, env = "SSR_AGENT_HISTORY")]
     history: Option<History>,
     /// This server's name among replicas behind a load balancer, sent with every answer as
