@@ -1013,3 +1013,64 @@ fn a_step_log_keeps_the_lights_around_the_ego_as_ground_truth() {
         "the route starts among the town's signalised junctions"
     );
 }
+
+#[test]
+fn results_compare_pairs_two_agents_runs_and_says_when_they_share_none() {
+    let tmp = tempfile::tempdir().unwrap();
+    let eval = |name: &str, ids: &str| {
+        let out = tmp.path().join(name);
+        let run = sim_bridge(&[
+            "eval",
+            "--routes",
+            "town05-short-style",
+            "--route-ids",
+            ids,
+            "--timeout",
+            "5",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        out
+    };
+    let (first, second, other) = (
+        eval("a.json", "0,1"),
+        eval("b.json", "1,0"),
+        eval("c.json", "2"),
+    );
+    let json = tmp.path().join("comparison.json");
+    let run = sim_bridge(&[
+        "results",
+        "compare",
+        first.to_str().unwrap(),
+        second.to_str().unwrap(),
+        "--out",
+        json.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success() && stdout.contains("2 runs paired"),
+        "{stdout}"
+    );
+    let comparison: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    // The same expert on the same runs: no difference, and one that cannot be told apart.
+    assert_eq!(comparison["ds"]["difference"], 0.0);
+    assert_eq!(comparison["same"], 2);
+    let run = sim_bridge(&[
+        "results",
+        "compare",
+        first.to_str().unwrap(),
+        other.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && stderr.contains("share no run"),
+        "{stderr}"
+    );
+}

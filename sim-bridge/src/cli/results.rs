@@ -1,10 +1,12 @@
 //! `sim-bridge results`: work on leaderboard results files; `merge` joins the files of one
-//! campaign's shares ([`sim_bridge::eval::merge`]).
+//! campaign's shares ([`sim_bridge::eval::merge`]), `compare` pairs two agents' runs
+//! ([`sim_bridge::eval::compare`]).
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
+use sim_bridge::eval::compare::{Paired, Runs, compare, runs_of};
 use sim_bridge::eval::merge::{Part, merge};
 use sim_bridge::scoring::{Results, summary_table};
 use ssrdrive_support::files::read_capped_text;
@@ -18,6 +20,23 @@ pub enum ResultsCommand {
     /// process would have written: refuses files of other campaigns (routes, settings, seed,
     /// agent, simulator), runs found twice, and missing runs unless --allow-missing.
     Merge(MergeArgs),
+    /// Pair two agents' runs (same part, route and repetition) and show each side's mean DS, RC
+    /// and IS, the paired difference (second minus first) and its 95 % confidence interval: an
+    /// interval that holds 0 means these runs cannot tell the two apart (closed loop, one run's
+    /// DS swings by tens of points from the smallest change).
+    Compare(CompareArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The first agent's results: a results file, or a suite's output folder (`eval --suite
+    /// NAME --out DIR`: one file per part).
+    first: PathBuf,
+    /// The second agent's, the same way.
+    second: PathBuf,
+    /// Also write the comparison as JSON here.
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -37,7 +56,81 @@ pub struct MergeArgs {
 pub fn run(command: ResultsCommand) -> anyhow::Result<()> {
     match command {
         ResultsCommand::Merge(args) => run_merge(args),
+        ResultsCommand::Compare(args) => run_compare(args),
     }
+}
+
+fn read_results(path: &std::path::Path) -> anyhow::Result<Results> {
+    let text = read_capped_text(path, MAX_RESULTS_BYTES)
+        .with_context(|| format!("reading {}", path.display()))?;
+    Results::from_json(&text).with_context(|| format!("reading {}", path.display()))
+}
+
+/// The runs of a results file, or of every part's file in a suite's folder (`suite.json`, the
+/// suite's summary, left out).
+fn read_runs(path: &std::path::Path) -> anyhow::Result<Runs> {
+    if !path.is_dir() {
+        let results = read_results(path)?;
+        return Ok(runs_of("", &results.checkpoint.records));
+    }
+    let mut runs = Runs::new();
+    let entries = std::fs::read_dir(path).with_context(|| format!("reading {}", path.display()))?;
+    for entry in entries {
+        let file = entry
+            .with_context(|| format!("reading {}", path.display()))?
+            .path();
+        let part = file
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default();
+        if file.extension().is_some_and(|e| e == "json") && part != "suite" {
+            let results = read_results(&file)?;
+            runs.extend(runs_of(part, &results.checkpoint.records));
+        }
+    }
+    if runs.is_empty() {
+        bail!("{} holds no results files", path.display());
+    }
+    Ok(runs)
+}
+
+fn run_compare(args: CompareArgs) -> anyhow::Result<()> {
+    let (first, second) = (read_runs(&args.first)?, read_runs(&args.second)?);
+    let Some(c) = compare(&first, &second) else {
+        bail!(
+            "{} and {} share no run (same part, route id and repetition)",
+            args.first.display(),
+            args.second.display()
+        );
+    };
+    println!(
+        "{} runs paired ({} only in the first, {} only in the second)",
+        c.pairs, c.only_first, c.only_second
+    );
+    println!("      first   second   second - first (95 % interval)");
+    let row = |name: &str, p: &Paired, digits: usize| {
+        let interval = p.half_width.map_or("-".to_string(), |h| {
+            format!(
+                "+/- {h:.digits$}{}",
+                if p.tells_apart() { "" } else { ", holds 0" }
+            )
+        });
+        println!(
+            "{name}  {:>7.digits$}  {:>7.digits$}   {:+.digits$} ({interval})",
+            p.first, p.second, p.difference
+        );
+    };
+    row("DS", &c.ds, 2);
+    row("RC", &c.rc, 2);
+    row("IS", &c.is, 3);
+    println!(
+        "DS per run: second higher {}, lower {}, equal {}",
+        c.second_better, c.second_worse, c.same
+    );
+    if let Some(out) = &args.out {
+        super::write_output(out, &serde_json::to_string_pretty(&c)?)?;
+    }
+    Ok(())
 }
 
 fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
@@ -45,13 +138,9 @@ fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
         .parts
         .iter()
         .map(|path| {
-            let text = read_capped_text(path, MAX_RESULTS_BYTES)
-                .with_context(|| format!("reading {}", path.display()))?;
-            let results =
-                Results::from_json(&text).with_context(|| format!("reading {}", path.display()))?;
             Ok(Part {
                 path: path.clone(),
-                results,
+                results: read_results(path)?,
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;

@@ -6,6 +6,7 @@
 //! criteria (with the contacts of the previous world step), then step the world.
 
 pub mod campaign;
+pub mod compare;
 pub mod merge;
 pub mod shard;
 pub mod suite;
