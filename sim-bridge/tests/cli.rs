@@ -724,34 +724,23 @@ fn random_routes_and_scenario_files_on_any_map_are_written_and_driven() {
     }
     let broken = tmp.path().join("broken.xodr");
     std::fs::write(&broken, "<OpenDRIVE><road").unwrap();
-    let run = sim_bridge(&[
-        "routes",
-        "random",
-        "--map",
-        broken.to_str().unwrap(),
-        "--out",
-        tmp.path().join("none.xml").to_str().unwrap(),
-    ]);
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        !run.status.success() && stderr.contains("map broken is not valid OpenDRIVE"),
-        "{stderr}"
-    );
-    assert!(!tmp.path().join("none.xml").exists());
-    let run = sim_bridge(&[
-        "routes",
-        "scenarios",
-        "--map",
-        broken.to_str().unwrap(),
-        "--out",
-        tmp.path().join("none.json").to_str().unwrap(),
-    ]);
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        !run.status.success() && stderr.contains("map broken is not valid OpenDRIVE"),
-        "{stderr}"
-    );
-    assert!(!tmp.path().join("none.json").exists());
+    for (command, out) in [("random", "none.xml"), ("scenarios", "none.json")] {
+        let out = tmp.path().join(out);
+        let run = sim_bridge(&[
+            "routes",
+            command,
+            "--map",
+            broken.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(
+            !run.status.success() && stderr.contains("map broken is not valid OpenDRIVE"),
+            "{command}: {stderr}"
+        );
+        assert!(!out.exists(), "{command}");
+    }
 }
 
 /// Every file of a dataset's episodes, by path relative to `root`, with its bytes; the
