@@ -70,6 +70,23 @@ fn carla_driving_lanes_turn_no_more_than_a_curve_between_poses_half_a_metre_apar
     }
 }
 
+/// Town03's file carries no traffic-light signal, so the simulator places its lights; they
+/// stand US-style across the junction, as in CARLA's Town03, where a car waiting at the stop
+/// line (its centre 3 m back) still sees the red lamp ahead. Beside the stop line they were
+/// out of every forward camera's view while the car waited.
+#[test]
+fn town03s_placed_lights_show_their_red_lamp_to_a_car_waiting_at_the_stop_line() {
+    let Some(dir) = carla_dir() else { return };
+    let map = Map::load_file(&dir.join("Town03.xodr"), MapOptions::default()).unwrap();
+    assert!(map.lights.len() >= 20 && map.lights.iter().all(|l| !l.from_map));
+    let unseen = lights_unseen_from(&map, &Rig::tcp(), map.lights.iter(), 3.0);
+    assert!(
+        unseen.len() * 10 <= map.lights.len(),
+        "lights {unseen:?} of {} show no red lamp from the stop line",
+        map.lights.len()
+    );
+}
+
 /// CARLA's exports place a light's `<signal>` at its post's foot, half a metre under the road:
 /// drawn there the head was buried and no camera ever saw a lamp. Every head must stand above
 /// the road, face the traffic it addresses, and show its state to a camera on the approach.

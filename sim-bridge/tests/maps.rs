@@ -1,5 +1,8 @@
 //! Map loading errors and the bundled towns' traffic control, through the public API.
 
+mod common;
+
+use common::lights_unseen_from;
 use sim_bridge::map::{Map, MapError, MapOptions};
 use sim_bridge::route::DenseRoute;
 use sim_bridge::towngen::{self, TownStyle};
@@ -111,6 +114,13 @@ fn placing_lights_is_only_for_maps_without_any() {
         assert!(junction.approaches.len() >= 4);
         assert!(junction.approaches.iter().any(|a| a.lanes.len() >= 2));
     }
+    // Placed heads stand across the junction: a car waiting at the stop line sees them.
+    let rig = ssrdrive_proto::camera::Rig::tcp();
+    let unseen = lights_unseen_from(&placed, &rig, placed.lights.iter(), 3.0);
+    assert!(
+        unseen.is_empty(),
+        "placed lights {unseen:?} unseen from the stop line"
+    );
 }
 
 /// `xml` without its traffic-light signals (type 1000001); stop signs stay.

@@ -13,15 +13,19 @@
 //! - A stop line lies across the end of an incoming lane, where the lane enters the junction.
 //! - A light's head (what cameras see) stands where the file's signal does, its centre
 //!   [`HEAD_HEIGHT`] above the road unless the file mounts it at least [`MIN_MOUNTED_HEIGHT`]
-//!   up ([`mounted_head`]); a placed light's head stands beside the rightmost stop line. Every
-//!   head faces the traffic of its approach: CARLA's exports give the post's yaw, which for
-//!   about half their lights points away from the lanes the light controls.
+//!   up ([`mounted_head`]). A placed light's head stands US-style, across the junction on the
+//!   far right corner where the approach's straight-on lanes leave it ([`placed_head`]), as in
+//!   CARLA's towns without signals in their files (Town03-05: a car waiting at the stop line
+//!   sees it ahead); an approach with no straight-on connector (a T-junction's stem) gets it
+//!   beside its rightmost stop line. Every head faces the traffic of its approach: CARLA's
+//!   exports give the post's yaw, which for about half their lights points away from the lanes
+//!   the light controls.
 
 use std::collections::BTreeMap;
 
 use glam::{DVec2, DVec3};
 
-use super::{JunctionIdx, LaneIdx, LaneKind, Map, MapOptions};
+use super::{JunctionIdx, LaneIdx, LaneKind, Map, MapOptions, angle_diff};
 
 /// OpenDRIVE signal type CARLA uses for traffic lights.
 const TRAFFIC_LIGHT_TYPE: &str = "1000001";
@@ -32,6 +36,10 @@ const STOP_SIGN_TYPE: &str = "206";
 const HEAD_HEIGHT: f64 = 3.0;
 /// A traffic-light signal lower than this above the road (m) marks its post's foot, not its head.
 const MIN_MOUNTED_HEIGHT: f64 = 2.0;
+/// How far right of a lane's edge a placed head's post stands, m.
+const POST_OFFSET: f64 = 1.5;
+/// A connector turning less than this (radians, about 20 degrees) carries its lane straight on.
+const STRAIGHT_ON: f64 = 0.35;
 
 /// A stop line across the end of one lane.
 #[derive(Debug, Clone, Copy)]
@@ -108,8 +116,8 @@ pub struct TrafficLight {
     pub approach: usize,
     /// One stop line per incoming lane.
     pub stop_lines: Vec<StopLine>,
-    /// Where the head's centre stands ([`mounted_head`] for a file's signal, else beside the
-    /// rightmost stop line), [`HEAD_HEIGHT`] above the road unless the file mounts it higher.
+    /// Where the head's centre stands ([`mounted_head`] for a file's signal, else
+    /// [`placed_head`]), [`HEAD_HEIGHT`] above the road unless the file mounts it higher.
     pub head: DVec3,
     /// The direction the head faces: towards the traffic of its approach.
     pub head_yaw: f64,
@@ -179,7 +187,7 @@ pub(super) fn derive(
                 .iter()
                 .map(|&l| StopLine::at_end_of(map, l))
                 .collect();
-            let (placed, head_yaw) = beside_rightmost(&stop_lines);
+            let (placed, head_yaw) = placed_head(map, &stop_lines);
             let (head, from_map) = match heads.get(&(j, a)) {
                 Some(&file) => (file, true),
                 None => (placed, false),
@@ -342,21 +350,66 @@ fn build_junctions(map: &Map, junction_ids: Vec<String>) -> Vec<Junction> {
     junctions
 }
 
-/// A head beside the rightmost stop line, [`HEAD_HEIGHT`] up, facing the traffic.
-fn beside_rightmost(lines: &[StopLine]) -> (DVec3, f64) {
-    let rightmost = lines
+/// Where the simulator stands a light it places, [`HEAD_HEIGHT`] up and facing the traffic of
+/// the approach whose stop lines are `lines`: across the junction, [`POST_OFFSET`] right of
+/// the approach's right edge where its rightmost straight-on lane leaves the junction; beside
+/// the rightmost stop line when no lane goes straight on.
+fn placed_head(map: &Map, lines: &[StopLine]) -> (DVec3, f64) {
+    let Some(rightmost) = lines
         .iter()
-        .min_by(|a, b| {
-            let side = |s: &StopLine| DVec2::from_angle(s.yaw).perp_dot(s.position.truncate());
-            side(a).total_cmp(&side(b))
+        .copied()
+        .min_by(|a, b| rightness(a).total_cmp(&rightness(b)))
+    else {
+        return (DVec3::ZERO, 0.0);
+    };
+    let facing = rightmost.yaw + std::f64::consts::PI;
+    let mut right_to_left: Vec<StopLine> = lines.to_vec();
+    right_to_left.sort_by(|a, b| rightness(a).total_cmp(&rightness(b)));
+    let across = right_to_left.iter().find_map(|line| {
+        let exit = straight_on_exit(map, line)?;
+        // The approach's right edge, measured from this lane's centre.
+        let to_edge = (rightness(line) - rightness(&rightmost)) + rightmost.half_width;
+        Some(beside(exit, rightmost.yaw, to_edge))
+    });
+    let head =
+        across.unwrap_or_else(|| beside(rightmost.position, rightmost.yaw, rightmost.half_width));
+    (head, facing)
+}
+
+/// How far left a stop line's centre lies, across its own heading (smaller is further right).
+fn rightness(line: &StopLine) -> f64 {
+    DVec2::from_angle(line.yaw).perp_dot(line.position.truncate())
+}
+
+/// A head `to_edge` + [`POST_OFFSET`] m right of `at` (for travel heading `yaw`), [`HEAD_HEIGHT`]
+/// above it.
+fn beside(at: DVec3, yaw: f64, to_edge: f64) -> DVec3 {
+    let right = -DVec2::from_angle(yaw).perp() * (to_edge + POST_OFFSET);
+    at + DVec3::new(right.x, right.y, HEAD_HEIGHT)
+}
+
+/// Where the lane behind `line` leaves the junction going straight on: the end of the
+/// connector chain from it that turns least, if that turns less than [`STRAIGHT_ON`].
+fn straight_on_exit(map: &Map, line: &StopLine) -> Option<DVec3> {
+    map.lane(line.lane)
+        .successors
+        .iter()
+        .filter_map(|&first| {
+            let mut lane = map.lane(first);
+            if !lane.in_junction() {
+                return None;
+            }
+            // Connectors may be cut into several lane sections; follow the chain to its end.
+            for _ in 0..16 {
+                match lane.successors.first().map(|&s| map.lane(s)) {
+                    Some(next) if next.in_junction() => lane = next,
+                    _ => break,
+                }
+            }
+            let end = lane.pose_at(lane.length());
+            let turn = angle_diff(end.yaw, line.yaw).abs();
+            (turn < STRAIGHT_ON).then_some((turn, end.position))
         })
-        .copied();
-    match rightmost {
-        Some(s) => {
-            let right = -DVec2::from_angle(s.yaw).perp() * (s.half_width + 1.5);
-            let p = s.position + DVec3::new(right.x, right.y, HEAD_HEIGHT);
-            (p, s.yaw + std::f64::consts::PI)
-        }
-        None => (DVec3::ZERO, 0.0),
-    }
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, position)| position)
 }

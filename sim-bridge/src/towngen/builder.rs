@@ -158,8 +158,8 @@ impl TownBuilder {
     }
 
     /// Write no traffic-light signal at all, as CARLA's old Town03 and some other CARLA towns
-    /// do: the simulator then places its own lights (beside the rightmost stop line, at
-    /// junctions of four or more approaches with a multi-lane one; `map::traffic_control`).
+    /// do: the simulator then places its own lights (across the junction, at junctions of four
+    /// or more approaches with a multi-lane one; `map::traffic_control`).
     pub fn leave_lights_to_simulator(&mut self) {
         self.lights_left_to_simulator = true;
     }
