@@ -251,15 +251,19 @@ fn the_public_scenario_file_gives_carla_long_routes_their_scenarios() {
 /// A world on `route` without background traffic, whose scenarios come from one trigger of
 /// scenario `n` at route index `k`.
 fn world_with<'m>(map: &'m Map, town: &str, route: &DenseRoute, n: u8, k: usize) -> World<'m> {
+    World::new(map, route, scenario_world(town, route, n, k))
+}
+
+/// A world without traffic or parked cars whose only scenario is `n`, triggered at route index `k`.
+fn scenario_world(town: &str, route: &DenseRoute, n: u8, k: usize) -> WorldConfig {
     let file =
         ScenarioFile::parse(&write(town, &[trigger_at(route, k, n, 0.0, 0.0)]), "t").unwrap();
-    let config = WorldConfig {
+    WorldConfig {
         vehicles: 0,
         parked_cars: false,
         scenario_file: Some(file.town(town).unwrap()),
         ..WorldConfig::default()
-    };
-    World::new(map, route, config)
+    }
 }
 
 /// Put the ego on route point `k`, fire what it has reached and tick `seconds` with it held
@@ -381,20 +385,7 @@ fn scenario5_two_vehicles_wait_for_the_trigger_then_drive_off_and_leave() {
 
 #[test]
 fn scenario6_barriers_block_the_lane_and_a_flow_comes_the_other_way() {
-    // A route with 115 m of road out of junctions (barriers at 50 m, the source at 110 m).
-    let (map, route, k) = (0..40)
-        .find_map(|r| {
-            let (map, _, route) = bundled_route("train-small", r);
-            let clear = |k: usize| {
-                (k..route.points.len())
-                    .take_while(|&j| route.cum[j] < route.cum[k] + 115.0)
-                    .all(|j| !map.lane(route.points[j].lane).in_junction())
-            };
-            let k = (0..route.points.len())
-                .find(|&k| route.cum[k] + 120.0 < route.length() && clear(k))?;
-            Some((map, route, k))
-        })
-        .expect("115 m without a junction");
+    let (map, route, k) = s6_route();
     let plain = world_with(&map, "ssr_train_small", &route, 1, k);
     let mut world = world_with(&map, "ssr_train_small", &route, 6, k);
     assert_eq!(world.statics.len(), plain.statics.len() + 2, "two barriers");
@@ -417,6 +408,79 @@ fn scenario6_barriers_block_the_lane_and_a_flow_comes_the_other_way() {
     stand_at(&mut world, &route, k, 60.0);
     let sent = world.traffic.vehicles.len();
     assert!((2..=7).contains(&sent), "{sent} sent");
+}
+
+/// A train-small route with 115 m of road out of junctions from route index `k` (Scenario6's
+/// barriers stand at 50 m, its source at 110 m).
+fn s6_route() -> (Map, DenseRoute, usize) {
+    (0..40)
+        .find_map(|r| {
+            let (map, _, route) = bundled_route("train-small", r);
+            let clear = |k: usize| {
+                (k..route.points.len())
+                    .take_while(|&j| route.cum[j] < route.cum[k] + 115.0)
+                    .all(|j| !map.lane(route.points[j].lane).in_junction())
+            };
+            let k = (0..route.points.len())
+                .find(|&k| route.cum[k] + 120.0 < route.length() && clear(k))?;
+            Some((map, route, k))
+        })
+        .expect("115 m without a junction")
+}
+
+/// Leaderboard 2.0's scenario timeout: a car that has not got past Scenario6's barriers 240 s
+/// after the trigger sees the scenario end, barriers and oncoming flow gone, and it is
+/// reported once; under 1.0's rules (no timeout) the barriers stand for good; a car past the
+/// barriers in time reports nothing.
+#[test]
+fn scenario6_times_out_under_leaderboard_2_rules_and_its_barriers_go() {
+    let (map, route, k) = s6_route();
+    let timeout = sim_bridge::scoring::Rules::Lb2.scenario_timeout();
+    let with_timeout = |scenario_timeout| {
+        let config = WorldConfig {
+            scenario_timeout,
+            ..scenario_world("ssr_train_small", &route, 6, k)
+        };
+        World::new(&map, &route, config)
+    };
+    let plain = world_with(&map, "ssr_train_small", &route, 1, k)
+        .statics
+        .len();
+
+    let mut world = with_timeout(timeout);
+    stand_at(&mut world, &route, k, 239.0);
+    assert_eq!(
+        world.statics.len(),
+        plain + 2,
+        "barriers stand before the timeout"
+    );
+    assert!(world.take_scenario_timeouts().is_empty());
+    stand_at(&mut world, &route, k, 2.0);
+    let ended = world.take_scenario_timeouts();
+    assert_eq!(ended.len(), 1, "{ended:?}");
+    assert_eq!(ended[0].name, "Scenario6");
+    assert!((239.9..240.2).contains(&ended[0].time), "{}", ended[0].time);
+    assert_eq!(world.statics.len(), plain, "its barriers are gone");
+    assert!(world.traffic.vehicles.is_empty(), "its flow left");
+    stand_at(&mut world, &route, k, 5.0);
+    assert!(world.take_scenario_timeouts().is_empty(), "reported once");
+
+    let mut lb1 = with_timeout(None);
+    stand_at(&mut lb1, &route, k, 241.0);
+    assert_eq!(lb1.statics.len(), plain + 2, "1.0: they stand for good");
+    assert!(lb1.take_scenario_timeouts().is_empty());
+
+    let mut passed = with_timeout(timeout);
+    stand_at(&mut passed, &route, k, 1.0);
+    let beyond = (k..route.points.len())
+        .find(|&j| route.cum[j] > route.cum[k] + 60.0)
+        .unwrap();
+    stand_at(&mut passed, &route, beyond, 241.0);
+    assert!(
+        passed.take_scenario_timeouts().is_empty(),
+        "got past in time"
+    );
+    assert_eq!(passed.statics.len(), plain + 2);
 }
 
 #[test]

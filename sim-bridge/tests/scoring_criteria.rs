@@ -383,6 +383,36 @@ mod scoring {
     }
 
     #[test]
+    fn a_scenario_timeout_costs_0_7_and_is_listed_under_leaderboard_2_rules() {
+        let map = straight_map();
+        let route = straight_route(&map);
+        let lb2 = ScoringConfig {
+            rules: Rules::Lb2,
+            ..ScoringConfig::default()
+        };
+        assert_eq!(lb2.rules.scenario_timeout(), Some(240.0));
+        assert_eq!(Rules::Lb1.scenario_timeout(), None, "1.0 has no such rule");
+        let mut d = Drive::with(&map, &route, lb2);
+        d.cruise(0.0, 100.0, 8.0, |_| -1.75, no_lights);
+        let at = DVec3::new(100.0, -1.75, 0.0);
+        d.scorer.scenario_timed_out(d.t, "Scenario6", at);
+        d.cruise(100.0, 260.0, 8.0, |_| -1.75, no_lights);
+        assert_eq!(d.count(InfractionKind::ScenarioTimeout), 1);
+        let r = d.finish();
+        assert_eq!(r.status, "Completed", "not Perfect");
+        assert_eq!(
+            r.infractions.scenario_timeouts,
+            ["Agent timed out a scenario (Scenario6)"]
+        );
+        assert!(close(r.scores.score_penalty, 0.7, 1e-12));
+        assert!(close(r.scores.score_composed, 70.0, 1e-9));
+        assert!(
+            !r.meta.bench2drive.unwrap().success,
+            "Bench2Drive counts a timed-out scenario"
+        );
+    }
+
+    #[test]
     fn completion_is_along_track_and_at_most_two_points_per_tick() {
         let map = straight_map();
         let route = straight_route(&map);

@@ -232,6 +232,8 @@ impl WorldArgs {
             traffic: self.traffic,
             seed,
             randomise_appearance: self.randomise_appearance,
+            // Follows `--scoring`: `eval::run_route` sets it from the rules.
+            scenario_timeout: None,
         })
     }
 }

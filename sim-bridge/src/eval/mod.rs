@@ -86,7 +86,8 @@ fn start_agent(
 }
 
 /// One route run: `spec` planned as `dense`, `repetition` and world seed recorded in the
-/// record's meta; `on_tick` sees the route completion (percent) every simulated second.
+/// record's meta; `on_tick` sees the route completion (percent) every simulated second. The
+/// world's scenario timeout follows the scoring rules ([`crate::scoring::Rules::scenario_timeout`]).
 #[allow(clippy::too_many_arguments)]
 pub fn run_route(
     map: &Map,
@@ -102,6 +103,10 @@ pub fn run_route(
     let started = Instant::now();
     let plan = global_plan(dense);
     let mut follower = RouteFollower::new(plan.clone());
+    let world_config = WorldConfig {
+        scenario_timeout: scoring.rules.scenario_timeout(),
+        ..world_config
+    };
     let mut world = World::new(map, dense, world_config.clone());
     let context = RouteContext {
         map,
@@ -158,6 +163,9 @@ pub fn run_route(
             on_tick(scorer.route_completion());
         }
         contacts = world.step(control);
+        for ended in world.take_scenario_timeouts() {
+            scorer.scenario_timed_out(ended.time, ended.name, ended.ego);
+        }
         frame += 1;
     };
     agent.end_route();

@@ -60,6 +60,9 @@ pub const PERFECT_STATUS: &str = "Perfect";
 /// Leaderboard 2.0's weight of the minimum-speed penalty: a checkpoint at p % of the traffic's
 /// speed multiplies IS by 1 - 0.3 (1 - p / 100) (PENALTY_PERC_DICT's 0.7 at 0 %).
 pub const MIN_SPEED_WEIGHT: f64 = 0.3;
+/// Leaderboard 2.0's scenario timeout, s (scenario_runner's `_scenario_timeout` of its
+/// obstacle scenarios): a scenario the ego has not got past this long after it fired ends.
+pub const SCENARIO_TIMEOUT_S: f64 = 240.0;
 
 /// Infraction coefficients (LB1.0 `statistics_manager.py` PENALTY_*). TransFuser's Longest6
 /// sets `stop` to 1.0 (stop signs ignored); the defaults are the leaderboard's.
@@ -75,6 +78,8 @@ pub struct Penalties {
     pub red_light: f64,
     /// Running a stop sign: 0.80.
     pub stop: f64,
+    /// A scenario timed out (Leaderboard 2.0's SCENARIO_TIMEOUT; [`Rules::Lb2`] only): 0.70.
+    pub scenario_timeout: f64,
 }
 
 impl Default for Penalties {
@@ -85,6 +90,7 @@ impl Default for Penalties {
             layout: 0.65,
             red_light: 0.70,
             stop: 0.80,
+            scenario_timeout: 0.70,
         }
     }
 }
@@ -97,12 +103,21 @@ pub enum Rules {
     Lb1,
     /// Leaderboard 2.0's penalty table where it applies here: LB1.0's criteria and coefficients,
     /// plus the minimum-speed test (4 checkpoints; each value p < 100 % multiplies IS by
-    /// 1 - 0.3 (1 - p / 100), "min_speed_infractions") and the status "Perfect" for a route
-    /// completed with no infraction. Not applied: 2.0's progress-based route timeout (our maps
-    /// carry no speed limits; LB1.0's timeout stays), scenario timeouts (only Scenario6's
-    /// barriers, from a scenario file, block the route; a car that does not go round them is
-    /// "blocked" after 180 s as in LB1.0) and yielding to emergency vehicles (none drive here).
+    /// 1 - 0.3 (1 - p / 100), "min_speed_infractions"), the scenario timeout (a route-blocking
+    /// scenario, Scenario6 here, that the ego has not got past [`SCENARIO_TIMEOUT_S`] after it
+    /// fired ends, its barriers and vehicles gone, and multiplies IS by 0.70,
+    /// "scenario_timeouts") and the status "Perfect" for a route completed with no infraction.
+    /// Not applied: 2.0's progress-based route timeout (our maps carry no speed limits;
+    /// LB1.0's timeout stays) and yielding to emergency vehicles (none drive here).
     Lb2,
+}
+
+impl Rules {
+    /// How long a route-blocking scenario may hold the ego before it ends, under these rules
+    /// (`None`: it stands for good, as in leaderboard 1.0).
+    pub fn scenario_timeout(self) -> Option<f64> {
+        (self == Rules::Lb2).then_some(SCENARIO_TIMEOUT_S)
+    }
 }
 
 /// Every threshold of the criteria; [`Default`] gives the leaderboard 1.0 values.
@@ -253,19 +268,30 @@ pub enum InfractionKind {
     RouteTimeout,
     /// `min_speed_infractions` (Leaderboard 2.0's MIN_SPEED_INFRACTION; [`Rules::Lb2`] only).
     MinSpeed,
+    /// `scenario_timeouts` (Leaderboard 2.0's SCENARIO_TIMEOUT; [`Rules::Lb2`] only).
+    ScenarioTimeout,
 }
 
 impl InfractionKind {
-    /// Every kind: the leaderboard 1.0 ones ([`InfractionKind::LB1`]) and 2.0's minimum speed.
-    pub const ALL: [InfractionKind; 10] = {
-        let mut all = [InfractionKind::MinSpeed; 10];
+    /// Every kind: the leaderboard 1.0 ones ([`InfractionKind::LB1`]) and 2.0's
+    /// ([`InfractionKind::LB2_ONLY`]).
+    pub const ALL: [InfractionKind; 11] = {
+        let mut all = [InfractionKind::MinSpeed; 11];
         let mut i = 0;
         while i < Self::LB1.len() {
             all[i] = Self::LB1[i];
             i += 1;
         }
+        while i < all.len() {
+            all[i] = Self::LB2_ONLY[i - Self::LB1.len()];
+            i += 1;
+        }
         all
     };
+
+    /// The kinds only leaderboard 2.0's rules ([`Rules::Lb2`]) record.
+    pub const LB2_ONLY: [InfractionKind; 2] =
+        [InfractionKind::MinSpeed, InfractionKind::ScenarioTimeout];
 
     /// The leaderboard 1.0 kinds, in the order of its `labels`/`values` rows.
     pub const LB1: [InfractionKind; 9] = [
@@ -293,6 +319,7 @@ impl InfractionKind {
             InfractionKind::VehicleBlocked => "vehicle_blocked",
             InfractionKind::RouteTimeout => "route_timeout",
             InfractionKind::MinSpeed => "min_speed_infractions",
+            InfractionKind::ScenarioTimeout => "scenario_timeouts",
         }
     }
 
@@ -309,6 +336,7 @@ impl InfractionKind {
             InfractionKind::VehicleBlocked => "blk",
             InfractionKind::RouteTimeout => "tout",
             InfractionKind::MinSpeed => "slow",
+            InfractionKind::ScenarioTimeout => "stmo",
         }
     }
 }
@@ -529,6 +557,23 @@ impl<'a> RouteScorer<'a> {
                 py_round(value, 2)
             ),
             factor: 1.0 - MIN_SPEED_WEIGHT * (1.0 - value / 100.0),
+            detail: None,
+        });
+    }
+
+    /// Leaderboard 2.0's scenario timeout: the world ended scenario `name` at sim time `t`, the
+    /// ego at `location`, because the ego had not got past it in time
+    /// ([`Rules::scenario_timeout`]). Ignored once the route has ended.
+    pub fn scenario_timed_out(&mut self, t: f64, name: &str, location: DVec3) {
+        if self.end.is_some() {
+            return;
+        }
+        self.infractions.push(Infraction {
+            kind: InfractionKind::ScenarioTimeout,
+            time: t,
+            location,
+            text: format!("Agent timed out a scenario ({name})"),
+            factor: self.config.penalties.scenario_timeout,
             detail: None,
         });
     }

@@ -10,7 +10,8 @@
 //! `infractions` (one message list per key), `meta` (`duration_game`, `duration_system`,
 //! `route_length`), `route_id`, `scores` (`score_composed` = DS, `score_penalty` = IS,
 //! `score_route` = RC) and `status`. Our additions are keys that LB1.0 readers ignore:
-//! Leaderboard 2.0's `infractions.min_speed_infractions` (empty unless `--scoring lb2`),
+//! Leaderboard 2.0's `infractions.min_speed_infractions` and `infractions.scenario_timeouts`
+//! (empty unless `--scoring lb2`),
 //! `meta.repetition`, `meta.seed` and `meta.bench2drive` on records, and `meta.records`,
 //! `meta.scores_std`, `meta.total_length`, `meta.duration_game`, `meta.duration_system`,
 //! `meta.infraction_counts` and `meta.bench2drive` on the global record, and a top-level `plan`
@@ -49,6 +50,8 @@ pub struct Infractions<T: Default> {
     pub vehicle_blocked: T,
     /// Leaderboard 2.0's minimum-speed events (`--scoring lb2`; empty or 0 under 1.0).
     pub min_speed_infractions: T,
+    /// Leaderboard 2.0's scenario timeouts (`--scoring lb2`; empty or 0 under 1.0).
+    pub scenario_timeouts: T,
 }
 
 impl<T: Default> Infractions<T> {
@@ -65,6 +68,7 @@ impl<T: Default> Infractions<T> {
             InfractionKind::VehicleBlocked => &self.vehicle_blocked,
             InfractionKind::RouteTimeout => &self.route_timeout,
             InfractionKind::MinSpeed => &self.min_speed_infractions,
+            InfractionKind::ScenarioTimeout => &self.scenario_timeouts,
         }
     }
 
@@ -81,6 +85,7 @@ impl<T: Default> Infractions<T> {
             InfractionKind::VehicleBlocked => &mut self.vehicle_blocked,
             InfractionKind::RouteTimeout => &mut self.route_timeout,
             InfractionKind::MinSpeed => &mut self.min_speed_infractions,
+            InfractionKind::ScenarioTimeout => &mut self.scenario_timeouts,
         }
     }
 }

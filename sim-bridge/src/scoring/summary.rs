@@ -24,11 +24,12 @@ pub fn summary_table(results: &Results) -> String {
         .unwrap_or(0)
         .max(6);
 
-    // Leaderboard 2.0's minimum speed only where some run has it (`--scoring lb2`).
+    // Leaderboard 2.0's kinds only where some run has them (`--scoring lb2`).
     let kinds: Vec<InfractionKind> = InfractionKind::ALL
         .into_iter()
         .filter(|k| {
-            *k != InfractionKind::MinSpeed || records.iter().any(|r| r.infractions.count(*k) > 0)
+            !InfractionKind::LB2_ONLY.contains(k)
+                || records.iter().any(|r| r.infractions.count(*k) > 0)
         })
         .collect();
     let mut out = String::new();

@@ -70,6 +70,11 @@ pub struct WorldConfig {
     /// Draw camera frames in a look varied from the seed (colours, sun, noise) instead of the
     /// canonical one.
     pub randomise_appearance: bool,
+    /// Leaderboard 2.0's scenario timeout, s ([`crate::scoring::Rules::scenario_timeout`]): a
+    /// route-blocking scenario (Scenario6's barriers) the ego has not got past this long after
+    /// it fired ends, its barriers and vehicles removed, and is reported
+    /// ([`World::take_scenario_timeouts`]). `None` (leaderboard 1.0): it stands for good.
+    pub scenario_timeout: Option<f64>,
 }
 
 impl Default for WorldConfig {
@@ -83,6 +88,7 @@ impl Default for WorldConfig {
             traffic: TrafficMode::default(),
             seed: 0,
             randomise_appearance: false,
+            scenario_timeout: None,
         }
     }
 }
@@ -124,6 +130,10 @@ pub struct World<'m> {
     pub scenarios: Vec<Scenario>,
     /// Fired scenarios still running.
     running: Vec<scenarios::Running>,
+    /// [`WorldConfig::scenario_timeout`].
+    scenario_timeout: Option<f64>,
+    /// Scenarios that timed out since [`World::take_scenario_timeouts`] was last called.
+    timed_out: Vec<scenarios::TimedOut>,
     route_progress: usize,
     /// Distance along the route of each route point, m.
     route_distance: Vec<f64>,
@@ -190,6 +200,8 @@ impl<'m> World<'m> {
             lights,
             scenarios: placed.scenarios,
             running: Vec::new(),
+            scenario_timeout: config.scenario_timeout,
+            timed_out: Vec::new(),
             route_progress: 0,
             route_distance: route.cum.clone(),
             lane_changes: lane_changes(map, route),

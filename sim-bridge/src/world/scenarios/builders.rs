@@ -276,6 +276,10 @@ pub(super) fn s5_other_leading_vehicles(
     out.add("Scenario5", trigger, action);
 }
 
+/// The ego is past Scenario6's barriers once its route progress is this far beyond the last
+/// one (its length and a margin), m.
+const PAST_BARRIERS: f64 = 6.0;
+
 /// Scenario6 ManeuverOppositeDirection at route index `trigger`: two street barriers across
 /// the ego's lane 50 and 52 m ahead (the second half a lane to the right), and from the
 /// trigger a flow of vehicles on the oncoming lane from 110 m ahead at 5.56 m/s, at most 7,
@@ -300,11 +304,14 @@ pub(super) fn s6_maneuver_opposite_direction(
         return;
     };
     let second = ahead_on_road(map, route, first, 2.0).unwrap_or(first);
+    let mut barriers = Vec::new();
     for (k, aside) in [(first, 0.0), (second, -0.5 * lane_width)] {
         let q = route.points[k];
+        let centre = q.position.truncate() + q.forward().perp() * aside;
+        barriers.push(centre);
         out.statics.push(StaticProp {
             obb: Obb {
-                centre: q.position.truncate() + q.forward().perp() * aside,
+                centre,
                 yaw: q.yaw + std::f64::consts::FRAC_PI_2,
                 half: DVec2::new(1.0, 0.3),
             },
@@ -317,6 +324,8 @@ pub(super) fn s6_maneuver_opposite_direction(
         speed: 5.56,
         count: 7,
         metres: 220.0,
+        barriers,
+        past: route.cum[second] + PAST_BARRIERS,
     };
     out.add("Scenario6", trigger, action);
 }

@@ -1,6 +1,8 @@
 //! Scenarios while they run: firing each at its trigger, and what a running one does every
 //! tick until it ends (Scenario2's leading vehicle leaving, Scenario5's vehicles leaving,
-//! Scenario6's oncoming flow).
+//! Scenario6's oncoming flow, and under Leaderboard 2.0's rules Scenario6 timing out).
+
+use glam::{DVec2, DVec3};
 
 use super::{S2_EGO_NEAR, S2_EGO_STOOD_S, S6_SOURCE_CLEAR, ScenarioAction};
 use crate::map::LaneIdx;
@@ -14,12 +16,37 @@ pub(in crate::world) enum Running {
     /// Scenario2: the leading vehicle `id` leaves once the ego has stood near it.
     LeaderWaits(u32),
     /// Scenario5 and 6: `vehicles` leave, and a flow stops, once the ego's progress along the
-    /// route passes `until` metres.
+    /// route passes `until` metres; a scenario that blocks the route also ends at its deadline.
     UntilEgoDrove {
         until: f64,
         vehicles: Vec<u32>,
         flow: Option<Flow>,
+        blocking: Option<Blocking>,
     },
+}
+
+/// A running scenario whose props block the ego's lane (Scenario6's barriers), under a
+/// scenario timeout.
+#[derive(Debug, Clone)]
+pub(in crate::world) struct Blocking {
+    name: &'static str,
+    /// Sim time at which it ends if the ego has not got past it, s.
+    deadline: f64,
+    /// Distance along the route beyond which the ego is past it, m.
+    past: f64,
+    /// Centres of its props.
+    props: Vec<DVec2>,
+}
+
+/// A scenario that ended on Leaderboard 2.0's scenario timeout.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimedOut {
+    /// Its leaderboard name, e.g. "Scenario6".
+    pub name: &'static str,
+    /// Sim time it ended, s.
+    pub time: f64,
+    /// Where the ego was then.
+    pub ego: DVec3,
 }
 
 /// Scenario6's source of oncoming vehicles.
@@ -41,7 +68,7 @@ impl World<'_> {
                 continue;
             }
             self.scenarios[k].fired = true;
-            self.fire(self.scenarios[k].action.clone());
+            self.fire(self.scenarios[k].name, self.scenarios[k].action.clone());
         }
     }
 
@@ -58,7 +85,13 @@ impl World<'_> {
         self.ids.0
     }
 
-    fn fire(&mut self, action: ScenarioAction) {
+    /// Scenarios that ended on their timeout since the last call
+    /// ([`crate::world::WorldConfig::scenario_timeout`]), for the scorer.
+    pub fn take_scenario_timeouts(&mut self) -> Vec<TimedOut> {
+        std::mem::take(&mut self.timed_out)
+    }
+
+    fn fire(&mut self, name: &'static str, action: ScenarioAction) {
         match action {
             ScenarioAction::StartCrosser(id) => {
                 if let Some(c) = self.crossers.iter_mut().find(|c| c.id == id) {
@@ -95,6 +128,7 @@ impl World<'_> {
                     until: self.ego_route_distance() + metres,
                     vehicles: vehicles.iter().map(|(id, _)| *id).collect(),
                     flow: None,
+                    blocking: None,
                 });
             }
             ScenarioAction::OncomingFlow {
@@ -103,7 +137,15 @@ impl World<'_> {
                 speed,
                 count,
                 metres,
+                barriers,
+                past,
             } => {
+                let blocking = self.scenario_timeout.map(|timeout| Blocking {
+                    name,
+                    deadline: self.time + timeout,
+                    past,
+                    props: barriers,
+                });
                 self.running.push(Running::UntilEgoDrove {
                     until: self.ego_route_distance() + metres,
                     vehicles: Vec::new(),
@@ -113,6 +155,7 @@ impl World<'_> {
                         speed,
                         left: count,
                     }),
+                    blocking,
                 });
             }
             ScenarioAction::JunctionCrosser {
@@ -141,6 +184,7 @@ impl World<'_> {
         let ego = self.ego.state();
         let progressed = self.ego_route_distance();
         let mut leaving = Vec::new();
+        let mut removed_props = Vec::new();
         let mut running = std::mem::take(&mut self.running);
         running.retain_mut(|r| match r {
             Running::LeaderWaits(id) => {
@@ -162,9 +206,23 @@ impl World<'_> {
                 until,
                 vehicles,
                 flow,
+                blocking,
             } => {
                 if progressed >= *until {
                     leaving.append(vehicles);
+                    return false;
+                }
+                if blocking.as_ref().is_some_and(|b| progressed >= b.past) {
+                    *blocking = None;
+                }
+                if let Some(b) = blocking.as_mut().filter(|b| self.time >= b.deadline) {
+                    leaving.append(vehicles);
+                    removed_props.append(&mut b.props);
+                    self.timed_out.push(TimedOut {
+                        name: b.name,
+                        time: self.time,
+                        ego: ego.position,
+                    });
                     return false;
                 }
                 if let Some(flow) = flow.as_mut().filter(|f| f.left > 0) {
@@ -192,5 +250,7 @@ impl World<'_> {
         });
         self.running = running;
         self.traffic.vehicles.retain(|v| !leaving.contains(&v.id));
+        self.statics
+            .retain(|p| !removed_props.contains(&p.obb.centre));
     }
 }

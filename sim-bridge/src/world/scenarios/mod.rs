@@ -24,6 +24,7 @@ mod live;
 pub use drawn::place_route_scenarios;
 pub use leaderboard::place_from_file;
 pub(super) use live::Running;
+pub use live::TimedOut;
 
 use glam::{DVec2, DVec3};
 use rand::{Rng, RngExt as _};
@@ -195,7 +196,10 @@ pub enum ScenarioAction {
     },
     /// Scenario6: vehicles come along the oncoming lane `lane` from `s` at `speed`, one
     /// whenever none is within [`S6_SOURCE_CLEAR`] m of the source, at most `count`, until the
-    /// ego has driven `metres` past the trigger, when they leave.
+    /// ego has driven `metres` past the trigger, when they leave. The static props centred at
+    /// `barriers` block the ego's lane until it is `past` m along the route: under a scenario
+    /// timeout ([`crate::world::WorldConfig::scenario_timeout`]) they go with the flow's
+    /// vehicles if it is not past them by then.
     OncomingFlow {
         /// The oncoming lane.
         lane: LaneIdx,
@@ -207,6 +211,10 @@ pub enum ScenarioAction {
         count: usize,
         /// How far past the trigger the ego drives before they leave, m.
         metres: f64,
+        /// Centres of the barriers across the ego's lane.
+        barriers: Vec<DVec2>,
+        /// Distance along the route beyond which the ego is past them, m.
+        past: f64,
     },
     /// Scenario10: a vehicle on the approach `lane` of a junction without lights crosses it
     /// without giving way, placed so that at its speed it reaches the junction about when the
