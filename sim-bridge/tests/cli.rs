@@ -1046,6 +1046,18 @@ fn results_compare_pairs_two_agents_runs_and_says_when_they_share_none() {
         run.status.success() && stdout.contains("2 runs paired"),
         "{stdout}"
     );
+    // A reader that stops early (`| head`) ends the printing, not the command with a panic.
+    let mut closed = Command::new(env!("CARGO_BIN_EXE_sim-bridge"))
+        .args(["results", "compare"])
+        .args([&first, &second])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(closed.stdout.take());
+    let run = closed.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success() && stderr.is_empty(), "{stderr}");
     let comparison: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     // The same expert on the same runs: no difference, and one that cannot be told apart.

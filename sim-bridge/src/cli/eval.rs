@@ -131,8 +131,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         &out,
         args.pictures.as_deref(),
     )?;
-    println!("{}", summary_table(&report.results));
-    println!("results written to {}", out.display());
+    super::print_stdout(&format!(
+        "{}\nresults written to {}",
+        summary_table(&report.results),
+        out.display()
+    ))?;
     check_report(&report, repetitions)
 }
 
@@ -206,8 +209,11 @@ fn run_suite(args: &EvalArgs, suite: &Suite) -> anyhow::Result<()> {
     let path = dir.join("suite.json");
     let text = serde_json::to_string_pretty(&summary).context("serializing the suite summary")?;
     super::write_output(&path, &text)?;
-    println!("{}", suite_table(&summary));
-    println!("suite summary written to {}", path.display());
+    super::print_stdout(&format!(
+        "{}\nsuite summary written to {}",
+        suite_table(&summary),
+        path.display()
+    ))?;
     if !failures.is_empty() {
         bail!("{}", failures.join("; "));
     }

@@ -163,6 +163,20 @@ fn town_map(specs: &[RouteSpec], dir: &std::path::Path, routes: &str) -> anyhow:
     Ok(path.to_string_lossy().into_owned())
 }
 
+/// Prints a command's report on standard output. A reader that closed the pipe early
+/// (`sim-bridge results compare A B | head -3`) ends the printing quietly, not the command with a
+/// panic: what the command wrote to files stays written.
+pub fn print_stdout(text: &str) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(e).context("writing to standard output")
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Writes a command's output file whole (atomically: a reader never sees half of it), the
 /// error naming the file.
 pub fn write_output(path: &std::path::Path, text: &str) -> anyhow::Result<()> {

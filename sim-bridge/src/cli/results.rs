@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
-use sim_bridge::eval::compare::{Paired, Runs, compare, runs_of};
+use sim_bridge::eval::compare::{Runs, compare, runs_of};
 use sim_bridge::eval::merge::{Part, merge};
 use sim_bridge::scoring::{Results, summary_table};
 use ssrdrive_support::files::read_capped_text;
@@ -103,34 +103,31 @@ fn run_compare(args: CompareArgs) -> anyhow::Result<()> {
             args.second.display()
         );
     };
-    println!(
-        "{} runs paired ({} only in the first, {} only in the second)",
+    let mut report = format!(
+        "{} runs paired ({} only in the first, {} only in the second)\n",
         c.pairs, c.only_first, c.only_second
     );
-    println!("      first   second   second - first (95 % interval)");
-    let row = |name: &str, p: &Paired, digits: usize| {
+    report.push_str("      first   second   second - first (95 % interval)\n");
+    for (name, p, digits) in [("DS", &c.ds, 2), ("RC", &c.rc, 2), ("IS", &c.is, 3)] {
         let interval = p.half_width.map_or("-".to_string(), |h| {
             format!(
                 "+/- {h:.digits$}{}",
                 if p.tells_apart() { "" } else { ", holds 0" }
             )
         });
-        println!(
-            "{name}  {:>7.digits$}  {:>7.digits$}   {:+.digits$} ({interval})",
+        report.push_str(&format!(
+            "{name}  {:>7.digits$}  {:>7.digits$}   {:+.digits$} ({interval})\n",
             p.first, p.second, p.difference
-        );
-    };
-    row("DS", &c.ds, 2);
-    row("RC", &c.rc, 2);
-    row("IS", &c.is, 3);
-    println!(
+        ));
+    }
+    report.push_str(&format!(
         "DS per run: second higher {}, lower {}, equal {}",
         c.second_better, c.second_worse, c.same
-    );
+    ));
     if let Some(out) = &args.out {
         super::write_output(out, &serde_json::to_string_pretty(&c)?)?;
     }
-    Ok(())
+    super::print_stdout(&report)
 }
 
 fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
@@ -152,22 +149,21 @@ fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
     }
     let merged = merge(&parts, args.allow_missing)?;
     super::write_output(&args.out, &merged.results.to_json())?;
-    println!("{}", summary_table(&merged.results));
     let runs = merged.results.plan.as_ref().map_or(0, |p| p.runs);
-    if merged.missing.is_empty() {
-        println!(
+    let outcome = if merged.missing.is_empty() {
+        format!(
             "merged {} files, all {runs} runs, into {}",
             parts.len(),
             args.out.display()
-        );
+        )
     } else {
-        println!(
+        format!(
             "merged {} files into {}: {} of {runs} runs missing (listed in its \
              global record's meta.exceptions)",
             parts.len(),
             args.out.display(),
             merged.missing.len()
-        );
-    }
-    Ok(())
+        )
+    };
+    super::print_stdout(&format!("{}\n{outcome}", summary_table(&merged.results)))
 }
