@@ -355,16 +355,12 @@ fn build_junctions(map: &Map, junction_ids: Vec<String>) -> Vec<Junction> {
 /// the approach's right edge where its rightmost straight-on lane leaves the junction; beside
 /// the rightmost stop line when no lane goes straight on.
 fn placed_head(map: &Map, lines: &[StopLine]) -> (DVec3, f64) {
-    let Some(rightmost) = lines
-        .iter()
-        .copied()
-        .min_by(|a, b| rightness(a).total_cmp(&rightness(b)))
-    else {
+    let mut right_to_left = lines.to_vec();
+    right_to_left.sort_by(|a, b| rightness(a).total_cmp(&rightness(b)));
+    let Some(&rightmost) = right_to_left.first() else {
         return (DVec3::ZERO, 0.0);
     };
     let facing = rightmost.yaw + std::f64::consts::PI;
-    let mut right_to_left: Vec<StopLine> = lines.to_vec();
-    right_to_left.sort_by(|a, b| rightness(a).total_cmp(&rightness(b)));
     let across = right_to_left.iter().find_map(|line| {
         let exit = straight_on_exit(map, line)?;
         // The approach's right edge, measured from this lane's centre.
