@@ -71,14 +71,49 @@ fn carla_driving_lanes_turn_no_more_than_a_curve_between_poses_half_a_metre_apar
 }
 
 /// Town03's file carries no traffic-light signal, so the simulator places its lights; they
-/// stand US-style across the junction, as in CARLA's Town03, where a car waiting at the stop
+/// stand US-style across the junction, as the exports of CARLA's other US-style towns put
+/// theirs (Town04's and Town06's heads all stand 8-54 m past their stop lines; Town01's and
+/// Town02's, European-style, at or up to 7 m before them), where a car waiting at the stop
 /// line (its centre 3 m back) still sees the red lamp ahead. Beside the stop line they were
 /// out of every forward camera's view while the car waited.
 #[test]
-fn town03s_placed_lights_show_their_red_lamp_to_a_car_waiting_at_the_stop_line() {
+fn town03s_placed_lights_stand_across_the_junction_as_carlas_us_style_exports_do() {
     let Some(dir) = carla_dir() else { return };
-    let map = Map::load_file(&dir.join("Town03.xodr"), MapOptions::default()).unwrap();
+    let load = |town: &str| {
+        Map::load_file(&dir.join(format!("{town}.xodr")), MapOptions::default()).unwrap()
+    };
+    // How far past its (first) stop line, along the approach, each head stands.
+    let past_line = |map: &Map| -> Vec<f64> {
+        map.lights
+            .iter()
+            .map(|l| {
+                let line = l.stop_lines[0];
+                let along = glam::DVec2::from_angle(line.yaw);
+                (l.head.truncate() - line.position.truncate()).dot(along)
+            })
+            .collect()
+    };
+    for town in ["Town04", "Town06"] {
+        let past = past_line(&load(town));
+        assert!(
+            past.iter().all(|d| (5.0..60.0).contains(d)),
+            "{town}: {past:?}"
+        );
+    }
+    for town in ["Town01", "Town02"] {
+        let past = past_line(&load(town));
+        assert!(
+            past.iter().all(|d| (-8.0..1.0).contains(d)),
+            "{town}: {past:?}"
+        );
+    }
+    let map = load("Town03");
     assert!(map.lights.len() >= 20 && map.lights.iter().all(|l| !l.from_map));
+    let past = past_line(&map);
+    assert!(
+        past.iter().all(|d| (5.0..60.0).contains(d)),
+        "Town03: {past:?}"
+    );
     let unseen = lights_unseen_from(&map, &Rig::tcp(), map.lights.iter(), 3.0);
     assert!(
         unseen.len() * 10 <= map.lights.len(),

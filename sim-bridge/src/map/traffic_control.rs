@@ -14,12 +14,12 @@
 //! - A light's head (what cameras see) stands where the file's signal does, its centre
 //!   [`HEAD_HEIGHT`] above the road unless the file mounts it at least [`MIN_MOUNTED_HEIGHT`]
 //!   up ([`mounted_head`]). A placed light's head stands US-style, across the junction on the
-//!   far right corner where the approach's straight-on lanes leave it ([`placed_head`]), as in
-//!   CARLA's towns without signals in their files (Town03-05: a car waiting at the stop line
-//!   sees it ahead); an approach with no straight-on connector (a T-junction's stem) gets it
-//!   beside its rightmost stop line. Every head faces the traffic of its approach: CARLA's
-//!   exports give the post's yaw, which for about half their lights points away from the lanes
-//!   the light controls.
+//!   far right corner where the approach's straight-on lanes leave it ([`placed_head`]), as
+//!   CARLA's US-style towns stand theirs (the exports of Town04 and Town06 put every head
+//!   8-54 m past its stop line; a car waiting at the line sees it ahead); an approach with no
+//!   straight-on connector (a T-junction's stem) gets it beside its rightmost stop line. Every
+//!   head faces the traffic of its approach: CARLA's exports give the post's yaw, which for
+//!   about half their lights points away from the lanes the light controls.
 
 use std::collections::BTreeMap;
 
