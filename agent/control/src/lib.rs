@@ -1,9 +1,10 @@
 //! From a planned trajectory and TCP's control branch to vehicle control: pure pursuit and a
 //! speed PID that follow the waypoints ([`trajectory`]), the control branch's Beta distributions
 //! turned into actions ([`beta`]), TCP's situation-based fusion of the two ([`fusion`]), a
-//! timed rule that gets a car going again after a long stop ([`unstick`]), and a stop when the
-//! network believes the path just ahead occupied ([`safety`]), with the per-episode state all
-//! of them keep ([`EpisodeController`]).
+//! timed rule that gets a car going again after a long stop ([`unstick`]), a rule that drives on
+//! through the light the car started on ([`commit`]), and a stop when the network believes the
+//! path just ahead occupied ([`safety`]), with the per-episode state all of them keep
+//! ([`EpisodeController`]).
 //!
 //! A crate of its own so that the agent server and the simulator's oracle-plan agent (which
 //! feeds it the expert's plan) drive through the same code; it depends on the contract crate
@@ -16,12 +17,15 @@
 #![forbid(unsafe_code)]
 
 pub mod beta;
+pub mod commit;
 pub mod fusion;
 pub mod pid;
 pub mod safety;
 pub mod trajectory;
 pub mod unstick;
 
+pub use commit::Commit;
+use commit::CommitState;
 use fusion::Fusion;
 pub use fusion::TurnLead;
 pub use safety::SafetyStop;
@@ -99,6 +103,8 @@ pub struct ControlConfig {
     pub turn_count: usize,
     /// The timed unstick rule (on by default).
     pub unstick: Unstick,
+    /// Going on through the light the car started on (off by default).
+    pub commit: Commit,
     /// The safety stop on the network's occupancy (off by default).
     pub safety: SafetyStop,
 }
@@ -124,6 +130,7 @@ impl Default for ControlConfig {
             turn_steer: 0.1,
             turn_count: 10,
             unstick: Unstick::default(),
+            commit: Commit::default(),
             safety: SafetyStop::default(),
         }
     }
@@ -173,6 +180,7 @@ impl ControlConfig {
             ("vehicle.max_wheel_angle", v.max_wheel_angle, 1.0, 89.0),
         ])?;
         self.unstick.validate()?;
+        self.commit.validate()?;
         self.safety.validate()
     }
 }
@@ -201,14 +209,17 @@ pub struct ControlDecision {
     /// Whether the unstick rule overrode the fused control this tick.
     #[serde(default)]
     pub unsticking: bool,
+    /// Whether the commit rule drove on through a light this tick.
+    #[serde(default)]
+    pub committed: bool,
     /// Whether the safety stop overrode the control this tick.
     #[serde(default)]
     pub safety_stop: bool,
 }
 
 /// What the network believes of the scene beyond its plan, read by the rules that may override
-/// the plan: the [`safety`] stop and the [`unstick`] rule. The default believes
-/// nothing (an agent without those heads, or an oracle).
+/// the plan: the [`safety`] stop, the [`unstick`] rule and the [`commit`] rule. The default
+/// believes nothing (an agent without those heads, or an oracle).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Beliefs<'a> {
     /// Ego-frame points the occupancy head believes occupied.
@@ -239,6 +250,7 @@ pub struct EpisodeController {
     follower: TrajectoryFollower,
     fusion: Fusion,
     unstick: UnstickState,
+    commit: CommitState,
     /// Ticks stopped since the safety stop first held the car in this standstill.
     held_ticks: u32,
     /// Whether the safety stop lets the current creep through (it held the car too long).
@@ -258,6 +270,7 @@ impl EpisodeController {
             follower: TrajectoryFollower::new(&config),
             fusion: Fusion::new(config.turn_window),
             unstick: UnstickState::default(),
+            commit: CommitState::default(),
             held_ticks: 0,
             yielding: false,
             config,
@@ -304,6 +317,14 @@ impl EpisodeController {
             &beliefs,
             &self.config.unstick,
         );
+        let (control, committed) = self.commit.apply(
+            control,
+            speed,
+            trajectory.steer,
+            &beliefs,
+            unsticking,
+            &self.config.commit,
+        );
         let safety = &self.config.safety;
         let blocked = safety.blocked(waypoints, speed, beliefs.occupied);
         // Counted from the first tick it blocks a stopped car until the car moves: an
@@ -335,6 +356,7 @@ impl EpisodeController {
             branch,
             turning,
             unsticking,
+            committed,
             safety_stop,
         }
     }

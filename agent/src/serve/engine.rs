@@ -439,6 +439,7 @@ fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
         controller: Some(v1::ControllerState {
             turning: output.decision.turning,
             unsticking: output.decision.unsticking,
+            committed: output.decision.committed,
             safety_stop: output.decision.safety_stop,
         }),
     })

@@ -100,6 +100,8 @@ pub struct TickTrace {
     pub turning: bool,
     /// The unstick rule's creep drove.
     pub unsticking: bool,
+    /// The commit rule drove on through the light the car started on.
+    pub committed: bool,
     /// The safety stop braked.
     pub safety_stop: bool,
     /// The log's ground truth: the traffic lights within 60 m, in the recorded ego's frame.
@@ -162,6 +164,7 @@ impl TickTrace {
             light: debug.and_then(|d| d.light).map(|l| [l.green, l.stop]),
             turning: state.turning,
             unsticking: state.unsticking,
+            committed: state.committed,
             safety_stop: state.safety_stop,
             lights: LightInView::all(tick),
         }
