@@ -110,16 +110,7 @@ impl CommitState {
         if unsticking || light < rule.held_probability {
             return (control, false);
         }
-        let throttle = if speed < rule.speed {
-            rule.throttle
-        } else {
-            0.0
-        };
-        let go = Control {
-            steer: plan_steer,
-            throttle,
-            brake: 0.0,
-        };
+        let go = super::along_plan(plan_steer, speed, rule.speed, rule.throttle);
         (go, true)
     }
 }
@@ -154,17 +145,30 @@ mod tests {
         }
     }
 
-    /// Held by a light for a while, then started by the network on "clear".
-    fn started_on_green(state: &mut CommitState, rule: &Commit) {
+    /// Stands 5 s with the hazard head's "light" at `light`, then moves off with its "clear" at
+    /// `clear` (`crept`: the unstick rule's creep moves it); returns the rule's answer then.
+    fn stand_then_start(
+        state: &mut CommitState,
+        rule: &Commit,
+        light: f32,
+        clear: f32,
+        crept: bool,
+    ) -> (Control, bool) {
         for _ in 0..100 {
-            state.apply(BRAKE, 0.0, 0.0, &hazard(0.05, 0.9), false, rule);
+            state.apply(BRAKE, 0.0, 0.0, &hazard(0.05, light), false, rule);
         }
-        let (control, overridden) = state.apply(DRIVE, 0.5, 0.0, &hazard(0.98, 0.01), false, rule);
-        assert_eq!(
-            (control, overridden),
-            (DRIVE, false),
-            "its own start stands"
-        );
+        state.apply(DRIVE, 0.5, 0.0, &hazard(clear, 1.0 - clear), crept, rule)
+    }
+
+    /// Held by a light, then started by the network on "clear".
+    fn started_on_green(state: &mut CommitState, rule: &Commit) {
+        let start = stand_then_start(state, rule, 0.9, 0.98, false);
+        assert_eq!(start, (DRIVE, false), "its own start stands");
+    }
+
+    /// The rule's answer to a brake for "a light" at 1 m/s.
+    fn brake_for_a_light(state: &mut CommitState, rule: &Commit) -> (Control, bool) {
+        state.apply(BRAKE, 1.0, 0.0, &hazard(0.3, 0.6), false, rule)
     }
 
     #[test]
@@ -192,16 +196,9 @@ mod tests {
         // The start tick used one tick of the window.
         let window = (rule.within_s * TICKS_PER_SECOND) as usize;
         for _ in 1..window {
-            assert!(
-                state
-                    .apply(BRAKE, 2.0, 0.0, &hazard(0.3, 0.6), false, &rule)
-                    .1
-            );
+            assert!(brake_for_a_light(&mut state, &rule).1);
         }
-        assert_eq!(
-            state.apply(BRAKE, 2.0, 0.0, &hazard(0.3, 0.6), false, &rule),
-            (BRAKE, false)
-        );
+        assert_eq!(brake_for_a_light(&mut state, &rule), (BRAKE, false));
     }
 
     #[test]
@@ -212,30 +209,17 @@ mod tests {
         started_on_green(&mut state, &rule);
         let other = state.apply(BRAKE, 2.0, 0.0, &hazard(0.1, 0.2), false, &rule);
         assert_eq!(other, (BRAKE, false));
-        // A start by the unstick rule's creep proves no green.
-        let mut crept = CommitState::default();
-        for _ in 0..100 {
-            crept.apply(BRAKE, 0.0, 0.0, &hazard(0.05, 0.9), false, &rule);
+        // Starts that prove no green: the unstick rule's creep, a start the network was unsure
+        // of, a start from a standstill no light held (behind a car).
+        for (light, clear, crept) in [(0.9, 0.98, true), (0.9, 0.6, false), (0.1, 0.98, false)] {
+            let mut state = CommitState::default();
+            stand_then_start(&mut state, &rule, light, clear, crept);
+            assert_eq!(
+                brake_for_a_light(&mut state, &rule),
+                (BRAKE, false),
+                "light {light}, clear {clear}, crept {crept}"
+            );
         }
-        crept.apply(DRIVE, 0.5, 0.0, &hazard(0.98, 0.01), true, &rule);
-        let later = crept.apply(BRAKE, 1.0, 0.0, &hazard(0.3, 0.6), false, &rule);
-        assert_eq!(later, (BRAKE, false));
-        // A start the network was unsure of.
-        let mut unsure = CommitState::default();
-        for _ in 0..100 {
-            unsure.apply(BRAKE, 0.0, 0.0, &hazard(0.05, 0.9), false, &rule);
-        }
-        unsure.apply(DRIVE, 0.5, 0.0, &hazard(0.6, 0.3), false, &rule);
-        let later = unsure.apply(BRAKE, 1.0, 0.0, &hazard(0.3, 0.6), false, &rule);
-        assert_eq!(later, (BRAKE, false));
-        // A start from a standstill no light held (behind a car).
-        let mut queued = CommitState::default();
-        for _ in 0..100 {
-            queued.apply(BRAKE, 0.0, 0.0, &hazard(0.1, 0.1), false, &rule);
-        }
-        queued.apply(DRIVE, 0.5, 0.0, &hazard(0.98, 0.01), false, &rule);
-        let later = queued.apply(BRAKE, 1.0, 0.0, &hazard(0.3, 0.6), false, &rule);
-        assert_eq!(later, (BRAKE, false));
     }
 
     #[test]
@@ -244,8 +228,7 @@ mod tests {
         let rule = Commit::default();
         assert!(!rule.enabled);
         started_on_green(&mut state, &rule);
-        let off = state.apply(BRAKE, 2.0, 0.0, &hazard(0.3, 0.6), false, &rule);
-        assert_eq!(off, (BRAKE, false));
+        assert_eq!(brake_for_a_light(&mut state, &rule), (BRAKE, false));
         let mut blind = CommitState::default();
         let none = Beliefs::default();
         assert_eq!(

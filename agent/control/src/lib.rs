@@ -185,6 +185,16 @@ impl ControlConfig {
     }
 }
 
+/// Driving along the plan at up to `max_speed` (m/s): the plan's steer, `throttle` below that
+/// speed, no brake. What the unstick rule's creep and the commit rule drive with.
+pub(crate) fn along_plan(plan_steer: f32, speed: f32, max_speed: f32, throttle: f32) -> Control {
+    Control {
+        steer: plan_steer,
+        throttle: if speed < max_speed { throttle } else { 0.0 },
+        brake: 0.0,
+    }
+}
+
 /// The longest PID or fusion window a config may ask for, ticks (500 s at 20 Hz): each episode
 /// allocates its windows up front.
 const MAX_WINDOW: usize = 10_000;

@@ -194,16 +194,7 @@ impl UnstickState {
             self.creep_ticks_left = (rule.creep_s * TICKS_PER_SECOND).ceil() as u32;
         }
         self.creep_ticks_left -= 1;
-        let throttle = if speed < rule.creep_speed {
-            rule.creep_throttle
-        } else {
-            0.0
-        };
-        let creep = Control {
-            steer: plan_steer,
-            throttle,
-            brake: 0.0,
-        };
+        let creep = super::along_plan(plan_steer, speed, rule.creep_speed, rule.creep_throttle);
         (creep, true)
     }
 }
