@@ -11,6 +11,15 @@ fn sim_bridge(args: &[&str]) -> std::process::Output {
         .expect("runs")
 }
 
+/// Fails the test with the command's standard error unless it exited successfully.
+fn assert_succeeded(run: &std::process::Output) {
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
 #[test]
 fn eval_writes_leaderboard_results_and_a_summary() {
     let tmp = tempfile::tempdir().unwrap();
@@ -29,11 +38,7 @@ fn eval_writes_leaderboard_results_and_a_summary() {
         "--pictures",
         pictures.to_str().unwrap(),
     ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert_succeeded(&run);
     let table = String::from_utf8_lossy(&run.stdout);
     assert!(table.contains("mean of 2"), "{table}");
     let json: serde_json::Value =
@@ -76,11 +81,7 @@ fn eval_jobs_run_routes_at_once_with_the_same_results() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
+        assert_succeeded(&run);
         let json: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
         let mut records = json["_checkpoint"]["records"].as_array().unwrap().clone();
@@ -318,11 +319,7 @@ fn render_writes_camera_frames_and_an_animation() {
         "--out",
         dir.to_str().unwrap(),
     ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert_succeeded(&run);
     let route = std::fs::read_dir(dir)
         .unwrap()
         .next()
@@ -634,11 +631,7 @@ fn random_routes_and_scenario_files_on_any_map_are_written_and_driven() {
         out.to_str().unwrap(),
     ]);
     let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert_succeeded(&run);
     assert!(
         stdout.contains("wrote 3 routes") && stdout.contains("on mytown"),
         "{stdout}"
@@ -816,11 +809,7 @@ fn a_collection_killed_mid_episode_resumes_to_the_same_bytes() {
     child.kill().unwrap();
     child.wait().unwrap();
     let run = collect(&killed).output().unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert_succeeded(&run);
     let (want, got) = (episode_files(&whole), episode_files(&killed));
     assert_eq!(
         want.keys().collect::<Vec<_>>(),
@@ -980,11 +969,7 @@ fn a_step_log_keeps_the_lights_around_the_ego_as_ground_truth() {
         "--record",
         logs.to_str().unwrap(),
     ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert_succeeded(&run);
     let log = std::fs::read_dir(&logs).unwrap().next().unwrap().unwrap();
     let log = sim_bridge::replay::log::read_log(&log.path()).unwrap();
     let mut seen = 0;
@@ -1020,11 +1005,7 @@ fn results_compare_pairs_two_agents_runs_and_says_when_they_share_none() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
+        assert_succeeded(&run);
         out
     };
     let (first, second, other) = (
