@@ -5,11 +5,16 @@ mod common;
 use common::carla_dir;
 use sim_bridge::eval::run_route;
 use sim_bridge::expert::Expert;
+use sim_bridge::expert::hazards::{self, HazardMemory};
 use sim_bridge::map::{LaneKind, Map, MapOptions};
 use sim_bridge::route::scenario_file::ScenarioFile;
 use sim_bridge::route::{planner, xml};
 use sim_bridge::scoring::ScoringConfig;
-use sim_bridge::world::{TrafficMode, WorldConfig, leaderboard_vehicles};
+use sim_bridge::world::ego::{Ego, EgoParams};
+use sim_bridge::world::state::LightState;
+use sim_bridge::world::{TrafficMode, World, WorldConfig, leaderboard_vehicles};
+use ssrdrive_proto::control::Control;
+use ssrdrive_proto::dataset::BrakeReason;
 
 /// The expert's driving score on one route (run `index` of its evaluation).
 fn expert_ds(map: &Map, spec: &xml::RouteSpec, world: WorldConfig, index: usize) -> f64 {
@@ -227,6 +232,52 @@ fn the_expert_is_held_only_by_the_light_of_its_own_next_stop_line() {
             assert!(ds > 99.0, "Town{town} route {}: DS {ds:.1}", spec.id);
         }
     }
+}
+
+/// Town03 cuts junction connectors into pieces, the first 3 cm long: a dense route's first
+/// point in the junction lies past that piece, on a lane the approach does not lead to
+/// directly. The approach's light still governs it: the expert stops for it red, and labels it
+/// as the light ahead (it ran a red on the long route 24 when it did not).
+#[test]
+fn the_expert_stops_for_a_light_whose_first_connector_piece_the_route_skips() {
+    let Some(dir) = carla_dir() else { return };
+    let map = Map::load_file(&dir.join("Town03.xodr"), MapOptions::default()).unwrap();
+    let specs =
+        xml::read_file(&dir.join("training_routes/transfuser/routes_town03_long.xml")).unwrap();
+    let spec = specs.iter().find(|s| s.id == "24").unwrap();
+    let route = planner::plan_route(&map, spec).unwrap();
+    // The last point on the approach, where the next one is past the connector's first piece.
+    let line = (0..route.points.len() - 1)
+        .find(|&j| {
+            let (lane, next) = (map.lane(route.points[j].lane), route.points[j + 1].lane);
+            map.light_ending(lane.idx).is_some()
+                && map.lane(next).in_junction()
+                && !lane.successors.contains(&next)
+        })
+        .expect("a skipped first piece at a light");
+    let light = map.light_ending(route.points[line].lane).unwrap().id;
+    let start = (0..line)
+        .rev()
+        .find(|&j| route.cum[line] - route.cum[j] > 25.0)
+        .unwrap();
+    let config = WorldConfig {
+        vehicles: 0,
+        scenarios: false,
+        parked_cars: false,
+        ..WorldConfig::default()
+    };
+    let mut world = World::new(&map, &route, config);
+    let p = route.points[start];
+    world.ego = Ego::new(EgoParams::default(), p.position, p.yaw);
+    world.lights.force(light, LightState::Red, 1000.0);
+    world.step(Control::default());
+    let view = hazards::scan(&world, &route, start, &mut HazardMemory::default());
+    let (gap, state) = view
+        .light_ahead
+        .expect("the approach's light is the light ahead");
+    assert_eq!(state, LightState::Red);
+    assert!((15.0..25.0).contains(&gap), "{gap:.1} m to its line");
+    assert_eq!(view.cause, Some(BrakeReason::TrafficLight));
 }
 
 /// Town06's long route 48 (with the leaderboard's public scenario file) changes lanes into a

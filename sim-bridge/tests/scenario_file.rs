@@ -17,7 +17,7 @@ use sim_bridge::towngen;
 use sim_bridge::world::ego::{Ego, EgoParams};
 use sim_bridge::world::state::ActorKind;
 use sim_bridge::world::vehicle::Script;
-use sim_bridge::world::{World, WorldConfig};
+use sim_bridge::world::{TrafficMode, World, WorldConfig};
 use ssrdrive_proto::command::RoadOption;
 use ssrdrive_proto::control::Control;
 
@@ -529,6 +529,50 @@ fn scenario10_a_vehicle_crosses_the_junction_without_lights_in_the_egos_way() {
         conflicts[&ego_connector].contains(&its_way),
         "its way crosses the ego's"
     );
+}
+
+#[test]
+fn scenario7s_runner_in_carla_traffic_goes_straight_on_across_the_egos_way() {
+    let mut runners = 0;
+    for k in 0..20 {
+        let (map, _, route) = bundled_route("town05-short-style", k);
+        let in_junction = |j: usize| map.lane(route.points[j].lane).in_junction();
+        // Each junction with lights where the route turns, 40 points clear of the one before.
+        let turns = (41..route.points.len()).filter(|&j| {
+            in_junction(j)
+                && !(j - 40..j).any(in_junction)
+                && map.light_ending(route.points[j - 1].lane).is_some()
+                && matches!(route.points[j].option, RoadOption::Left | RoadOption::Right)
+        });
+        for junction in turns {
+            let config = WorldConfig {
+                traffic: TrafficMode::Carla,
+                ..scenario_world("ssr_town05", &route, 7, junction - 40)
+            };
+            let mut world = World::new(&map, &route, config);
+            stand_at(&mut world, &route, junction - 1, 0.05);
+            let Some(runner) = world.traffic.vehicles.first() else {
+                continue; // no approach of this junction crosses the ego's way
+            };
+            runners += 1;
+            let approach = map.lane(runner.lane);
+            let end = approach.pose_at(approach.length());
+            let (straight, _) = map
+                .straight_on(runner.lane, end.yaw)
+                .expect("a way straight on");
+            assert_eq!(
+                runner.next[0], straight,
+                "route {k}: the runner goes straight on"
+            );
+            let conflicts = sim_bridge::world::junctions::conflicts(&map);
+            let ego_connector = route.points[junction].lane;
+            assert!(
+                conflicts[&ego_connector].contains(&straight),
+                "across the ego's way"
+            );
+        }
+    }
+    assert!(runners >= 3, "{runners} runners");
 }
 
 #[test]

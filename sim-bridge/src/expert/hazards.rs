@@ -339,13 +339,15 @@ fn stop_lines(
     let ego = world.ego_state();
     let map = world.map;
     // The route reaches a lane's end, where its stop line is, when it goes on to one of the
-    // lane's successors: leaving it sideways (a lane change) is not reaching its end, and the
+    // lane's successors or into a junction (its first point there may lie past a successor a
+    // few centimetres long: Town03 cuts connectors into 3 cm pieces that no route point falls
+    // on): leaving it sideways along the road (a lane change) is not reaching its end, and the
     // last lane ahead may continue past the scan window.
     let ends_in_window = |lane: LaneIdx, j: usize| {
-        route
-            .points
-            .get(j + 1)
-            .is_some_and(|next| map.lane(lane).successors.contains(&next.lane))
+        route.points.get(j + 1).is_some_and(|next| {
+            map.lane(lane).successors.contains(&next.lane)
+                || (map.lane(next.lane).in_junction() && !map.lane(lane).in_junction())
+        })
     };
     let gap_to = |j: usize| along(route, index, j) - ego.half_extent.x - STOP_LINE_MARGIN;
     // Only the next stop line, with no junction before it, may hold the ego short of its head.

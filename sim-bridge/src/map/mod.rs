@@ -174,6 +174,33 @@ impl Map {
             .find(|light| light.stop_lines.iter().any(|line| line.lane == lane))
     }
 
+    /// The junction connector a vehicle at the end of `lane`, heading `yaw`, takes to go
+    /// straight on: of the connectors that follow the lane, the one whose chain (CARLA's files
+    /// cut some connectors into several pieces) turns least, if that is under
+    /// [`traffic_control::STRAIGHT_ON`]; with where that chain leaves the junction.
+    pub fn straight_on(&self, lane: LaneIdx, yaw: f64) -> Option<(LaneIdx, LanePose)> {
+        self.lane(lane)
+            .successors
+            .iter()
+            .filter_map(|&first| {
+                let mut piece = self.lane(first);
+                if !piece.in_junction() {
+                    return None;
+                }
+                for _ in 0..16 {
+                    match piece.successors.first().map(|&s| self.lane(s)) {
+                        Some(next) if next.in_junction() => piece = next,
+                        _ => break,
+                    }
+                }
+                let end = piece.pose_at(piece.length());
+                let turn = angle_diff(end.yaw, yaw).abs();
+                (turn < traffic_control::STRAIGHT_ON).then_some((turn, first, end))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, first, end)| (first, end))
+    }
+
     /// The driving lane whose centre line is nearest `p`, however far (CARLA's `get_waypoint`
     /// projects to the road from anywhere: route files hold keypoints up to 100 m off the map).
     pub fn nearest_driving(&self, p: DVec2) -> Option<(LaneIdx, Projection)> {

@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 
 use glam::{DVec2, DVec3};
 
-use super::{JunctionIdx, LaneIdx, LaneKind, Map, MapOptions, angle_diff};
+use super::{JunctionIdx, LaneIdx, LaneKind, Map, MapOptions};
 
 /// OpenDRIVE signal type CARLA uses for traffic lights.
 const TRAFFIC_LIGHT_TYPE: &str = "1000001";
@@ -39,7 +39,7 @@ const MIN_MOUNTED_HEIGHT: f64 = 2.0;
 /// How far right of a lane's edge a placed head's post stands, m.
 const POST_OFFSET: f64 = 1.5;
 /// A connector turning less than this (radians, about 20 degrees) carries its lane straight on.
-const STRAIGHT_ON: f64 = 0.35;
+pub(crate) const STRAIGHT_ON: f64 = 0.35;
 
 /// A stop line across the end of one lane.
 #[derive(Debug, Clone, Copy)]
@@ -362,10 +362,10 @@ fn placed_head(map: &Map, lines: &[StopLine]) -> (DVec3, f64) {
     };
     let facing = rightmost.yaw + std::f64::consts::PI;
     let across = right_to_left.iter().find_map(|line| {
-        let exit = straight_on_exit(map, line)?;
+        let (_, exit) = map.straight_on(line.lane, line.yaw)?;
         // The approach's right edge, measured from this lane's centre.
         let to_edge = (rightness(line) - rightness(&rightmost)) + rightmost.half_width;
-        Some(beside(exit, rightmost.yaw, to_edge))
+        Some(beside(exit.position, rightmost.yaw, to_edge))
     });
     let head =
         across.unwrap_or_else(|| beside(rightmost.position, rightmost.yaw, rightmost.half_width));
@@ -382,30 +382,4 @@ fn rightness(line: &StopLine) -> f64 {
 fn beside(at: DVec3, yaw: f64, to_edge: f64) -> DVec3 {
     let right = -DVec2::from_angle(yaw).perp() * (to_edge + POST_OFFSET);
     at + DVec3::new(right.x, right.y, HEAD_HEIGHT)
-}
-
-/// Where the lane behind `line` leaves the junction going straight on: the end of the
-/// connector chain from it that turns least, if that turns less than [`STRAIGHT_ON`].
-fn straight_on_exit(map: &Map, line: &StopLine) -> Option<DVec3> {
-    map.lane(line.lane)
-        .successors
-        .iter()
-        .filter_map(|&first| {
-            let mut lane = map.lane(first);
-            if !lane.in_junction() {
-                return None;
-            }
-            // Connectors may be cut into several lane sections; follow the chain to its end.
-            for _ in 0..16 {
-                match lane.successors.first().map(|&s| map.lane(s)) {
-                    Some(next) if next.in_junction() => lane = next,
-                    _ => break,
-                }
-            }
-            let end = lane.pose_at(lane.length());
-            let turn = angle_diff(end.yaw, line.yaw).abs();
-            (turn < STRAIGHT_ON).then_some((turn, end.position))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, position)| position)
 }

@@ -185,6 +185,14 @@ impl Traffic {
         self.vehicles.push(v);
     }
 
+    /// Send vehicle `id` through `connector` (a successor of its lane), then on at random.
+    pub fn set_path(&mut self, map: &Map, id: u32, connector: LaneIdx, rng: &mut impl Rng) {
+        if let Some(v) = self.vehicles.iter_mut().find(|v| v.id == id) {
+            v.next = vec![connector];
+            extend_path(map, v, rng);
+        }
+    }
+
     /// Advance every vehicle by `dt` at sim time `t`.
     pub fn step(
         &mut self,

@@ -111,17 +111,31 @@ pub(super) fn red_light_runner(
     else {
         return false;
     };
-    let Some((lane, s)) = runner_start(map, route.points[start].lane, ego_light) else {
+    let ego_connector = route.points[start].lane;
+    let Some((lane, s, _)) = runner_start(map, ego_connector, ego_light, false) else {
         return false;
     };
-    let action = ScenarioAction::RedLightRunner { ego_light, lane, s };
+    let straight = runner_start(map, ego_connector, ego_light, true)
+        .and_then(|(lane, s, through)| Some((lane, s, through?)));
+    let action = ScenarioAction::RedLightRunner {
+        ego_light,
+        lane,
+        s,
+        straight,
+    };
     out.add(name, start.saturating_sub(30), action);
     true
 }
 
 /// A place 35 m before the stop line of an approach (of the same junction, not the ego's) whose
-/// connectors conflict with `ego_connector`.
-fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(LaneIdx, f64)> {
+/// connectors conflict with `ego_connector`; with `straight_on`, one whose straight-on
+/// connector does, and that connector.
+fn runner_start(
+    map: &Map,
+    ego_connector: LaneIdx,
+    ego_light: usize,
+    straight_on: bool,
+) -> Option<(LaneIdx, f64, Option<LaneIdx>)> {
     let junction = map.lane(ego_connector).junction?;
     let conflicts = crate::world::junctions::conflicts(map);
     let theirs = conflicts.get(&ego_connector)?;
@@ -132,9 +146,17 @@ fn runner_start(map: &Map, ego_connector: LaneIdx, ego_light: usize) -> Option<(
     {
         for line in &light.stop_lines {
             let lane = map.lane(line.lane);
-            let crosses = lane.successors.iter().any(|s| theirs.contains(s));
+            let through = map
+                .straight_on(line.lane, line.yaw)
+                .map(|(connector, _)| connector)
+                .filter(|connector| theirs.contains(connector));
+            let crosses = if straight_on {
+                through.is_some()
+            } else {
+                lane.successors.iter().any(|s| theirs.contains(s))
+            };
             if crosses && lane.length() > 40.0 {
-                return Some((line.lane, lane.length() - 35.0));
+                return Some((line.lane, lane.length() - 35.0, through));
             }
         }
     }

@@ -16,8 +16,9 @@
 //! - Scenario7, 8 and 9 SignalJunctionCrossingRoute: at the junction of the route's next turn,
 //!   the ego's light held green while a vehicle on a conflicting approach runs its red, as
 //!   the seed's placement does (scenario_runner changes the junction's lights so background
-//!   traffic crosses against the ego, and spawns nobody). Skipped where the ego's approach has
-//!   no light.
+//!   traffic crosses against the ego, and spawns nobody; with CARLA-like traffic the runner
+//!   goes straight on, as its standalone `OppositeVehicleRunningRedLight` drives one). Skipped
+//!   where the ego's approach has no light.
 //! - Scenario2 FollowLeadingVehicle: at the trigger a vehicle appears 25 m ahead on the ego's
 //!   lane (nearer where a junction comes first), drives at 10 m/s and stops 20 m short of the
 //!   next junction; it leaves once the ego has stood 1 s within 20 m of it (as

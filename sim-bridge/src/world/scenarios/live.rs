@@ -6,9 +6,9 @@ use glam::{DVec2, DVec3};
 
 use super::{S2_EGO_NEAR, S2_EGO_STOOD_S, S6_SOURCE_CLEAR, ScenarioAction};
 use crate::map::LaneIdx;
-use crate::world::World;
 use crate::world::state::LightState;
 use crate::world::vehicle::Script;
+use crate::world::{TrafficMode, World};
 
 /// A fired scenario that still has something to do.
 #[derive(Debug, Clone)]
@@ -98,13 +98,37 @@ impl World<'_> {
                     c.moving = true;
                 }
             }
-            ScenarioAction::RedLightRunner { ego_light, lane, s } => {
+            ScenarioAction::RedLightRunner {
+                ego_light,
+                lane,
+                s,
+                straight,
+            } => {
                 self.lights
                     .force(ego_light, LightState::Green, self.time + 15.0);
                 let id = self.next_id();
                 let runner = (Script::RunsReds, 8.0, 9.0);
-                self.traffic
-                    .spawn_scenario_vehicle(self.map, id, (lane, s), runner, &mut self.rng);
+                // With CARLA-like traffic the runner goes straight on across the ego's way, as
+                // scenario_runner's does; courteous traffic keeps the runner that takes any way.
+                match straight.filter(|_| self.traffic_mode == TrafficMode::Carla) {
+                    Some((lane, s, through)) => {
+                        self.traffic.spawn_scenario_vehicle(
+                            self.map,
+                            id,
+                            (lane, s),
+                            runner,
+                            &mut self.rng,
+                        );
+                        self.traffic.set_path(self.map, id, through, &mut self.rng);
+                    }
+                    None => self.traffic.spawn_scenario_vehicle(
+                        self.map,
+                        id,
+                        (lane, s),
+                        runner,
+                        &mut self.rng,
+                    ),
+                }
             }
             ScenarioAction::LeadingVehicle { lane, s, speed } => {
                 let id = self.next_id();

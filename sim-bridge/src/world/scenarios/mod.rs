@@ -170,10 +170,14 @@ pub enum ScenarioAction {
     RedLightRunner {
         /// Id of the traffic light that controls the ego's approach to the junction.
         ego_light: usize,
-        /// Lane the runner starts on.
+        /// Lane the runner starts on, taking any way across the ego's.
         lane: LaneIdx,
         /// Distance along that lane where the runner starts, m.
         s: f64,
+        /// With CARLA-like traffic, where the runner starts instead and the connector it takes:
+        /// an approach whose straight-on way crosses the ego's (the way scenario_runner's
+        /// runner drives), if the junction has one.
+        straight: Option<(LaneIdx, f64, LaneIdx)>,
     },
     /// Scenario2: a leading vehicle appears on `lane` at `s` and drives at `speed` until
     /// [`S2_STOP_SHORT`] m short of the next junction, where it stops; it leaves once the ego
