@@ -110,24 +110,12 @@ impl World<'_> {
                 let runner = (Script::RunsReds, 8.0, 9.0);
                 // With CARLA-like traffic the runner goes straight on across the ego's way, as
                 // scenario_runner's does; courteous traffic keeps the runner that takes any way.
-                match straight.filter(|_| self.traffic_mode == TrafficMode::Carla) {
-                    Some((lane, s, through)) => {
-                        self.traffic.spawn_scenario_vehicle(
-                            self.map,
-                            id,
-                            (lane, s),
-                            runner,
-                            &mut self.rng,
-                        );
-                        self.traffic.set_path(self.map, id, through, &mut self.rng);
-                    }
-                    None => self.traffic.spawn_scenario_vehicle(
-                        self.map,
-                        id,
-                        (lane, s),
-                        runner,
-                        &mut self.rng,
-                    ),
+                let straight = straight.filter(|_| self.traffic_mode == TrafficMode::Carla);
+                let from = straight.map_or((lane, s), |(lane, s, _)| (lane, s));
+                self.traffic
+                    .spawn_scenario_vehicle(self.map, id, from, runner, &mut self.rng);
+                if let Some((_, _, through)) = straight {
+                    self.traffic.set_path(self.map, id, through, &mut self.rng);
                 }
             }
             ScenarioAction::LeadingVehicle { lane, s, speed } => {
