@@ -92,10 +92,16 @@ fn four_shards_merge_into_the_single_process_file() {
     // A run in two parts.
     let twice = [parts[0].clone(), parts[1].clone(), parts[0].clone()];
     fails_saying(merge(&twice, &dir.join("x.json"), &[]), "is in both");
-    // A part of another campaign: another seed, another route timeout.
+    // The plan names the traffic mode (CARLA's by default).
+    assert_eq!(without_wall_time(&parts[0])["plan"]["traffic"], "carla");
+    // A part of another campaign: another seed, another route timeout, other traffic.
     for (flags, says) in [
         (&["--seed", "7"][..], "from seed 7"),
         (&["--timeout", "30"][..], "route timeout"),
+        (
+            &["--traffic", "courteous"][..],
+            "traffic `carla` against `courteous`",
+        ),
     ] {
         let other = dir.join("other.json");
         ok(eval(&other, &[&["--shard", "3/4"][..], flags].concat()));

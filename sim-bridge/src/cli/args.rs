@@ -194,10 +194,11 @@ pub struct WorldArgs {
     /// No parked cars.
     #[arg(long)]
     pub no_parked_cars: bool,
-    /// How background traffic treats the ego: `courteous` (lets it into a lane it waits to
-    /// change into, gives it its turn and way at junctions, creeps past it when it stands) or
-    /// `carla` (as CARLA's traffic manager: an obstacle not to drive into, nothing more).
-    #[arg(long, value_enum, default_value = "courteous")]
+    /// How background traffic treats the ego: `carla` (as CARLA's traffic manager: an obstacle
+    /// not to drive into, nothing more) or `courteous` (lets it into a lane it waits to change
+    /// into, gives it its turn and way at junctions, creeps past it when it stands; the default
+    /// until 2026-11-29, in which the bundled agent's training data was recorded).
+    #[arg(long, value_enum, default_value_t)]
     pub traffic: sim_bridge::world::TrafficMode,
     /// Vary camera colours, sun and sensor noise with the seed.
     #[arg(long)]

@@ -189,6 +189,14 @@ fn difference(a: &CampaignPlan, b: &CampaignPlan) -> Option<String> {
             timeout(b.timeout_s)
         ));
     }
+    if a.traffic != b.traffic {
+        let mode = |t: &Option<String>| t.as_deref().unwrap_or("unrecorded").to_string();
+        return Some(format!(
+            "traffic `{}` against `{}`",
+            mode(&a.traffic),
+            mode(&b.traffic)
+        ));
+    }
     let fields = [
         ("town", &a.town, &b.town),
         ("agent", &a.agent, &b.agent),

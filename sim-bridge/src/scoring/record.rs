@@ -403,6 +403,10 @@ pub struct CampaignPlan {
     /// A fixed route timeout, seconds (`eval --timeout`); absent: the leaderboard's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timeout_s: Option<f64>,
+    /// How background traffic treated the ego (`--traffic`: `carla` or `courteous`); absent in
+    /// files written before 2026-11-29, whose default was `courteous`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub traffic: Option<String>,
     /// What drove (a served agent: its model, config, checkpoint and version, not its address).
     #[serde(default)]
     pub agent: String,

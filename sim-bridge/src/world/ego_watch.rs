@@ -52,16 +52,27 @@ const SQUEEZE_STEP: f64 = 0.25;
 /// faster, it keeps [`EGO_WATCH_MARGIN`] and brakes, so it passes at about this speed.
 const SQUEEZE_SPEED: f64 = 1.0;
 
-/// How background traffic treats the ego (`--traffic`).
+/// How background traffic treats the ego (`--traffic`). The default is CARLA's: a score here
+/// should mean what it means there, and the courtesies raise it (sim-bridge/README.md, "Traffic").
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum TrafficMode {
     /// Courtesies CARLA's traffic manager does not extend: vehicles let the ego into a lane it
     /// waits to change into, give it its turn at junctions without lights and way when it
     /// approaches a junction at speed, and creep past it once it has stood 5 s.
-    #[default]
     Courteous,
     /// As CARLA's traffic manager: the ego is an obstacle vehicles stop for, nothing more.
+    #[default]
     Carla,
+}
+
+impl TrafficMode {
+    /// The mode's name as `--traffic` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrafficMode::Courteous => "courteous",
+            TrafficMode::Carla => "carla",
+        }
+    }
 }
 
 /// The ego as other traffic sees it.
