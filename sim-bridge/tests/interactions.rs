@@ -696,7 +696,7 @@ fn a_light_held_green_by_a_scenario_shows_yellow_before_red() {
         hold_ended_in_red += usize::from(unforced.light_states()[id] == LightState::Red);
         let mut world = World::new(&map, &route, config);
         // Scenario 7 holds the ego's light green for a while, whatever its cycle says.
-        world.lights.force(id, LightState::Green, 7.0);
+        world.lights.hold_green(id, 7.0);
         let mut previous = LightState::Green;
         for tick in 0..400 {
             let t = tick as f64 * 0.05;

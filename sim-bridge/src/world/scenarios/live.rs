@@ -6,7 +6,6 @@ use glam::{DVec2, DVec3};
 
 use super::{S2_EGO_NEAR, S2_EGO_STOOD_S, S6_SOURCE_CLEAR, ScenarioAction};
 use crate::map::LaneIdx;
-use crate::world::state::LightState;
 use crate::world::vehicle::Script;
 use crate::world::{TrafficMode, World};
 
@@ -104,8 +103,7 @@ impl World<'_> {
                 s,
                 straight,
             } => {
-                self.lights
-                    .force(ego_light, LightState::Green, self.time + 15.0);
+                self.lights.hold_green(ego_light, self.time + 15.0);
                 let id = self.next_id();
                 let runner = (Script::RunsReds, 8.0, 9.0);
                 // With CARLA-like traffic the runner goes straight on across the ego's way, as
