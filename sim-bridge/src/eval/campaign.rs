@@ -79,7 +79,7 @@ impl Campaign<'_> {
             seed: self.world.seed,
             runs: self.runs(),
             timeout_s: self.scoring.timeout,
-            traffic: Some(self.world.traffic.name().to_string()),
+            traffic: Some(self.world.traffic.name()),
             agent: String::new(),
             simulator: format!("sim-bridge {}", env!("CARGO_PKG_VERSION")),
             shard: self.shard.map(|s| s.to_string()),

@@ -66,12 +66,11 @@ pub enum TrafficMode {
 }
 
 impl TrafficMode {
-    /// The mode's name as `--traffic` takes it.
-    pub fn name(self) -> &'static str {
-        match self {
-            TrafficMode::Courteous => "courteous",
-            TrafficMode::Carla => "carla",
-        }
+    /// The mode's name as `--traffic` takes it (clap's, so the two cannot drift apart).
+    pub fn name(self) -> String {
+        use clap::ValueEnum as _;
+        self.to_possible_value()
+            .map_or_else(String::new, |v| v.get_name().to_owned())
     }
 }
 
