@@ -35,7 +35,7 @@ fn carla_maps() -> Option<std::path::PathBuf> {
 }
 
 #[test]
-fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
+fn a_suite_drives_each_route_file_into_one_folder_repetition_by_repetition_and_sums_them_up() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("home");
     let home = |extra: &[&str]| {
@@ -44,9 +44,9 @@ fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
             "--suite",
             "home",
             "--repetitions",
-            "1",
+            "2",
             "--timeout",
-            "4",
+            "2",
         ];
         args.extend_from_slice(extra);
         args.extend_from_slice(&["--quiet", "--out", out.to_str().unwrap()]);
@@ -54,11 +54,17 @@ fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
     };
     let run = home(&["--jobs", "2"]);
     assert!(run.status.success(), "{}", stderr(&run));
-    assert!(
-        stderr(&run).contains("not the suite's protocol"),
-        "{}",
-        stderr(&run)
-    );
+    let log = stderr(&run);
+    assert!(log.contains("not the suite's protocol"), "{log}");
+    // Repetition 0 of both parts before repetition 1 of either.
+    let at = |line: &str| log.find(line).unwrap_or_else(|| panic!("{line}: {log}"));
+    let passes = [
+        at("suite home: town05-long-style, repetition 1 of 2"),
+        at("suite home: town05-short-style, repetition 1 of 2"),
+        at("suite home: town05-long-style, repetition 2 of 2"),
+        at("suite home: town05-short-style, repetition 2 of 2"),
+    ];
+    assert!(passes.is_sorted(), "{log}");
     let summary = read_json(&out.join("suite.json"));
     assert_eq!(summary["suite"], "home");
     let parts = summary["parts"].as_array().unwrap();
@@ -69,20 +75,23 @@ fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
         let results = read_json(&out.join(part["results"].as_str().unwrap()));
         // --timeout cuts each run: said so, and not an agent error.
         assert_eq!(results["entry_status"], "Finished");
-        for record in results["_checkpoint"]["records"].as_array().unwrap() {
+        let records = results["_checkpoint"]["records"].as_array().unwrap();
+        for (index, record) in records.iter().enumerate() {
             assert_eq!(record["status"], "Stopped - --timeout reached", "{record}");
-            assert_eq!(record["meta"]["stopped_at_s"], 4.0);
+            assert_eq!(record["meta"]["stopped_at_s"], 2.0);
+            // Leaderboard order in the file: every route of repetition 0, then of 1.
+            let repetition = (index >= records.len() / 2) as u64;
+            assert_eq!(record["meta"]["repetition"], repetition, "{record}");
         }
-        let records = results["_checkpoint"]["records"].as_array().unwrap().len();
-        assert_eq!(part["runs"].as_u64().unwrap() as usize, records);
+        assert_eq!(part["runs"].as_u64().unwrap() as usize, records.len());
         assert_eq!(part["town"], "ssr_town05");
-        runs += records;
+        runs += records.len();
     }
-    assert_eq!(runs, 30);
-    assert_eq!(summary["all"]["runs"].as_u64().unwrap(), 30);
-    // 4 simulated seconds of each route: some metres driven, nothing completed.
+    assert_eq!(runs, 60);
+    assert_eq!(summary["all"]["runs"].as_u64().unwrap(), 60);
+    // 2 simulated seconds of each route: some metres driven, nothing completed.
     let km = summary["all"]["km_driven"].as_f64().unwrap();
-    assert!(km > 0.0 && km < 30.0 * 0.1, "{km}");
+    assert!(km > 0.0 && km < 60.0 * 0.05, "{km}");
     assert_eq!(summary["all"]["completed"].as_u64().unwrap(), 0);
     let table = String::from_utf8_lossy(&run.stdout);
     assert!(
@@ -94,7 +103,7 @@ fn a_suite_drives_each_route_file_into_one_folder_and_sums_them_up() {
     let again = home(&["--resume"]);
     assert!(again.status.success(), "{}", stderr(&again));
     assert!(
-        stderr(&again).contains("10 of 10 runs already scored"),
+        stderr(&again).contains("20 of 20 runs already scored"),
         "{}",
         stderr(&again)
     );

@@ -123,11 +123,16 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("results.json"));
     let repetitions = args.repetitions.unwrap_or(1);
+    let scope = Scope {
+        repetitions,
+        first_repetitions: None,
+        resume: args.resume,
+    };
     let report = drive(
         &args,
         target.as_deref(),
         &args.route,
-        repetitions,
+        scope,
         &out,
         args.pictures.as_deref(),
     )?;
@@ -139,8 +144,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     check_report(&report, repetitions)
 }
 
-/// Drive every route file of `suite` into the folder --out, one results JSON each, then write
-/// and print the suite's summary. With --resume each part keeps its finished runs.
+/// Drive every route file of `suite` into the folder --out, one results JSON each (repetition 0
+/// of every file first), then write and print the suite's summary. With --resume each part
+/// keeps its finished runs.
 fn run_suite(args: &EvalArgs, suite: &Suite) -> anyhow::Result<()> {
     let dir = args
         .out
@@ -160,33 +166,50 @@ fn run_suite(args: &EvalArgs, suite: &Suite) -> anyhow::Result<()> {
         default.is_dir().then_some(default)
     });
     let (target, _local_server) = agent_target(args)?;
+    // Repetition 0 of every part, then repetition 1 of every part, ...: a suite cut short is
+    // a sample of all its towns, and its --resume goes on where it stopped.
     let mut parts = Vec::new();
     let mut failures = Vec::new();
-    for &part in suite.parts {
-        let route = RouteArgs {
-            routes: part.to_string(),
-            map: None,
-            maps: maps.clone(),
-            route_ids: Vec::new(),
-            limit: None,
-            no_placed_lights: args.route.no_placed_lights,
-        };
-        let file = format!("{part}.json");
-        let pictures = args.pictures.as_ref().map(|p| p.join(part));
-        eprintln!("suite {}: {part}", suite.name);
-        let report = drive(
-            args,
-            target.as_deref(),
-            &route,
-            repetitions,
-            &dir.join(&file),
-            pictures.as_deref(),
-        )
-        .with_context(|| format!("suite {}, part {part}", suite.name))?;
-        if let Err(e) = check_report(&report, repetitions) {
-            failures.push(format!("{part}: {e:#}"));
+    for repetition in 0..repetitions {
+        let last = repetition + 1 == repetitions;
+        for &part in suite.parts {
+            let route = RouteArgs {
+                routes: part.to_string(),
+                map: None,
+                maps: maps.clone(),
+                route_ids: Vec::new(),
+                limit: None,
+                no_placed_lights: args.route.no_placed_lights,
+            };
+            let file = format!("{part}.json");
+            let pictures = args.pictures.as_ref().map(|p| p.join(part));
+            eprintln!(
+                "suite {}: {part}, repetition {} of {repetitions}",
+                suite.name,
+                repetition + 1
+            );
+            let scope = Scope {
+                repetitions,
+                first_repetitions: Some(repetition + 1),
+                // Later passes keep what the earlier ones drove.
+                resume: args.resume || repetition > 0,
+            };
+            let report = drive(
+                args,
+                target.as_deref(),
+                &route,
+                scope,
+                &dir.join(&file),
+                pictures.as_deref(),
+            )
+            .with_context(|| format!("suite {}, part {part}", suite.name))?;
+            if last {
+                if let Err(e) = check_report(&report, repetitions) {
+                    failures.push(format!("{part}: {e:#}"));
+                }
+                parts.push((part, file, report.results.checkpoint.records));
+            }
         }
-        parts.push((part, file, report.results.checkpoint.records));
     }
     let all: Vec<_> = parts
         .iter()
@@ -225,11 +248,22 @@ const DEFAULT_CARLA_MAPS: &str = "../shared/carla";
 
 /// One campaign: `route` driven `repetitions` times by the agent at `target` (or an in-process
 /// one), results to `out`, pictures to `pictures`.
+/// Which runs of a campaign one [`drive`] covers.
+#[derive(Debug, Clone, Copy)]
+struct Scope {
+    /// The campaign's repetitions (its plan).
+    repetitions: usize,
+    /// Drive only the first this many now ([`Campaign::first_repetitions`]).
+    first_repetitions: Option<usize>,
+    /// Keep the runs already in the results file.
+    resume: bool,
+}
+
 fn drive(
     args: &EvalArgs,
     target: Option<&str>,
     route: &RouteArgs,
-    repetitions: usize,
+    scope: Scope,
     out: &Path,
     pictures: Option<&Path>,
 ) -> anyhow::Result<CampaignReport> {
@@ -254,7 +288,7 @@ fn drive(
     let campaign = Campaign {
         map: &map,
         routes: &planned,
-        repetitions,
+        repetitions: scope.repetitions,
         world: args.world.config(&map, args.world.seed)?,
         scoring: ScoringConfig {
             rules: args.scoring,
@@ -262,9 +296,10 @@ fn drive(
             ..ScoringConfig::default()
         },
         out: out.to_path_buf(),
-        resume: args.resume,
+        resume: scope.resume,
         jobs: args.jobs,
         shard: args.shard,
+        first_repetitions: scope.first_repetitions,
         label: route.routes.clone(),
     };
     let display = EvalDisplay {

@@ -51,6 +51,11 @@ pub struct Campaign<'a> {
     pub jobs: usize,
     /// Drive only this share of the runs (all of them without).
     pub shard: Option<Shard>,
+    /// Drive only the runs of the first this many repetitions now (all of them without): the
+    /// results file keeps the whole plan, and a later campaign with `resume` drives the rest.
+    /// A suite drives repetition 0 of every part before repetition 1 of any, so that a suite cut
+    /// short is still a sample of all its towns.
+    pub first_repetitions: Option<usize>,
     /// The route set or file as the user gave it (for the results file's plan).
     pub label: String,
 }
@@ -271,7 +276,14 @@ pub fn run_campaign<O: CampaignObserver>(
     if campaign.resume {
         observer.resuming(kept, share, &campaign.out);
     }
-    let jobs = campaign.jobs.min(share - kept).max(1);
+    let now = |run: usize| {
+        selected[run]
+            && campaign
+                .first_repetitions
+                .is_none_or(|r| run / campaign.routes.len() < r)
+    };
+    let to_drive = (0..total).filter(|&run| now(run) && records[run].is_none());
+    let jobs = campaign.jobs.min(to_drive.count()).max(1);
     let scored = Mutex::new(Scored {
         records,
         crashes: 0,
@@ -280,7 +292,7 @@ pub fn run_campaign<O: CampaignObserver>(
     });
     let order: Vec<usize> = dispatch_order(&lengths, campaign.repetitions, jobs)
         .into_iter()
-        .filter(|&run| selected[run])
+        .filter(|&run| now(run))
         .collect();
     let next_run = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);

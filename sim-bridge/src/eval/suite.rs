@@ -1,5 +1,6 @@
 //! Named evaluation suites: fixed sets of route files, each driven a fixed number of
-//! repetitions, that `sim-bridge eval --suite NAME` drives one after the other and sums up.
+//! repetitions, that `sim-bridge eval --suite NAME` drives (repetition 0 of every file, then
+//! repetition 1, ...) and sums up.
 //!
 //! - `unseen`, the held-out suite: towns that no training set, checkpoint choice or controller
 //!   constant may touch. CARLA's Town02 (`heldout-town02`, 40 routes the project drew and
