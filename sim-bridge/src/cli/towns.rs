@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 use sim_bridge::map::MapOptions;
-use sim_bridge::towngen::procedural::Bends;
+use sim_bridge::towngen::procedural::{Bends, Family, LightPlacement};
 use sim_bridge::towngen::{self, TownStyle};
 
 #[derive(Debug, Subcommand)]
@@ -19,9 +19,10 @@ pub enum TownsCommand {
         out_dir: PathBuf,
     },
     /// Write procedural training towns (`ssr_proc_NNN.xodr` or, with `--bends tight`,
-    /// `ssr_tight_NNN.xodr`, one per seed: grids of varied spacing, angles, lanes, widths,
-    /// bends, gaps and control; see `towngen::procedural`). Draw routes on them with
-    /// `routes random` and collect with `collect --maps DIR`.
+    /// `ssr_tight_NNN.xodr`, one per seed, `_kerb_` in the name with `--lights kerb`: grids of
+    /// varied spacing, angles, lanes, widths, bends, gaps and control; see
+    /// `towngen::procedural`). Draw routes on them with `routes random` and collect with
+    /// `collect --maps DIR`.
     Procedural {
         /// Seeds, as FIRST-LAST (inclusive) or a comma-separated list.
         #[arg(long, value_parser = parse_seeds)]
@@ -31,6 +32,12 @@ pub enum TownsCommand {
         /// as small towns bend).
         #[arg(long, value_enum, default_value_t = BendsArg::Gentle)]
         bends: BendsArg,
+        /// Where the lights stand: `across` (across the junction, US-style, as CARLA's
+        /// Town03-07; some towns leave them to the simulator, which places them likewise) or
+        /// `kerb` (every light at the kerb just before its stop line, as CARLA's Town01 and
+        /// Town02 post them).
+        #[arg(long, value_enum, default_value_t = LightsArg::Across)]
+        lights: LightsArg,
         /// Folder to write into.
         #[arg(long)]
         out: PathBuf,
@@ -49,6 +56,22 @@ impl From<BendsArg> for Bends {
         match arg {
             BendsArg::Gentle => Bends::Gentle,
             BendsArg::Tight => Bends::Tight,
+        }
+    }
+}
+
+/// `towns procedural --lights`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum LightsArg {
+    Across,
+    Kerb,
+}
+
+impl From<LightsArg> for LightPlacement {
+    fn from(arg: LightsArg) -> Self {
+        match arg {
+            LightsArg::Across => LightPlacement::Across,
+            LightsArg::Kerb => LightPlacement::Kerb,
         }
     }
 }
@@ -111,8 +134,17 @@ pub fn run(cmd: TownsCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        TownsCommand::Procedural { seeds, bends, out } => {
-            for path in towngen::write_procedural(&out, seeds.0, bends.into())? {
+        TownsCommand::Procedural {
+            seeds,
+            bends,
+            lights,
+            out,
+        } => {
+            let family = Family {
+                bends: bends.into(),
+                lights: lights.into(),
+            };
+            for path in towngen::write_procedural(&out, seeds.0, family)? {
                 let map = super::load_map(&path.to_string_lossy(), MapOptions::default())?;
                 let size = map.bounds.1 - map.bounds.0;
                 println!(

@@ -8,7 +8,7 @@ use super::elevation::{self, Cubic};
 use super::geometry::{Frame, Path};
 use super::junction::{LaneLink, Leg, default_links, straight_on_from_rightmost};
 use super::profile::{LANE_WIDTH, Profile};
-use super::signals::{approach_signal, far_side_light};
+use super::signals::{LightPlacement, approach_signal, far_side_light, kerb_light};
 use super::town::{Connection, Contact, Controller, Junction, Link, Road, SignalKind, Town};
 
 /// A junction being declared.
@@ -73,6 +73,8 @@ pub struct TownBuilder {
     frame: Frame,
     /// Junctions declared with lights get no light signals in the file.
     lights_left_to_simulator: bool,
+    /// Where the file's lights stand.
+    light_placement: LightPlacement,
     junctions: Vec<JunctionDef>,
     streets: Vec<StreetDef>,
 }
@@ -84,6 +86,7 @@ impl TownBuilder {
             name: name.into(),
             frame,
             lights_left_to_simulator: false,
+            light_placement: LightPlacement::default(),
             junctions: Vec::new(),
             streets: Vec::new(),
         }
@@ -162,6 +165,11 @@ impl TownBuilder {
     /// or more approaches with a multi-lane one; `map::traffic_control`).
     pub fn leave_lights_to_simulator(&mut self) {
         self.lights_left_to_simulator = true;
+    }
+
+    /// Stand the file's traffic lights as `placement` says (across the junction by default).
+    pub fn place_lights(&mut self, placement: LightPlacement) {
+        self.light_placement = placement;
     }
 
     /// Put a traffic light on every approach of `j`.
@@ -377,8 +385,9 @@ impl TownBuilder {
         for a in approaches {
             let leg = &legs[a];
             let id = ids.take();
-            let straight_on = straight_on_from_rightmost(&links, &legs, a)
-                .filter(|_| kind == SignalKind::TrafficLight);
+            let across =
+                kind == SignalKind::TrafficLight && self.light_placement == LightPlacement::Across;
+            let straight_on = straight_on_from_rightmost(&links, &legs, a).filter(|_| across);
             match straight_on {
                 Some((k, link)) => {
                     let connecting = junction.connections[k].connecting;
@@ -392,9 +401,13 @@ impl TownBuilder {
                 }
                 None => {
                     let length = self.streets[leg.road].path.length();
-                    roads[leg.road]
-                        .signals
-                        .push(approach_signal(id, kind, leg, length));
+                    let kerb = kind == SignalKind::TrafficLight
+                        && self.light_placement == LightPlacement::Kerb;
+                    roads[leg.road].signals.push(if kerb {
+                        kerb_light(id, leg, length)
+                    } else {
+                        approach_signal(id, kind, leg, length)
+                    });
                 }
             }
             if kind == SignalKind::TrafficLight {

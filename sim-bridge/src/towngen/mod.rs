@@ -10,8 +10,9 @@
 //!
 //! The generated documents are committed under `sim-bridge/towns/` and
 //! compiled in by [`bundled`]; [`write_bundled`] regenerates them.
-//! [`procedural`] adds two families of training towns drawn from a seed (gentle and tight
-//! bends), written on request ([`write_procedural`]) rather than committed.
+//! [`procedural`] adds families of training towns drawn from a seed (gentle and tight bends,
+//! lights across the junction or at the kerb), written on request ([`write_procedural`])
+//! rather than committed.
 
 mod builder;
 mod dense;
@@ -146,24 +147,24 @@ pub fn write_bundled(dir: &Path) -> std::io::Result<()> {
     Ok(())
 }
 
-/// The OpenDRIVE document of the procedural training town of `seed` in the family `bends`
+/// The OpenDRIVE document of the procedural training town of `seed` in `family`
 /// ([`procedural`]).
-pub fn generate_procedural(seed: u64, bends: procedural::Bends) -> String {
-    emit::write_town(&procedural::build(seed, bends))
+pub fn generate_procedural(seed: u64, family: procedural::Family) -> String {
+    emit::write_town(&procedural::build(seed, family))
 }
 
-/// Write the procedural towns of `seeds` in the family `bends` to `dir/NAME.xodr`
-/// (`ssr_proc_NNN`, `ssr_tight_NNN`), creating `dir`; returns the paths written.
+/// Write the procedural towns of `seeds` in `family` to `dir/NAME.xodr` (`ssr_proc_NNN`,
+/// `ssr_tight_NNN`, `ssr_tight_kerb_NNN`, ...), creating `dir`; returns the paths written.
 pub fn write_procedural(
     dir: &Path,
     seeds: impl IntoIterator<Item = u64>,
-    bends: procedural::Bends,
+    family: procedural::Family,
 ) -> std::io::Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir)?;
     let mut written = Vec::new();
     for seed in seeds {
-        let path = dir.join(format!("{}.xodr", procedural::name(seed, bends)));
-        std::fs::write(&path, generate_procedural(seed, bends))?;
+        let path = dir.join(format!("{}.xodr", procedural::name(seed, family)));
+        std::fs::write(&path, generate_procedural(seed, family))?;
         written.push(path);
     }
     Ok(written)

@@ -21,6 +21,13 @@
 //! corners that tight. The first family's corners (18-40 m) are
 //! wider than any of the CARLA towns' usual corners; agents trained on it alone cut tight ones.
 //!
+//! Either family comes with its lights across the junction (the default) or at the kerb before
+//! the stop line ([`LightPlacement::Kerb`], as CARLA's Town01 and Town02 post them):
+//! `ssr_proc_kerb_NNN`, `ssr_tight_kerb_NNN`, the same grid as the seed's other town, every
+//! light in the file (none left to the simulator, which would place it across the junction).
+//! No other training town posts every light beside its stop line, where a camera loses the
+//! lamp as the car comes up to it.
+//!
 //! Nothing else is random: the same seed and family give the same bytes. None of these towns is
 //! an evaluation town; the held-out radial town is of another layout family.
 
@@ -33,6 +40,7 @@ use rand_chacha::ChaCha8Rng;
 use super::builder::{JunctionId, RoadId, TownBuilder};
 use super::geometry::Frame;
 use super::profile::{Profile, Side, setback};
+pub use super::signals::LightPlacement;
 use super::town::Town;
 
 /// Straight road kept beyond a junction's setback before a bend begins, metres.
@@ -48,11 +56,24 @@ pub enum Bends {
     Tight,
 }
 
-/// The name of the town of `seed` in the family `bends`.
-pub fn name(seed: u64, bends: Bends) -> String {
-    match bends {
-        Bends::Gentle => format!("ssr_proc_{seed:03}"),
-        Bends::Tight => format!("ssr_tight_{seed:03}"),
+/// A family of procedural towns: how their roads bend and where their lights stand.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Family {
+    /// The bends.
+    pub bends: Bends,
+    /// Where the lights stand.
+    pub lights: LightPlacement,
+}
+
+/// The name of the town of `seed` in `family`.
+pub fn name(seed: u64, family: Family) -> String {
+    let bends = match family.bends {
+        Bends::Gentle => "proc",
+        Bends::Tight => "tight",
+    };
+    match family.lights {
+        LightPlacement::Across => format!("ssr_{bends}_{seed:03}"),
+        LightPlacement::Kerb => format!("ssr_{bends}_kerb_{seed:03}"),
     }
 }
 
@@ -228,8 +249,9 @@ fn lines(rng: &mut impl Rng, n: usize) -> Vec<f64> {
     at
 }
 
-/// Build the town of `seed` in the family `bends`.
-pub fn build(seed: u64, bends: Bends) -> Town {
+/// Build the town of `seed` in `family`.
+pub fn build(seed: u64, family: Family) -> Town {
+    let bends = family.bends;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (cols, rows) = (rng.random_range(3..=5usize), rng.random_range(3..=5usize));
     let xs = lines(&mut rng, cols);
@@ -252,10 +274,13 @@ pub fn build(seed: u64, bends: Bends) -> Town {
         bends,
         line_gap: (step - 2.0 * jitter).min(55.0 - jitter),
         detoured: BTreeSet::new(),
-        b: TownBuilder::new(name(seed, bends), Frame::new(rotation, 0.0, 0.0)),
+        b: TownBuilder::new(name(seed, family), Frame::new(rotation, 0.0, 0.0)),
         nodes: Vec::new(),
     };
-    if rng.random_bool(0.35) {
+    t.b.place_lights(family.lights);
+    // Drawn in every family, so that a seed's towns share their grid.
+    let leave_lights = rng.random_bool(0.35);
+    if leave_lights && family.lights == LightPlacement::Across {
         t.b.leave_lights_to_simulator();
     }
 

@@ -201,6 +201,15 @@ impl Profile {
         inner + lanes[j - 1].width / 2.0
     }
 
+    /// `|t|` of `side`'s kerb: the outer edge of its lanes short of the sidewalk.
+    pub fn kerb_offset(&self, side: Side) -> f64 {
+        self.lanes(side)
+            .iter()
+            .take_while(|l| l.kind != LaneKind::Sidewalk)
+            .map(|l| l.width)
+            .sum()
+    }
+
     /// The total width of `side`.
     pub fn side_width(&self, side: Side) -> f64 {
         self.lanes(side).iter().map(|l| l.width).sum()

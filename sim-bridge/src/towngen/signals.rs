@@ -1,18 +1,33 @@
 //! Traffic control: where a junction approach's traffic light or stop sign
 //! stands, and which lanes it governs.
 //!
-//! Traffic lights stand US-style, as in CARLA's Town03-07 and 10: across the
-//! junction, on the far right corner, where a car waiting at the stop line
-//! still sees them (a head beside the stop line is out of a forward camera's
-//! view there). The signal sits at the end of the connecting road that
-//! carries the approach's rightmost lane straight on, governing that road's
-//! lane, which the simulator traces back to the approach. An approach with no
-//! straight-on connection (a T-junction's stem) and every stop sign stand
-//! just before the junction on the right edge of the incoming road.
+//! Traffic lights stand where [`LightPlacement`] says. US-style, as in CARLA's
+//! Town03-07 and 10 (the default): across the junction, on the far right
+//! corner, where a car waiting at the stop line still sees them (a head beside
+//! the stop line is out of a forward camera's view there). The signal sits at
+//! the end of the connecting road that carries the approach's rightmost lane
+//! straight on, governing that road's lane, which the simulator traces back to
+//! the approach. An approach with no straight-on connection (a T-junction's
+//! stem) and every stop sign stand just before the junction on the right edge
+//! of the incoming road; every light of a [`LightPlacement::Kerb`] town just
+//! before the junction on the right kerb ([`kerb_light`]).
 
 use super::junction::Leg;
 use super::profile::Side;
 use super::town::{Contact, Signal, SignalKind};
+
+/// Where a town's traffic lights stand.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LightPlacement {
+    /// Across the junction, on the far right corner (a T-junction's stem keeps its light at
+    /// the kerb).
+    #[default]
+    Across,
+    /// At the kerb on the right, just before the stop line, as CARLA's Town01 and Town02 post
+    /// theirs: a car at the line has the head beside or above it, out of a forward camera's
+    /// view, and keeps the lamp in view only by stopping short of the head.
+    Kerb,
+}
 
 /// How far before the junction a signal stands, in metres.
 const BEFORE_JUNCTION: f64 = 1.0;
@@ -36,6 +51,21 @@ pub fn approach_signal(id: u32, kind: SignalKind, leg: &Leg, length: f64) -> Sig
         side,
         lanes: (side.od_id(1), side.od_id(n)),
         kind,
+    }
+}
+
+/// How far onto the sidewalk a kerb-side light's post stands, m.
+const POST_FROM_KERB: f64 = 0.5;
+
+/// The [`LightPlacement::Kerb`] light for the traffic entering a junction along `leg`: as
+/// [`approach_signal`] places it, but on the kerb (its post half a metre onto the sidewalk),
+/// beside the rightmost lane as CARLA's Town01 and Town02 post theirs, not at the sidewalk's
+/// back.
+pub fn kerb_light(id: u32, leg: &Leg, length: f64) -> Signal {
+    let side = leg.in_side();
+    Signal {
+        t: side.sign() * (leg.profile.kerb_offset(side) + POST_FROM_KERB),
+        ..approach_signal(id, SignalKind::TrafficLight, leg, length)
     }
 }
 

@@ -5,9 +5,9 @@
 use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::sync::OnceLock;
 
-use xodr::{Direction, LaneId, LaneType, Orientation, Point, Provenance, RoadNetwork};
+use xodr::{Direction, LaneId, LaneType, Orientation, Point, Provenance, RoadNetwork, Signal};
 
-use super::procedural::Bends;
+use super::procedural::{Bends, Family, LightPlacement};
 use super::*;
 
 /// Each town, loaded once and shared by the tests.
@@ -47,6 +47,20 @@ fn exit(net: &RoadNetwork, id: LaneId) -> Point {
         Direction::Backward => points[0],
         _ => points[points.len() - 1],
     }
+}
+
+/// Where `signal` stands from the end of lane `id`: metres ahead along the lane's last
+/// direction (negative: before its end), and across.
+fn from_lane_end(net: &RoadNetwork, signal: &Signal, id: LaneId) -> (f32, f32) {
+    let lane = net.lane(id).expect("a lane");
+    let t = lane.center.tangents();
+    let along = match lane.direction {
+        Direction::Backward => -t[0],
+        _ => t[t.len() - 1],
+    };
+    let offset = signal.applies_at[0] - exit(net, id);
+    let ahead = offset.dot(along);
+    (ahead, (offset - along * ahead).length())
 }
 
 fn entry(net: &RoadNetwork, id: LaneId) -> Point {
@@ -332,14 +346,7 @@ fn signals_govern_their_approach_and_stand_where_its_drivers_see_them() {
                 }
                 // Level with the lane's end along the road (the stop line, or the far side
                 // of the junction for a connecting road), at most a road's width across it.
-                let t = lane.center.tangents();
-                let along = match lane.direction {
-                    Direction::Backward => -t[0],
-                    _ => t[t.len() - 1],
-                };
-                let offset = signal.applies_at[0] - exit(net, id);
-                let ahead = offset.dot(along);
-                let across = (offset - along * ahead).length();
+                let (ahead, across) = from_lane_end(net, signal, id);
                 assert!(
                     (-2.0..=0.5).contains(&ahead) && across < 16.0,
                     "{name}: signal {:?} is {ahead} m ahead of and {across} m beside lane {id:?}'s end",
@@ -354,6 +361,54 @@ fn signals_govern_their_approach_and_stand_where_its_drivers_see_them() {
         }
         assert!(far_side > 0, "{}: no light across a junction", style.name());
     }
+}
+
+#[test]
+fn kerb_towns_are_their_seeds_grid_with_every_light_at_the_kerb_before_its_stop_line() {
+    let mut lights = 0;
+    for seed in 1..=6 {
+        let kerb = Family {
+            bends: Bends::Tight,
+            lights: LightPlacement::Kerb,
+        };
+        let across = Family {
+            lights: LightPlacement::Across,
+            ..kerb
+        };
+        let xodr = generate_procedural(seed, kerb);
+        assert!(xodr.contains("name=\"ssr_tight_kerb_"), "named apart");
+        assert_eq!(
+            geometry_lines(&xodr),
+            geometry_lines(&generate_procedural(seed, across)),
+            "seed {seed}: the same roads as the town with its lights across"
+        );
+        let (net, _) = xodr::load_str_with_provenance(&xodr).unwrap();
+        for signal in net.signals().iter().filter(|s| s.kind == "1000001") {
+            lights += 1;
+            let mut nearest = f32::MAX;
+            for &id in &signal.lanes {
+                assert!(
+                    junction_of(&net, id).is_none(),
+                    "seed {seed}: across a junction"
+                );
+                let (ahead, across) = from_lane_end(&net, signal, id);
+                assert!(
+                    (-2.0..=0.0).contains(&ahead) && across < 16.0,
+                    "seed {seed}: light {:?} {ahead:.1} m ahead of, {across:.1} m beside its line",
+                    signal.id
+                );
+                nearest = nearest.min(across);
+            }
+            // On the kerb: beside the rightmost lane (and its parking lane), not at the
+            // sidewalk's back.
+            assert!(
+                nearest < 5.0,
+                "seed {seed}: light {:?} {nearest:.1} m from its nearest lane",
+                signal.id
+            );
+        }
+    }
+    assert!(lights > 20, "{lights} lights in 6 towns");
 }
 
 #[test]
@@ -501,16 +556,20 @@ fn procedural_towns_load_clean_join_up_repeat_and_vary() {
         .flat_map(|s| geometry_lines(bundled(s)))
         .collect();
     for bends in [Bends::Gentle, Bends::Tight] {
+        let family = Family {
+            bends,
+            lights: LightPlacement::Across,
+        };
         let mut without_lights = 0;
         let mut sizes = BTreeSet::new();
         let mut tight_corners = 0;
         for seed in 1..=12 {
-            let xodr = generate_procedural(seed, bends);
+            let xodr = generate_procedural(seed, family);
             assert!(
-                xodr == generate_procedural(seed, bends),
+                xodr == generate_procedural(seed, family),
                 "seed {seed} is not deterministic"
             );
-            assert!(xodr.contains(&format!("name=\"{}\"", procedural::name(seed, bends))));
+            assert!(xodr.contains(&format!("name=\"{}\"", procedural::name(seed, family))));
             let (net, provenance) = xodr::load_str_with_provenance(&xodr)
                 .unwrap_or_else(|e| panic!("{bends:?} seed {seed} does not load: {e}"));
             let faults = faults(&provenance);
