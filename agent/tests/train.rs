@@ -257,3 +257,26 @@ fn balanced_sampling_favours_starts_slowing_light_waits_stop_signs_walkers_turns
         "a state the learner reached (DAgger)"
     );
 }
+
+#[test]
+fn frames_a_learner_drove_blind_to_its_light_are_left_out_and_the_experts_kept() {
+    use ssr_agent::train::data::blind_to_its_light;
+    use ssrdrive_proto::dataset::FrameRecord;
+    let mut frame: FrameRecord = serde_json::from_str(
+        r#"{"index":0,"tick":0,"time":0,"speed":0,"position":[0,0,0],"yaw":0,"command":4,
+        "target_point":[10,0],"control":{"steer":0,"throttle":0,"brake":1},
+        "executed":{"steer":0,"throttle":0,"brake":1},"noise":false,"brake_reason":"traffic_light",
+        "waypoints":[],"future_controls":[],"future_complete":true,"images":[],
+        "light":{"state":"red","distance":1.0},"light_in_view":false}"#,
+    )
+    .unwrap();
+    assert!(blind_to_its_light(&frame, true));
+    assert!(!blind_to_its_light(&frame, false), "the expert's own frame");
+    frame.light_in_view = Some(true);
+    assert!(!blind_to_its_light(&frame, true), "the lamp in view");
+    frame.light_in_view = None;
+    assert!(
+        !blind_to_its_light(&frame, true),
+        "recorded before the field (or no light ahead)"
+    );
+}

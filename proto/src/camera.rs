@@ -272,6 +272,16 @@ impl Rig {
         }
     }
 
+    /// Whether an ego-frame point (x forward, y left, z up above the ground, m) projects into
+    /// the frame of one of the cameras: in front of it and within its pixels.
+    pub fn sees(&self, point: [f32; 3]) -> bool {
+        self.cameras.iter().any(|camera| {
+            camera.project(point).is_some_and(|([u, v], _)| {
+                (0.0..camera.width as f32).contains(&u) && (0.0..camera.height as f32).contains(&v)
+            })
+        })
+    }
+
     /// A preset of [`RIG_PRESETS`] by name.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
@@ -346,5 +356,35 @@ impl Rig {
         };
         let cameras: Vec<CameraSpec> = serde_json::from_value(list).map_err(json)?;
         Self::new(cameras)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_rig_sees_what_projects_into_a_frame_and_nothing_above_beside_or_behind_it() {
+        let rig = Rig::tcp_small();
+        // TCP's camera: 1.5 m behind the centre, 2 m up, about 19.7 degrees of frame above its
+        // axis at 320x96 and 100 degrees across.
+        assert!(rig.sees([10.0, 0.0, 2.0]));
+        assert!(rig.sees([10.0, -3.0, 5.0]));
+        // A traffic-light head 3 m above the camera is cut by the top of the frame once it is
+        // nearer than 3 / tan(19.7 deg) = 8.4 m to it.
+        assert!(rig.sees([7.2, -2.5, 5.0]));
+        assert!(!rig.sees([6.6, -2.5, 5.0]));
+        assert!(!rig.sees([0.0, -2.5, 2.0]), "beside");
+        assert!(!rig.sees([-5.0, 0.0, 2.0]), "behind");
+        let two = Rig {
+            cameras: vec![
+                CameraSpec::tcp_front(),
+                CameraSpec {
+                    yaw: 180.0,
+                    ..CameraSpec::tcp_front()
+                },
+            ],
+        };
+        assert!(two.sees([-5.0, 0.0, 2.0]), "a rear camera");
     }
 }

@@ -109,6 +109,12 @@ pub struct FrameRecord {
     /// ahead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub light: Option<LightAhead>,
+    /// Whether the head of [`FrameRecord::light`]'s light projects into a frame of the rig
+    /// (privileged ground truth): where it does not (a head at the kerb beside the stopped ego,
+    /// above the top of the frame), no camera shows its state. `None` without a light ahead
+    /// and in datasets recorded before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_in_view: Option<bool>,
 }
 
 /// The light that governs the ego's route ahead, and the free distance from the ego's front to

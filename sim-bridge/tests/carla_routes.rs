@@ -272,11 +272,15 @@ fn the_expert_stops_for_a_light_whose_first_connector_piece_the_route_skips() {
     world.lights.force(light, LightState::Red, 1000.0);
     world.step(Control::default());
     let view = hazards::scan(&world, &route, start, &mut HazardMemory::default());
-    let (gap, state) = view
+    let ahead = view
         .light_ahead
         .expect("the approach's light is the light ahead");
-    assert_eq!(state, LightState::Red);
-    assert!((15.0..25.0).contains(&gap), "{gap:.1} m to its line");
+    assert_eq!((ahead.state, ahead.id), (LightState::Red, light));
+    assert!(
+        (15.0..25.0).contains(&ahead.gap),
+        "{:.1} m to its line",
+        ahead.gap
+    );
     assert_eq!(view.cause, Some(BrakeReason::TrafficLight));
 }
 

@@ -7,7 +7,8 @@
 //! control now and at each future step, speed). Waypoint labels are the expert's plan from the
 //! frame's state ([`Labels::Plan`]) or the positions it went on to drive ([`Labels::Driven`]).
 //! Measurements of every episode are read once into an index, with each sample's sampling
-//! weight; images are read from disk batch by batch.
+//! weight; images are read from disk batch by batch. Frames a learner drove blind to the light
+//! ahead are left out ([`blind_to_its_light`]).
 //!
 //! Episodes are split into training and validation by a hash of their route (town, route set,
 //! route id), so every repetition of a route lands on the same side and validation routes are
@@ -224,6 +225,7 @@ impl TrainingData {
                     && f.waypoints.len() >= pred_len
                     && f.future_controls.len() >= pred_len
                     && f.index + future_offset < frames.len()
+                    && !blind_to_its_light(f, learner_drove)
             });
             for f in usable {
                 if !held_out {
@@ -424,6 +426,18 @@ pub const STOP_SIGN_WEIGHT: f32 = 3.0;
 /// of the expert's frames, and a learner trained without it crept on at the expert's walking
 /// pace into walkers crossing its lane in 5 of 30 home long runs.
 pub const WALKER_BRAKE_WEIGHT: f32 = 4.0;
+
+/// Whether a frame is left out of training and validation: one of an episode the learner drove
+/// where the head of the light ahead stood out of the cameras' view
+/// ([`FrameRecord::light_in_view`]). The expert's label there follows a lamp no camera shows,
+/// and a learner stands blind by a kerb-side head mostly through reds (a red wait lasts longer
+/// than a green one), so such frames taught "standing by the head means red": on Town02 the
+/// learner braked as the lamp of a green light left the top of its frame and waited there blind
+/// through the green (`sim-bridge replay LOG --ticks`). The expert's own frames stay: it stops
+/// where its lamp stays in view, and passes a head out of view only on green or yellow.
+pub fn blind_to_its_light(frame: &FrameRecord, learner_drove: bool) -> bool {
+    learner_drove && frame.light_in_view == Some(false)
+}
 
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying
 /// still) is a fifth of the data and teaches little, so it is drawn a third as often, except

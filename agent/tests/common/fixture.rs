@@ -78,6 +78,7 @@ pub fn write_fixture_dataset(root: &Path) -> Manifest {
                 light: (route % 2 == 0).then_some(LightAhead::Red {
                     distance: 20.0 - index as f64,
                 }),
+                light_in_view: (route % 2 == 0).then_some(true),
             };
             lines.push_str(&serde_json::to_string(&record).unwrap());
             lines.push('\n');

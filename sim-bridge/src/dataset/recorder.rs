@@ -14,7 +14,7 @@ use std::collections::VecDeque;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use rand::{RngExt as _, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ssrdrive_proto::camera::Rig;
@@ -264,6 +264,10 @@ impl<'d> EpisodeRecorder<'d> {
                 images,
                 actors: Some(actors_near(obs, world)),
                 light: Some(self.expert.light_ahead()),
+                light_in_view: self
+                    .expert
+                    .light_ahead_id()
+                    .map(|id| head_in_view(&self.rig, world.map.lights[id].head, obs)),
             });
             self.frames += 1;
         }
@@ -278,6 +282,12 @@ impl<'d> EpisodeRecorder<'d> {
         }
         Ok(())
     }
+}
+
+/// Whether a light's head (world frame) projects into a frame of `rig` from the ego's pose.
+fn head_in_view(rig: &Rig, head: DVec3, obs: &Observation) -> bool {
+    let head = to_ego_frame(head, obs.position, obs.yaw).as_vec3();
+    rig.sees(head.to_array())
 }
 
 /// The actors whose centre is within [`ACTOR_RANGE`] of the ego, in its frame.

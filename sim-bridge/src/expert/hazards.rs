@@ -93,9 +93,20 @@ pub struct HazardView {
     pub nosing_in: bool,
     /// The forecast predicts a collision.
     pub collision_predicted: bool,
-    /// The nearest light whose stop line ends a lane of the path ahead, whatever its colour:
-    /// (free gap from the front to the line in metres, its state). A training label.
-    pub light_ahead: Option<(f64, LightState)>,
+    /// The nearest light whose stop line ends a lane of the path ahead, whatever its colour.
+    /// A training label.
+    pub light_ahead: Option<NearestLight>,
+}
+
+/// The light ahead ([`HazardView::light_ahead`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NearestLight {
+    /// Free gap from the ego's front to its stop line, m.
+    pub gap: f64,
+    /// Its state.
+    pub state: LightState,
+    /// The light, in [`crate::map::Map::lights`].
+    pub id: usize,
 }
 
 impl HazardView {
@@ -367,8 +378,12 @@ fn stop_lines(
             .filter(|l| l.stop_lines.iter().any(|s| s.lane == lane))
         {
             let state = world.light_states()[light.id];
-            if !front_past && view.light_ahead.is_none_or(|(nearest, _)| gap < nearest) {
-                view.light_ahead = Some((gap.max(0.0), state));
+            if !front_past && view.light_ahead.is_none_or(|nearest| gap < nearest.gap) {
+                view.light_ahead = Some(NearestLight {
+                    gap: gap.max(0.0),
+                    state,
+                    id: light.id,
+                });
             }
             let head_gap = next_line
                 .then(|| head_in_view_gap(world, light, lane, gap))

@@ -60,8 +60,8 @@ pub struct Expert {
     hazards: hazards::HazardMemory,
     params: EgoParams,
     reason: Option<BrakeReason>,
-    /// The last tick's light ahead: free gap to its stop line (m) and state.
-    light_ahead: Option<(f64, LightState)>,
+    /// The last tick's light ahead.
+    light_ahead: Option<hazards::NearestLight>,
     /// The last tick's plan, ego frame.
     plan: Vec<DVec2>,
 }
@@ -82,12 +82,20 @@ impl Expert {
     /// a lane of the route within the expert's scan, with the free distance from the ego's
     /// front to that line; [`LightAhead::None`] when there is none.
     pub fn light_ahead(&self) -> LightAhead {
-        match self.light_ahead {
-            None => LightAhead::None,
-            Some((distance, LightState::Green)) => LightAhead::Green { distance },
-            Some((distance, LightState::Yellow)) => LightAhead::Yellow { distance },
-            Some((distance, LightState::Red)) => LightAhead::Red { distance },
+        let Some(light) = self.light_ahead else {
+            return LightAhead::None;
+        };
+        let distance = light.gap;
+        match light.state {
+            LightState::Green => LightAhead::Green { distance },
+            LightState::Yellow => LightAhead::Yellow { distance },
+            LightState::Red => LightAhead::Red { distance },
         }
+    }
+
+    /// Which light [`Expert::light_ahead`] is (its index in [`crate::map::Map::lights`]).
+    pub fn light_ahead_id(&self) -> Option<usize> {
+        self.light_ahead.map(|light| light.id)
     }
 }
 
