@@ -188,6 +188,7 @@ fn light_labels_say_whether_the_head_is_in_the_cameras_view() {
     collect(&config(&out, 0.0), &tasks, None, |_| {}).unwrap();
     let data = Dataset::open(&out).unwrap();
     let (mut far_in_view, mut near_out_of_view) = (0, 0);
+    let (mut red_stands, mut blind_red_stands) = (0, 0);
     for entry in &data.manifest.episode_list {
         for frame in data.frames(&entry.name).unwrap() {
             let distance = match frame.light.expect("recorded") {
@@ -202,11 +203,21 @@ fn light_labels_say_whether_the_head_is_in_the_cameras_view() {
             let in_view = frame.light_in_view.expect("said with a light ahead");
             far_in_view += usize::from(in_view && distance > 20.0);
             near_out_of_view += usize::from(!in_view && distance < 8.0);
+            if matches!(frame.light, Some(LightAhead::Red { .. })) && frame.speed < 0.1 {
+                red_stands += 1;
+                blind_red_stands += usize::from(!in_view);
+            }
         }
     }
     assert!(
         far_in_view > 0 && near_out_of_view > 0,
         "{far_in_view} frames in view far from the line, {near_out_of_view} out of view near it"
+    );
+    // The expert waits for a red where its camera still sees the lamp (short of the head, and
+    // farther short of one far beside its lane), unless the light turned too late for that.
+    assert!(
+        red_stands > 0 && blind_red_stands * 10 <= red_stands,
+        "{blind_red_stands} of {red_stands} frames standing at red with the lamp out of view"
     );
 }
 

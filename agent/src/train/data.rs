@@ -434,7 +434,8 @@ pub const WALKER_BRAKE_WEIGHT: f32 = 4.0;
 /// than a green one), so such frames taught "standing by the head means red": on Town02 the
 /// learner braked as the lamp of a green light left the top of its frame and waited there blind
 /// through the green (`sim-bridge replay LOG --ticks`). The expert's own frames stay: it stops
-/// where its lamp stays in view, and passes a head out of view only on green or yellow.
+/// where its lamp stays in view (unless the light turned too late for that), and passes a head
+/// out of view only on green or yellow.
 pub fn blind_to_its_light(frame: &FrameRecord, learner_drove: bool) -> bool {
     learner_drove && frame.light_in_view == Some(false)
 }

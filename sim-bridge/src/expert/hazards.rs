@@ -27,7 +27,17 @@ const STOP_LINE_MARGIN: f64 = 1.0;
 /// degrees across a 320x96 frame, so about 20 degrees above its axis) loses a 3 m head when
 /// the front is about 1 m from it; 4 m keeps the lamp in view for a learner that stops a metre
 /// or two late. A head beside or past the line leaves the stop point where the line puts it.
+/// A head far to the side (at the kerb beside a multi-lane approach, the ego in an inner lane)
+/// holds the ego farther back still: [`HEAD_ACROSS_VIEW`].
 const HEAD_IN_VIEW: f64 = 4.0;
+/// How far ahead of the front a head must stand for every metre it stands beside the ego's
+/// lane, less [`CAMERA_BEHIND_FRONT`], so that it stays within 45 degrees of the camera's axis
+/// (TCP's camera sees 50 degrees to either side): a head 10 m to the right holds the ego 6 m
+/// short of it.
+const HEAD_ACROSS_VIEW: f64 = 1.0;
+/// How far TCP's camera stands behind the ego's front, m (1.5 m behind the centre of a 4.9 m
+/// car).
+const CAMERA_BEHIND_FRONT: f64 = 3.95;
 /// How far past its [`HEAD_IN_VIEW`] point a stopping ego still holds there rather than going
 /// on to the line, m (the IDM may come to rest a little past it).
 const HEAD_SLACK: f64 = 1.5;
@@ -416,7 +426,7 @@ fn stop_lines(
 }
 
 /// The obstacle gap (as for a stop line) that stops the ego [`HEAD_IN_VIEW`] short of
-/// `light`'s head, for a head that stands before the stop line ending `lane` (`line_gap`
+/// `light`'s head (farther for a head far beside its lane, [`HEAD_ACROSS_VIEW`]), for a head that stands before the stop line ending `lane` (`line_gap`
 /// ahead, as [`stop_lines`] measures it) and beside that approach (within [`HEAD_ASIDE`]),
 /// while the ego can still stop there comfortably ([`STOP_DECEL`], give or take
 /// [`HEAD_SLACK`]); `None` past that point, or for a head elsewhere (the line decides). The
@@ -438,10 +448,12 @@ fn head_in_view_gap(
         return None;
     }
     let head_ahead = line_gap + STOP_LINE_MARGIN - before_line;
+    let aside = from_line.perp_dot(along_approach).abs();
+    let short = HEAD_IN_VIEW.max(aside * HEAD_ACROSS_VIEW - CAMERA_BEHIND_FRONT);
     // The IDM holds the ego its standstill gap short of an obstacle.
-    let gap = head_ahead - HEAD_IN_VIEW + super::IDM.min_gap;
+    let gap = head_ahead - short + super::IDM.min_gap;
     let stopping = ego.speed * ego.speed / (2.0 * STOP_DECEL);
-    (head_ahead - HEAD_IN_VIEW + HEAD_SLACK >= stopping).then_some(gap.max(0.0))
+    (head_ahead - short + HEAD_SLACK >= stopping).then_some(gap.max(0.0))
 }
 
 /// Before a junction without a light on its approach, the ego takes its turn as traffic does:
