@@ -246,8 +246,6 @@ fn run_suite(args: &EvalArgs, suite: &Suite) -> anyhow::Result<()> {
 /// Where the CARLA maps are looked for when --maps is not given (a suite with CARLA towns).
 const DEFAULT_CARLA_MAPS: &str = "../shared/carla";
 
-/// One campaign: `route` driven `repetitions` times by the agent at `target` (or an in-process
-/// one), results to `out`, pictures to `pictures`.
 /// Which runs of a campaign one [`drive`] covers.
 #[derive(Debug, Clone, Copy)]
 struct Scope {
@@ -259,6 +257,8 @@ struct Scope {
     resume: bool,
 }
 
+/// One campaign: `route` driven `scope.repetitions` times (those `scope` covers now) by the
+/// agent at `target` (or an in-process one), results to `out`, pictures to `pictures`.
 fn drive(
     args: &EvalArgs,
     target: Option<&str>,
