@@ -444,11 +444,11 @@ fn head_in_view_gap(
     let from_line = light.head.truncate() - end.position.truncate();
     let along_approach = DVec2::from_angle(end.yaw);
     let before_line = -from_line.dot(along_approach);
-    if before_line <= 0.0 || from_line.perp_dot(along_approach).abs() > HEAD_ASIDE {
+    let aside = from_line.perp_dot(along_approach).abs();
+    if before_line <= 0.0 || aside > HEAD_ASIDE {
         return None;
     }
     let head_ahead = line_gap + STOP_LINE_MARGIN - before_line;
-    let aside = from_line.perp_dot(along_approach).abs();
     let short = HEAD_IN_VIEW.max(aside * HEAD_ACROSS_VIEW - CAMERA_BEHIND_FRONT);
     // The IDM holds the ego its standstill gap short of an obstacle.
     let gap = head_ahead - short + super::IDM.min_gap;
