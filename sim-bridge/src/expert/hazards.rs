@@ -430,9 +430,9 @@ fn stop_lines(
 /// that stands before the stop line ending `lane` (`line_gap` ahead, as [`stop_lines`]
 /// measures it) and beside that approach (within [`HEAD_ASIDE`]), while the ego can still stop
 /// there comfortably ([`STOP_DECEL`], give or take [`HEAD_SLACK`]); `None` past that point, or
-/// for a head elsewhere (the line decides). The
-/// head is measured along the approach's end, not the ego's heading: on a turning route a head
-/// off to the side would otherwise project a few metres ahead of the ego.
+/// for a head elsewhere (the line decides). The head is measured along the approach's end, not
+/// the ego's heading: on a turning route a head off to the side would otherwise project a few
+/// metres ahead of the ego.
 fn head_in_view_gap(
     world: &World<'_>,
     light: &TrafficLight,
