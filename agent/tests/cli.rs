@@ -290,6 +290,39 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
     let training = &info.metadata["training"];
     assert!(training.contains("\"init_perception\""), "{training}");
 
+    // A deeper backbone grown from the first run's checkpoint, named after the growth.
+    let deep = dir.join("deep");
+    let deepen = |blocks: &str| {
+        ssr_agent(&[
+            "train",
+            "--data",
+            data,
+            "--out",
+            deep.to_str().unwrap(),
+            "--quiet",
+            "--steps",
+            "1",
+            "--batch-size",
+            "2",
+            "--init",
+            first.to_str().unwrap(),
+            "--deepen-backbone",
+            blocks,
+        ])
+    };
+    let (ok, _, stderr) = deepen("2,1,2,1");
+    assert!(ok, "{stderr}");
+    let info = ssr_agent::checkpoint::inspect(&deep.join("final.safetensors")).unwrap();
+    assert_eq!(info.config.name, "tiny-no-stl-no-ffp-blocks-2-1-2-1");
+    assert_eq!(info.config.backbone.blocks, [2, 1, 2, 1]);
+    let (ok, _, stderr) = deepen("1,1");
+    assert!(
+        !ok && stderr.contains("--deepen-backbone") && stderr.contains("[1, 1, 1, 1] blocks"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = train(&["--deepen-backbone", "2,2,2,2"]);
+    assert!(!ok && stderr.contains("--init"), "{stderr}");
+
     let (ok, _, stderr) = train(&["--stop-at", "0"]);
     assert!(!ok && stderr.contains("--stop-at"), "{stderr}");
     let (ok, _, stderr) = ssr_agent(&[

@@ -673,3 +673,58 @@ impl BothGradients {
         );
     }
 }
+
+#[test]
+fn a_deepened_backbone_computes_exactly_what_it_grew_from() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let mut deeper = config.clone();
+    deeper.backbone.blocks = vec![2, 1, 3, 1];
+    let shallow = config.init(&device);
+    let grown = ssr_agent::model::SsrModel {
+        backbone: shallow
+            .backbone
+            .clone()
+            .deepened(&config.backbone, &deeper.backbone, &device)
+            .unwrap(),
+        ..shallow.clone()
+    };
+    assert_eq!(grown.num_params(), deeper.init(&device).num_params());
+    assert!(grown.num_params() > shallow.num_params());
+    let input = model_input(&config, 2, 1, true, &device);
+    let (a, b) = (
+        shallow.valid().forward(&input),
+        grown.valid().forward(&input),
+    );
+    let same = |x: Tensor<3>, y: Tensor<3>| max_abs_diff(float_values(x), float_values(y));
+    assert_eq!(same(a.head.waypoints, b.head.waypoints), 0.0);
+    assert_eq!(same(a.bev, b.bev), 0.0);
+}
+
+#[test]
+fn deepening_refuses_any_other_change_of_the_backbone() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let trunk = || config.init(&device).backbone;
+    let other = |change: fn(&mut ssr_agent::model::config::BackboneConfig)| {
+        let mut backbone = config.backbone.clone();
+        change(&mut backbone);
+        backbone
+    };
+    for to in [
+        other(|b| b.blocks = vec![1, 0, 1, 1]),
+        other(|b| b.blocks = vec![2, 2, 2]),
+        other(|b| b.widths[3] = 32),
+        other(|b| b.strides[0] = 2),
+    ] {
+        let err = trunk()
+            .deepened(&config.backbone, &to, &device)
+            .unwrap_err();
+        assert!(err.contains("does not deepen"), "{err}");
+    }
+    // A trunk of other stages than the ones it is said to have.
+    let said = other(|b| b.blocks = vec![2, 1, 1, 1]);
+    let to = other(|b| b.blocks = vec![2, 2, 2, 2]);
+    let err = trunk().deepened(&said, &to, &device).unwrap_err();
+    assert!(err.contains("the trunk has 4 blocks"), "{err}");
+}

@@ -7,7 +7,7 @@ use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use ssr_agent::checkpoint;
 use ssr_agent::history::History;
-use ssr_agent::model::config::SsrConfig;
+use ssr_agent::model::config::{BackboneConfig, SsrConfig};
 use ssr_agent::train::config::{Head, Schedule, TrainConfig};
 use ssr_agent::train::data::{Labels, TrainingData};
 use ssr_agent::train::run::{self, TrainOptions};
@@ -42,6 +42,13 @@ pub struct TrainArgs {
     /// weights; for example agent/models/ssr-cpu-default.safetensors, the bundled one.
     #[arg(long, conflicts_with_all = ["model", "no_stl", "tokens"])]
     init: Option<PathBuf>,
+    /// With --init: grow the checkpoint's image backbone to these blocks per stage
+    /// (comma-separated, one per stage, none fewer than the checkpoint's; e.g. 2,3,4,3 for the
+    /// cpu-default's 1,1,2,1). The new blocks start as the identity, so the run starts from the
+    /// checkpoint's driving with a deeper trunk: a capacity experiment without training from
+    /// scratch. The run's model is named after the growth (cpu-default-blocks-2-3-4-3).
+    #[arg(long, requires = "init", value_delimiter = ',')]
+    deepen_backbone: Option<Vec<usize>>,
     /// Start a fresh network of --model and the ablation flags from this checkpoint's
     /// perception (backbone, BEV encoder, occupancy head), drawing the scene tokens, heads and
     /// FFP from --seed: the ablations' shared start (agent/ablation/ablate.py).
@@ -165,6 +172,26 @@ impl TrainArgs {
             Some(path) => checkpoint::inspect(path)?.config,
             None => SsrConfig::from_name_or_file(&self.model)?,
         };
+        if let Some(blocks) = &self.deepen_backbone {
+            // clap's `requires` lets a present --model stand in for the missing --init.
+            anyhow::ensure!(
+                self.init.is_some(),
+                "--deepen-backbone grows the backbone of the --init checkpoint: give one"
+            );
+            let deeper = BackboneConfig {
+                blocks: blocks.clone(),
+                ..model.backbone.clone()
+            };
+            anyhow::ensure!(
+                deeper.deepens(&model.backbone),
+                "--deepen-backbone {blocks:?}: the checkpoint's backbone has {:?} blocks per \
+                 stage; give one number per stage, none smaller",
+                model.backbone.blocks
+            );
+            let tag: Vec<String> = blocks.iter().map(usize::to_string).collect();
+            model.name = format!("{}-blocks-{}", model.name, tag.join("-"));
+            model.backbone = deeper;
+        }
         model.tokens.dense_bev |= self.no_stl;
         model.tokens.gate_target_point &= !self.gate_command_only;
         model.ego_status |= self.ego_status;

@@ -4,7 +4,7 @@
 //! Input: images normalised with ImageNet statistics ([`normalise_images`]), `[N, 3, H, W]`.
 //! Output: `[N, C, h, w]` with the size of [`SsrConfig::feature_size`] (stride 16 or 32).
 
-use burn::module::Module;
+use burn::module::{Module, Param};
 use burn::nn::conv::Conv2dConfig;
 use burn::nn::pool::MaxPool2dConfig;
 use burn::nn::{BatchNormConfig, PaddingConfig2d};
@@ -12,7 +12,7 @@ use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor};
 
-use super::config::SsrConfig;
+use super::config::{BackboneConfig, SsrConfig};
 use super::cpu_kernels::{self, Activation};
 use super::fused::{FusedBatchNorm, FusedConv2d, FusedMaxPool2d};
 
@@ -150,6 +150,20 @@ impl BasicBlock {
         }
     }
 
+    /// A stride-1 block of `width` channels that starts as the identity: its residual branch
+    /// ends in a batch norm of scale zero (and shift zero, as every fresh one), so the branch
+    /// adds nothing and the block's ReLU passes its input, the ReLU output of the block before,
+    /// through unchanged, in inference and in a training step's forward pass alike. The scale
+    /// still gets a gradient, so training grows the branch from there (Goyal et al.'s
+    /// zero-initialised residual).
+    fn identity(width: usize, device: &Device) -> Self {
+        let mut block = Self::new(width, width, 1, device);
+        let mut norm = BatchNormConfig::new(width).init(device);
+        norm.gamma = Param::from_tensor(Tensor::zeros([width], device));
+        block.second.bn = norm.into();
+        block
+    }
+
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let residual = match &self.shortcut {
             Some(projection) => projection.forward(x.clone()),
@@ -206,6 +220,42 @@ impl Backbone {
                 .init(device)
                 .into(),
         }
+    }
+
+    /// This trunk, built with the stages of `from`, grown to the stages of `to`: every stage
+    /// keeps its blocks and gains [`BasicBlock::identity`] ones after them, so the deeper trunk
+    /// computes exactly what this one did until training moves the new blocks. A capacity
+    /// experiment can so start from a trained checkpoint's driving instead of from random
+    /// weights (`ssr-agent train --init CKPT --model DEEPER.json`).
+    ///
+    /// Errors (naming the problem) where `to` does not deepen `from`
+    /// ([`BackboneConfig::deepens`]) or this trunk does not have `from`'s blocks.
+    pub fn deepened(
+        self,
+        from: &BackboneConfig,
+        to: &BackboneConfig,
+        device: &Device,
+    ) -> Result<Self, String> {
+        if !to.deepens(from) {
+            return Err(format!(
+                "backbone {to:?} does not deepen {from:?}: only more blocks per stage may differ"
+            ));
+        }
+        let had: usize = from.blocks.iter().sum();
+        if self.blocks.len() != had {
+            return Err(format!(
+                "the trunk has {} blocks where its stages {:?} make {had}",
+                self.blocks.len(),
+                from.blocks
+            ));
+        }
+        let mut kept = self.blocks.into_iter();
+        let mut blocks = Vec::with_capacity(to.blocks.iter().sum());
+        for ((&fewer, &more), &width) in from.blocks.iter().zip(&to.blocks).zip(&to.widths) {
+            blocks.extend(kept.by_ref().take(fewer));
+            blocks.extend((fewer..more).map(|_| BasicBlock::identity(width, device)));
+        }
+        Ok(Self { blocks, ..self })
     }
 
     /// `[N, 3, H, W]` normalised images to `[N, C, h, w]` features.

@@ -86,6 +86,23 @@ pub struct BackboneConfig {
     pub strides: Vec<usize>,
 }
 
+impl BackboneConfig {
+    /// Whether this trunk is `shallower` with at least as many blocks in every stage and
+    /// nothing else changed (stem width, stage widths and strides), every stage of `shallower`
+    /// having a block: the growth [`super::backbone::Backbone::deepened`] makes.
+    pub fn deepens(&self, shallower: &BackboneConfig) -> bool {
+        self.stem_width == shallower.stem_width
+            && self.widths == shallower.widths
+            && self.strides == shallower.strides
+            && self.blocks.len() == shallower.blocks.len()
+            && self
+                .blocks
+                .iter()
+                .zip(&shallower.blocks)
+                .all(|(&more, &fewer)| fewer > 0 && more >= fewer)
+    }
+}
+
 /// The BEV grid and its encoder.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BevConfig {

@@ -179,7 +179,10 @@ pub fn resumed_config(out: &Path) -> Result<TrainConfig, TrainError> {
 /// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
 /// (a fine-tune changes the training, not the network), except that a fine-tune may add the
 /// occupancy, hazard, motion or light head to a checkpoint without one: the head starts from random
-/// weights.
+/// weights; and it may deepen the backbone (more blocks per stage, nothing else; the run's
+/// model then names itself): the new blocks start as the identity
+/// ([`crate::model::backbone::Backbone::deepened`]), so the run starts from the checkpoint's
+/// driving.
 fn initial_weights(
     path: &Path,
     model: &SsrConfig,
@@ -190,11 +193,23 @@ fn initial_weights(
     let adds_hazard = model.hazard_head && !info.config.hazard_head;
     let adds_motion = model.motion_head && !info.config.motion_head;
     let adds_light = model.light_head && !info.config.light_head;
+    let from = info.config.backbone.clone();
+    let deepens = model.backbone != from && model.backbone.deepens(&from);
     let saved = SsrConfig {
         occupancy_head: info.config.occupancy_head || model.occupancy_head,
         hazard_head: info.config.hazard_head || model.hazard_head,
         motion_head: info.config.motion_head || model.motion_head,
         light_head: info.config.light_head || model.light_head,
+        name: if deepens {
+            model.name.clone()
+        } else {
+            info.config.name.clone()
+        },
+        backbone: if deepens {
+            model.backbone.clone()
+        } else {
+            from.clone()
+        },
         ..info.config
     };
     let differences = saved.differences(model);
@@ -216,6 +231,12 @@ fn initial_weights(
     }
     if adds_light {
         weights.light = model.init_light_head(device);
+    }
+    if deepens {
+        weights.backbone = weights
+            .backbone
+            .deepened(&from, &model.backbone, device)
+            .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
     }
     Ok(weights)
 }
