@@ -226,7 +226,7 @@ impl Backbone {
     /// keeps its blocks and gains [`BasicBlock::identity`] ones after them, so the deeper trunk
     /// computes exactly what this one did until training moves the new blocks. A capacity
     /// experiment can so start from a trained checkpoint's driving instead of from random
-    /// weights (`ssr-agent train --init CKPT --model DEEPER.json`).
+    /// weights (`ssr-agent train --init CKPT --deepen-backbone N,N,N,N`).
     ///
     /// Errors (naming the problem) where `to` does not deepen `from`
     /// ([`BackboneConfig::deepens`]) or this trunk does not have `from`'s blocks.
