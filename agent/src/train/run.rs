@@ -195,21 +195,18 @@ fn initial_weights(
     let adds_light = model.light_head && !info.config.light_head;
     let from = info.config.backbone.clone();
     let deepens = model.backbone != from && model.backbone.deepens(&from);
+    let (name, backbone) = if deepens {
+        (model.name.clone(), model.backbone.clone())
+    } else {
+        (info.config.name.clone(), from.clone())
+    };
     let saved = SsrConfig {
         occupancy_head: info.config.occupancy_head || model.occupancy_head,
         hazard_head: info.config.hazard_head || model.hazard_head,
         motion_head: info.config.motion_head || model.motion_head,
         light_head: info.config.light_head || model.light_head,
-        name: if deepens {
-            model.name.clone()
-        } else {
-            info.config.name.clone()
-        },
-        backbone: if deepens {
-            model.backbone.clone()
-        } else {
-            from.clone()
-        },
+        name,
+        backbone,
         ..info.config
     };
     let differences = saved.differences(model);
