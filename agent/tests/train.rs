@@ -259,9 +259,9 @@ fn balanced_sampling_favours_starts_slowing_light_waits_stop_signs_walkers_turns
 }
 
 #[test]
-fn frames_a_learner_drove_blind_to_its_light_are_left_out_and_the_experts_kept() {
+fn frames_whose_label_follows_a_lamp_out_of_view_are_left_out() {
     use ssr_agent::train::data::blind_to_its_light;
-    use ssrdrive_proto::dataset::FrameRecord;
+    use ssrdrive_proto::dataset::{BrakeReason, FrameRecord};
     let mut frame: FrameRecord = serde_json::from_str(
         r#"{"index":0,"tick":0,"time":0,"speed":0,"position":[0,0,0],"yaw":0,"command":4,
         "target_point":[10,0],"control":{"steer":0,"throttle":0,"brake":1},
@@ -270,13 +270,30 @@ fn frames_a_learner_drove_blind_to_its_light_are_left_out_and_the_experts_kept()
         "light":{"state":"red","distance":1.0},"light_in_view":false}"#,
     )
     .unwrap();
-    assert!(blind_to_its_light(&frame, true));
-    assert!(!blind_to_its_light(&frame, false), "the expert's own frame");
+    assert!(blind_to_its_light(&frame, true), "the learner stood blind");
+    assert!(
+        blind_to_its_light(&frame, false),
+        "the expert holds for a lamp out of view"
+    );
+    frame.brake_reason = Some(BrakeReason::PredictedCollision);
+    assert!(
+        !blind_to_its_light(&frame, false),
+        "the expert holds for a car, which the camera shows"
+    );
+    assert!(blind_to_its_light(&frame, true), "but the learner drove");
+    frame.brake_reason = None;
+    frame.light = serde_json::from_str(r#"{"state":"green","distance":1.0}"#).unwrap();
+    assert!(
+        !blind_to_its_light(&frame, false),
+        "the expert going on past a head out of view"
+    );
+    frame.brake_reason = Some(BrakeReason::TrafficLight);
     frame.light_in_view = Some(true);
     assert!(!blind_to_its_light(&frame, true), "the lamp in view");
+    assert!(!blind_to_its_light(&frame, false), "the lamp in view");
     frame.light_in_view = None;
     assert!(
-        !blind_to_its_light(&frame, true),
+        !blind_to_its_light(&frame, true) && !blind_to_its_light(&frame, false),
         "recorded before the field (or no light ahead)"
     );
 }

@@ -18,7 +18,8 @@ use sim_bridge::world::{World, WorldConfig};
 use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::dataset::{
-    ACTOR_RANGE, Dataset, DatasetError, FUTURE_COUNT, LightAhead, NoiseConfig, parse_frames,
+    ACTOR_RANGE, BrakeReason, Dataset, DatasetError, FUTURE_COUNT, LightAhead, NoiseConfig,
+    parse_frames,
 };
 
 fn small_town() -> (Map, RouteSet) {
@@ -148,8 +149,9 @@ fn a_collection_reads_back_with_consistent_futures() {
 
 /// A town whose lights stand at the kerb before their stop lines (as CARLA's Town01 and Town02
 /// post them): the camera sees a head while the ego comes up to it and loses it above the top
-/// of its frame as the ego passes it, which the label says (training leaves out the frames a
-/// learner drove blind).
+/// of its frame as the ego passes it, which the label says (training leaves out the frames
+/// whose label follows a lamp out of view). Recorded with pedal noise, which never presses on
+/// while the expert holds for a light: that pushed it past its stopping point to wait blind.
 #[test]
 fn light_labels_say_whether_the_head_is_in_the_cameras_view() {
     let family = Family {
@@ -185,12 +187,19 @@ fn light_labels_say_whether_the_head_is_in_the_cameras_view() {
         .collect();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("dataset");
-    collect(&config(&out, 0.0), &tasks, None, |_| {}).unwrap();
+    let mut noisy = config(&out, 1.0);
+    noisy.noise.longitudinal = 1.0;
+    collect(&noisy, &tasks, None, |_| {}).unwrap();
     let data = Dataset::open(&out).unwrap();
     let (mut far_in_view, mut near_out_of_view) = (0, 0);
+    let (mut pushed, mut pushed_at_lights) = (0, 0);
     let (mut red_stands, mut blind_red_stands) = (0, 0);
     for entry in &data.manifest.episode_list {
         for frame in data.frames(&entry.name).unwrap() {
+            let pressed_on = frame.noise && frame.executed.throttle > 0.0;
+            pushed += usize::from(pressed_on);
+            pushed_at_lights +=
+                usize::from(pressed_on && frame.brake_reason == Some(BrakeReason::TrafficLight));
             let distance = match frame.light.expect("recorded") {
                 LightAhead::None => {
                     assert_eq!(frame.light_in_view, None);
@@ -212,6 +221,10 @@ fn light_labels_say_whether_the_head_is_in_the_cameras_view() {
     assert!(
         far_in_view > 0 && near_out_of_view > 0,
         "{far_in_view} frames in view far from the line, {near_out_of_view} out of view near it"
+    );
+    assert!(
+        pushed > 0 && pushed_at_lights == 0,
+        "{pushed} frames pressed on by noise, {pushed_at_lights} while the expert held for a light"
     );
     // The expert waits for a red where its camera still sees the lamp (short of the head, and
     // farther short of one far beside its lane), unless the light turned too late for that.

@@ -7,8 +7,8 @@
 //! control now and at each future step, speed). Waypoint labels are the expert's plan from the
 //! frame's state ([`Labels::Plan`]) or the positions it went on to drive ([`Labels::Driven`]).
 //! Measurements of every episode are read once into an index, with each sample's sampling
-//! weight; images are read from disk batch by batch. Frames a learner drove blind to the light
-//! ahead are left out ([`blind_to_its_light`]).
+//! weight; images are read from disk batch by batch. Frames whose label follows a lamp no camera
+//! shows are left out ([`blind_to_its_light`]).
 //!
 //! Episodes are split into training and validation by a hash of their route (town, route set,
 //! route id), so every repetition of a route lands on the same side and validation routes are
@@ -427,17 +427,25 @@ pub const STOP_SIGN_WEIGHT: f32 = 3.0;
 /// pace into walkers crossing its lane in 5 of 30 home long runs.
 pub const WALKER_BRAKE_WEIGHT: f32 = 4.0;
 
-/// Whether a frame is left out of training and validation: one of an episode the learner drove
-/// where the head of the light ahead stood out of the cameras' view
-/// ([`FrameRecord::light_in_view`]). The expert's label there follows a lamp no camera shows,
-/// and a learner stands blind by a kerb-side head mostly through reds (a red wait lasts longer
-/// than a green one), so such frames taught "standing by the head means red": on Town02 the
-/// learner braked as the lamp of a green light left the top of its frame and waited there blind
-/// through the green (`sim-bridge replay LOG --ticks`). The expert's own frames stay: it stops
-/// where its lamp stays in view (unless the light turned too late for that), and passes a head
-/// out of view only on green or yellow.
+/// Whether a frame is left out of training and validation because its label follows a lamp no
+/// camera shows ([`FrameRecord::light_in_view`] false):
+/// - any frame of an episode the learner drove with the head of the light ahead out of view: a
+///   learner stands blind by a kerb-side head mostly through reds (a red wait lasts longer than
+///   a green one), so such frames taught "standing by the head means red": on Town02 the
+///   learner braked as the lamp of a green light left the top of its frame and waited there
+///   blind through the green (`sim-bridge replay LOG --ticks`);
+/// - a frame where the expert brakes or holds for its light with the head out of view. The
+///   expert stops where its lamp stays in view, so it stands blind only where the light turned
+///   too late for that or noise pushed it past its stopping point (24 of 27 such waits in 720
+///   episodes of kerb-light towns; `sim-bridge collect` no longer presses on there); its braking
+///   while rolling past the head at walking pace (57 frames) against going on at green (133)
+///   taught the same "a lamp leaving the frame means stop".
+///
+/// The expert's other frames with the lamp out of view stay: it passes a head out of view only on
+/// green or yellow, and those frames teach to go on.
 pub fn blind_to_its_light(frame: &FrameRecord, learner_drove: bool) -> bool {
-    learner_drove && frame.light_in_view == Some(false)
+    frame.light_in_view == Some(false)
+        && (learner_drove || frame.brake_reason == Some(BrakeReason::TrafficLight))
 }
 
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying
