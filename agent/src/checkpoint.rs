@@ -31,6 +31,8 @@ pub const HISTORY_KEY: &str = "history";
 pub const RIG_KEY: &str = "rig";
 /// Metadata key of the training notes (JSON: config, step, data, validation).
 pub const TRAINING_KEY: &str = "training";
+/// Metadata key of a blend's notes (JSON: the two checkpoints and the weight; see [`blend`]).
+pub const BLEND_KEY: &str = "blend";
 /// Largest safetensors header accepted.
 pub const MAX_HEADER_BYTES: u64 = 16 << 20;
 
@@ -85,6 +87,16 @@ pub enum CheckpointError {
         /// The checkpoint file they were meant for.
         path: PathBuf,
         /// Which setting is out of range.
+        reason: String,
+    },
+    /// Two checkpoints that cannot be blended: different configs, history modes or rigs.
+    #[error("checkpoints {from} and {to} cannot be blended: {reason}")]
+    Incompatible {
+        /// The checkpoint weighing `1 - weight`.
+        from: PathBuf,
+        /// The checkpoint weighing `weight`.
+        to: PathBuf,
+        /// What differs.
         reason: String,
     },
     /// The weights do not fit the network the config describes (names or shapes).
@@ -173,21 +185,91 @@ pub fn with_control(
         .map(|(key, value)| (key.as_str(), value.clone()))
         .chain([(CONTROL_KEY, control_json), (HISTORY_KEY, history_json)])
         .collect();
-    let mut partial = to.as_os_str().to_owned();
+    save_over(&model, &info.config, &metadata, from, to)
+}
+
+/// Writes to `out` the blend of the checkpoints `from` and `to`, `(1 - weight) * from + weight *
+/// to` tensor by tensor ([`crate::model::blend::blend`]), with `to`'s controller settings,
+/// history mode, rig and training notes, and a [`BLEND_KEY`] entry naming both files and the
+/// weight. The two must share their model config, history mode and rig: a blend of networks
+/// trained for different inputs would drive as neither. `out` may be either of them and is
+/// never left half written.
+pub fn blend(
+    from: &Path,
+    to: &Path,
+    weight: f64,
+    out: &Path,
+    device: &Device,
+) -> Result<(), CheckpointError> {
+    let (from_model, from_info) = load(from, device)?;
+    let (to_model, to_info) = load(to, device)?;
+    let incompatible = |reason: String| CheckpointError::Incompatible {
+        from: from.to_path_buf(),
+        to: to.to_path_buf(),
+        reason,
+    };
+    let unreadable = |path: &Path, reason: String| CheckpointError::BadControl {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if from_info.config != to_info.config {
+        return Err(incompatible(format!(
+            "their model configs differ ('{}' and '{}')",
+            from_info.config.name, to_info.config.name
+        )));
+    }
+    let from_history = history(&from_info).map_err(|e| unreadable(from, e))?;
+    let to_history = history(&to_info).map_err(|e| unreadable(to, e))?;
+    if from_history != to_history {
+        return Err(incompatible(format!(
+            "they were trained for different history modes ({from_history} and {to_history})"
+        )));
+    }
+    if rig(&from_info).map_err(|e| unreadable(from, e))?
+        != rig(&to_info).map_err(|e| unreadable(to, e))?
+    {
+        return Err(incompatible("they were trained on different rigs".into()));
+    }
+    let model = crate::model::blend::blend(&from_model, to_model, weight).map_err(incompatible)?;
+    let note = serde_json::json!({
+        "from": from.display().to_string(),
+        "to": to.display().to_string(),
+        "weight": weight,
+    });
+    let history_json = serde_json::to_string(&to_history).expect("modes serialise");
+    let metadata: Vec<(&str, String)> = to_info
+        .metadata
+        .iter()
+        .filter(|(key, _)| ![HISTORY_KEY, BLEND_KEY].contains(&key.as_str()))
+        .map(|(key, value)| (key.as_str(), value.clone()))
+        .chain([(HISTORY_KEY, history_json), (BLEND_KEY, note.to_string())])
+        .collect();
+    save_over(&model, &to_info.config, &metadata, to, out)
+}
+
+/// Saves beside `out` and renames over it, so `out` is never left half written; the file keeps
+/// the mode of the one it replaces, else of `like`.
+fn save_over(
+    model: &SsrModel,
+    config: &SsrConfig,
+    metadata: &[(&str, String)],
+    like: &Path,
+    out: &Path,
+) -> Result<(), CheckpointError> {
+    let mut partial = out.as_os_str().to_owned();
     partial.push(".partial");
     let partial = PathBuf::from(partial);
-    save(&model, &info.config, &metadata, &partial)?;
+    save(model, config, metadata, &partial)?;
     let io = |source| CheckpointError::Io {
-        path: to.to_path_buf(),
+        path: out.to_path_buf(),
         source,
     };
-    // The copy keeps the mode of the file it replaces, else of the checkpoint it copies.
-    let mode = std::fs::metadata(to)
-        .or_else(|_| std::fs::metadata(from))
+    let mode = std::fs::metadata(out)
+        .or_else(|_| std::fs::metadata(like))
         .map_err(io)?
         .permissions();
     std::fs::set_permissions(&partial, mode).map_err(io)?;
-    std::fs::rename(&partial, to).map_err(io)
+    std::fs::rename(&partial, out).map_err(io)
 }
 
 /// The controller settings a checkpoint carries (checked), or the defaults when it has none.

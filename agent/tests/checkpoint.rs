@@ -1,5 +1,5 @@
 //! Checkpoints: save then load gives identical outputs; new controller settings keep the
-//! weights; bad files are clear errors.
+//! weights; blends interpolate every tensor; bad files are clear errors.
 
 mod common;
 
@@ -9,8 +9,8 @@ use burn::tensor::Device;
 
 use common::{max_abs_diff, model_input, tiny_config};
 use ssr_agent::checkpoint::{
-    CONTROL_KEY, CheckpointError, HISTORY_KEY, control_config, history, inspect, load, save,
-    with_control,
+    BLEND_KEY, CONTROL_KEY, CheckpointError, HISTORY_KEY, blend, control_config, history, inspect,
+    load, save, with_control,
 };
 use ssr_agent::control::ControlConfig;
 use ssr_agent::history::History;
@@ -157,6 +157,93 @@ fn new_controller_settings_keep_the_weights_and_the_other_metadata() {
         "{error}"
     );
     assert!(!out.exists());
+}
+
+/// Every float of a network, in the order its tensors are visited.
+fn floats(model: &SsrModel) -> Vec<f32> {
+    model
+        .collect(None, None, false)
+        .into_iter()
+        .flat_map(|tensor| {
+            let bytes = tensor.to_bytes().unwrap();
+            bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+#[test]
+fn a_blend_interpolates_every_tensor_and_carries_the_second_checkpoints_settings() {
+    let device = Device::flex();
+    let config = tiny_config();
+    let dir = tempfile::tempdir().unwrap();
+    let link = serde_json::to_string(&History::Link).unwrap();
+    let (a, b) = (config.init(&device), config.init(&device));
+    let (from, to) = (
+        dir.path().join("a.safetensors"),
+        dir.path().join("b.safetensors"),
+    );
+    save(&a, &config, &[(HISTORY_KEY, link.clone())], &from).unwrap();
+    let mut control = ControlConfig::default();
+    control.safety.enabled = true;
+    let b_metadata = [
+        (HISTORY_KEY, link.clone()),
+        (CONTROL_KEY, serde_json::to_string(&control).unwrap()),
+        ("note", "fine-tuned".to_string()),
+    ];
+    save(&b, &config, &b_metadata, &to).unwrap();
+    let out = dir.path().join("blend.safetensors");
+    let blended = |weight: f64| {
+        blend(&from, &to, weight, &out, &device).unwrap();
+        load(&out, &device).unwrap()
+    };
+
+    // The ends are the two networks themselves.
+    assert_same_outputs(&blended(0.0).0, &a, &config, &device);
+    assert_same_outputs(&blended(1.0).0, &b, &config, &device);
+    // Between, each value of every tensor the file holds lies where the weight puts it.
+    let (mid, info) = blended(0.25);
+    let (x, y, m) = (floats(&a), floats(&b), floats(&mid));
+    assert_eq!((x.len(), y.len()), (m.len(), m.len()));
+    let worst = x
+        .iter()
+        .zip(&y)
+        .zip(&m)
+        .map(|((x, y), m)| (m - (0.75 * x + 0.25 * y)).abs() / (1.0 + x.abs() + y.abs()))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-6, "{worst}");
+    assert!(x.iter().zip(&m).any(|(x, m)| x != m));
+    assert_eq!(control_config(&info).unwrap(), control);
+    assert_eq!(info.metadata["note"], "fine-tuned");
+    let note: serde_json::Value = serde_json::from_str(&info.metadata[BLEND_KEY]).unwrap();
+    assert_eq!(note["weight"], 0.25);
+    assert!(note["from"].as_str().unwrap().ends_with("a.safetensors"));
+
+    // Refusals name what differs, and write nothing.
+    let nothing = dir.path().join("nothing.safetensors");
+    let refused = |from: &std::path::Path, weight: f64, needle: &str| {
+        let error = blend(from, &to, weight, &nothing, &device).unwrap_err();
+        assert!(error.to_string().contains(needle), "{error}");
+        assert!(!nothing.exists());
+    };
+    refused(&from, 1.5, "must be in 0..=1, not 1.5");
+    refused(&from, f64::NAN, "must be in 0..=1, not NaN");
+    let mut wider = config.clone();
+    wider.channels *= 2;
+    let other = dir.path().join("wider.safetensors");
+    save(&wider.init(&device), &wider, &[(HISTORY_KEY, link)], &other).unwrap();
+    refused(&other, 0.5, "their model configs differ");
+    let chained = dir.path().join("chain.safetensors");
+    let chain = serde_json::to_string(&History::Chain).unwrap();
+    save(&a, &config, &[(HISTORY_KEY, chain)], &chained).unwrap();
+    refused(&chained, 0.5, "different history modes (chain and link)");
+    refused(
+        &dir.path().join("missing.safetensors"),
+        0.5,
+        "missing.safetensors",
+    );
 }
 
 #[test]

@@ -100,6 +100,37 @@ fn control_prints_and_changes_only_the_named_settings() {
 }
 
 #[test]
+fn blend_writes_a_checkpoint_and_names_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = common::tiny_config();
+    let device = burn::tensor::Device::flex();
+    let [a, b, out] = ["a", "b", "mixed"].map(|name| {
+        dir.path()
+            .join(format!("{name}.safetensors"))
+            .to_str()
+            .unwrap()
+            .to_string()
+    });
+    for path in [&a, &b] {
+        ssr_agent::checkpoint::save(&config.init(&device), &config, &[], path.as_ref()).unwrap();
+    }
+    let (ok, _, stderr) = ssr_agent(&["blend", &a, &b, "--weight", "0.5", "--out", &out]);
+    assert!(ok && stderr.contains("0.5 x"), "{stderr}");
+    let (ok, stdout, stderr) = ssr_agent(&["inspect", &out]);
+    assert!(
+        ok && stdout.contains("blend: {\"from\""),
+        "{stdout}{stderr}"
+    );
+    let (ok, _, stderr) = ssr_agent(&["blend", &a, &b, "--weight", "2", "--out", &out]);
+    assert!(
+        !ok && stderr.contains("must be in 0..=1, not 2"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = ssr_agent(&["blend", &a, &b, "--out", &out]);
+    assert!(!ok && stderr.contains("--weight"), "{stderr}");
+}
+
+#[test]
 fn bench_runs_a_small_config_and_prints_json() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("tiny.json");

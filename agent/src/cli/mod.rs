@@ -1,8 +1,9 @@
 //! The `ssr-agent` command line: one module per subcommand ([`serve`], [`train`], [`bench`],
-//! [`bench_serve`], [`control`]), the small ones (`config`, `inspect`) here.
+//! [`bench_serve`], [`control`], [`blend`]), the small ones (`config`, `inspect`) here.
 
 pub mod bench;
 pub mod bench_serve;
+pub mod blend;
 pub mod control;
 pub mod serve;
 pub mod train;
@@ -57,6 +58,11 @@ pub enum Command {
     /// JSON --out PATH). `serve` drives with them unless its flags override the unstick rule
     /// or the safety stop.
     Control(control::ControlArgs),
+    /// Write a checkpoint whose weights are (1 - WEIGHT) x FROM + WEIGHT x TO, tensor by tensor
+    /// (WiSE-FT: a fine-tuned network blended with the one it started from often drives unseen
+    /// towns better than either). Both must share their model config, history mode and rig;
+    /// the blend carries TO's controller settings.
+    Blend(blend::BlendArgs),
 }
 
 /// Logging for one run: `format` at info level unless `RUST_LOG` says otherwise.
@@ -82,6 +88,7 @@ fn run_tool(command: Command) -> anyhow::Result<()> {
         Command::BenchServe(args) => bench_serve::run(&args),
         Command::Train(args) => train::run(&args),
         Command::Control(args) => control::run(&args),
+        Command::Blend(args) => blend::run(&args),
         Command::Config { preset } => {
             let config = SsrConfig::preset(&preset).expect("clap checked the name");
             println!(

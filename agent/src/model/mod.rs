@@ -10,6 +10,7 @@
 
 pub mod backbone;
 pub mod bev;
+pub mod blend;
 pub mod classifier;
 pub mod config;
 pub mod cpu_kernels;
