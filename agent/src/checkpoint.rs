@@ -178,13 +178,10 @@ pub fn with_control(
     })?;
     let control_json = serde_json::to_string(control).expect("configs serialise");
     let history_json = serde_json::to_string(&history).expect("modes serialise");
-    let metadata: Vec<(&str, String)> = info
-        .metadata
-        .iter()
-        .filter(|(key, _)| ![CONTROL_KEY, HISTORY_KEY].contains(&key.as_str()))
-        .map(|(key, value)| (key.as_str(), value.clone()))
-        .chain([(CONTROL_KEY, control_json), (HISTORY_KEY, history_json)])
-        .collect();
+    let metadata = replaced(
+        &info.metadata,
+        vec![(CONTROL_KEY, control_json), (HISTORY_KEY, history_json)],
+    );
     save_over(&model, &info.config, &metadata, from, to)
 }
 
@@ -237,14 +234,25 @@ pub fn blend(
         "weight": weight,
     });
     let history_json = serde_json::to_string(&to_history).expect("modes serialise");
-    let metadata: Vec<(&str, String)> = to_info
-        .metadata
-        .iter()
-        .filter(|(key, _)| ![HISTORY_KEY, BLEND_KEY].contains(&key.as_str()))
-        .map(|(key, value)| (key.as_str(), value.clone()))
-        .chain([(HISTORY_KEY, history_json), (BLEND_KEY, note.to_string())])
-        .collect();
+    let metadata = replaced(
+        &to_info.metadata,
+        vec![(HISTORY_KEY, history_json), (BLEND_KEY, note.to_string())],
+    );
     save_over(&model, &to_info.config, &metadata, to, out)
+}
+
+/// `metadata` with `entries` in place of whatever it held under their keys.
+fn replaced<'a>(
+    metadata: &'a BTreeMap<String, String>,
+    entries: Vec<(&'a str, String)>,
+) -> Vec<(&'a str, String)> {
+    let mut kept: Vec<(&str, String)> = metadata
+        .iter()
+        .filter(|(key, _)| entries.iter().all(|(replacing, _)| replacing != key))
+        .map(|(key, value)| (key.as_str(), value.clone()))
+        .collect();
+    kept.extend(entries);
+    kept
 }
 
 /// Saves beside `out` and renames over it, so `out` is never left half written; the file keeps
