@@ -270,30 +270,24 @@ fn frames_whose_label_follows_a_lamp_out_of_view_are_left_out() {
         "light":{"state":"red","distance":1.0},"light_in_view":false}"#,
     )
     .unwrap();
-    assert!(blind_to_its_light(&frame, true), "the learner stood blind");
+    assert!(blind_to_its_light(&frame), "holding for a lamp out of view");
+    frame.brake_reason = Some(BrakeReason::Vehicle);
     assert!(
-        blind_to_its_light(&frame, false),
-        "the expert holds for a lamp out of view"
+        !blind_to_its_light(&frame),
+        "holding for a car, which the camera shows"
     );
-    frame.brake_reason = Some(BrakeReason::PredictedCollision);
-    assert!(
-        !blind_to_its_light(&frame, false),
-        "the expert holds for a car, which the camera shows"
-    );
-    assert!(blind_to_its_light(&frame, true), "but the learner drove");
     frame.brake_reason = None;
     frame.light = serde_json::from_str(r#"{"state":"green","distance":1.0}"#).unwrap();
     assert!(
-        !blind_to_its_light(&frame, false),
-        "the expert going on past a head out of view"
+        !blind_to_its_light(&frame),
+        "going on past a head out of view"
     );
     frame.brake_reason = Some(BrakeReason::TrafficLight);
     frame.light_in_view = Some(true);
-    assert!(!blind_to_its_light(&frame, true), "the lamp in view");
-    assert!(!blind_to_its_light(&frame, false), "the lamp in view");
+    assert!(!blind_to_its_light(&frame), "the lamp in view");
     frame.light_in_view = None;
     assert!(
-        !blind_to_its_light(&frame, true) && !blind_to_its_light(&frame, false),
+        !blind_to_its_light(&frame),
         "recorded before the field (or no light ahead)"
     );
 }

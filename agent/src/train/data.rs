@@ -225,7 +225,7 @@ impl TrainingData {
                     && f.waypoints.len() >= pred_len
                     && f.future_controls.len() >= pred_len
                     && f.index + future_offset < frames.len()
-                    && !blind_to_its_light(f, learner_drove)
+                    && !blind_to_its_light(f)
             });
             for f in usable {
                 if !held_out {
@@ -428,24 +428,20 @@ pub const STOP_SIGN_WEIGHT: f32 = 3.0;
 pub const WALKER_BRAKE_WEIGHT: f32 = 4.0;
 
 /// Whether a frame is left out of training and validation because its label follows a lamp no
-/// camera shows ([`FrameRecord::light_in_view`] false):
-/// - any frame of an episode the learner drove with the head of the light ahead out of view: a
-///   learner stands blind by a kerb-side head mostly through reds (a red wait lasts longer than
-///   a green one), so such frames taught "standing by the head means red": on Town02 the
-///   learner braked as the lamp of a green light left the top of its frame and waited there
-///   blind through the green (`sim-bridge replay LOG --ticks`);
-/// - a frame where the expert brakes or holds for its light with the head out of view. The
-///   expert stops where its lamp stays in view, so it stands blind only where the light turned
-///   too late for that or noise pushed it past its stopping point (24 of 27 such waits in 720
-///   episodes of kerb-light towns; `sim-bridge collect` no longer presses on there); its braking
-///   while rolling past the head at walking pace (57 frames) against going on at green (133)
-///   taught the same "a lamp leaving the frame means stop".
+/// camera shows: the expert brakes or holds for the light ahead while its head is out of the
+/// cameras' view ([`FrameRecord::light_in_view`] false), whoever drove.
 ///
-/// The expert's other frames with the lamp out of view stay: it passes a head out of view only on
-/// green or yellow, and those frames teach to go on.
-pub fn blind_to_its_light(frame: &FrameRecord, learner_drove: bool) -> bool {
-    frame.light_in_view == Some(false)
-        && (learner_drove || frame.brake_reason == Some(BrakeReason::TrafficLight))
+/// Such frames taught "standing by a kerb-side head means red" and "a lamp leaving the top of
+/// the frame means brake": in 720 episodes of kerb-light towns the expert stood blind at red
+/// for 762 frames against 3 going at green, and braked while rolling past the head at walking
+/// pace 57 times against 133 going on (most of those waits followed collection's noise pushing
+/// it past its stopping point, which `sim-bridge collect` no longer does); on Town02 a learner
+/// braked as the lamp of a green light left its frame and waited there blind through the green
+/// (`sim-bridge replay LOG --ticks`). The other frames with the lamp out of view stay, a
+/// learner's included: going on past a head at green, and waiting for a car the camera shows,
+/// are labels the camera supports.
+pub fn blind_to_its_light(frame: &FrameRecord) -> bool {
+    frame.light_in_view == Some(false) && frame.brake_reason == Some(BrakeReason::TrafficLight)
 }
 
 /// How often a training frame is drawn relative to an ordinary one: standing still (and staying
