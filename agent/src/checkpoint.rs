@@ -205,7 +205,13 @@ pub fn blend(
         to: to.to_path_buf(),
         reason,
     };
+    // A history mode is read as the controller settings that once carried it (as in
+    // `with_control`); a rig is part of what the network takes in.
     let unreadable = |path: &Path, reason: String| CheckpointError::BadControl {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let bad_rig = |path: &Path, reason: String| CheckpointError::BadConfig {
         path: path.to_path_buf(),
         reason,
     };
@@ -222,8 +228,8 @@ pub fn blend(
             "they were trained for different history modes ({from_history} and {to_history})"
         )));
     }
-    if rig(&from_info).map_err(|e| unreadable(from, e))?
-        != rig(&to_info).map_err(|e| unreadable(to, e))?
+    if rig(&from_info).map_err(|e| bad_rig(from, e))?
+        != rig(&to_info).map_err(|e| bad_rig(to, e))?
     {
         return Err(incompatible("they were trained on different rigs".into()));
     }
