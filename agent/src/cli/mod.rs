@@ -59,9 +59,9 @@ pub enum Command {
     /// or the safety stop.
     Control(control::ControlArgs),
     /// Write a checkpoint whose weights are (1 - WEIGHT) x FROM + WEIGHT x TO, tensor by tensor
-    /// (WiSE-FT: a fine-tuned network blended with the one it started from often drives unseen
-    /// towns better than either). Both must share their model config, history mode and rig;
-    /// the blend carries TO's controller settings.
+    /// (WiSE-FT: a fine-tuned network blended with the one it started from can keep what each
+    /// does well away from the fine-tuning data). Both must share their model config, history
+    /// mode and rig; the blend carries TO's controller settings.
     Blend(blend::BlendArgs),
 }
 
