@@ -11,6 +11,7 @@ mod scoring {
         InfractionKind, RouteEnd, RouteRecord, RouteScorer, Rules, ScoringConfig, route_timeout,
     };
     use sim_bridge::world::state::{CollisionClass, CollisionEvent, EgoState, LightState};
+    use ssrdrive_proto::camera::{CameraSpec, Rig};
     use ssrdrive_proto::command::RoadOption;
 
     const DT: f64 = 0.05;
@@ -675,6 +676,83 @@ mod scoring {
         assert_eq!(r.meta.events.len(), 1);
         assert_eq!(r.meta.events[0].kind, "red_light");
         assert_eq!(r.meta.events[0].detail, detail);
+    }
+
+    #[test]
+    fn a_red_light_says_what_the_agents_frames_last_showed_of_its_lamp() {
+        // The head stands 5 m before the stop line and 2.25 m right of the lane (as Town01 and
+        // Town02 post theirs), so a front camera loses it before the car reaches the line.
+        let map = junction_map(TRAFFIC_LIGHT);
+        let route = junction_route(&map);
+        let head = light_of(&map).head;
+        let (green, red) = (
+            light_states(&map, LightState::Green),
+            light_states(&map, LightState::Red),
+        );
+        let front = Rig::tcp_small();
+        let in_frame =
+            |x: f64| front.sees([(head.x - x) as f32, (head.y + 1.75) as f32, head.z as f32]);
+        let gone = (500..1000)
+            .map(|i| f64::from(i) * 0.1)
+            .find(|&x| !in_frame(x))
+            .unwrap();
+        assert!(
+            in_frame(50.0) && gone < 96.0,
+            "the lamp leaves the frame at x = {gone}"
+        );
+        // Drives through with the light red from `x_red` on, the scorer told what `rig` frames.
+        let detail = |x_red: f64, rig: &Rig| {
+            let mut d = Drive::new(&map, &route);
+            let mut x = 0.0;
+            while x < 300.0 && d.end.is_none() {
+                let (ego, lights) = (
+                    ego_at(x, -1.75, 10.0),
+                    if x < x_red { &green } else { &red },
+                );
+                d.scorer.frame_lamps(d.t, &ego, lights, rig);
+                d.step(ego, &[], lights);
+                x += 10.0 * DT;
+            }
+            let event = d
+                .scorer
+                .infractions()
+                .iter()
+                .find(|i| i.kind == InfractionKind::RedLight);
+            event
+                .and_then(|e| e.detail.clone())
+                .expect("a red light was run")
+        };
+        let seen = detail(0.0, &front);
+        assert!(
+            seen.starts_with("map light, lamp last in frame red, "),
+            "{seen}"
+        );
+        // Red only once the lamp had left the frame: the agent last saw it green, the time from
+        // that tick to the tail crossing the line (x = 103.45) before.
+        let blind = detail(gone + 1.0, &front);
+        let rest = blind
+            .strip_prefix("map light, lamp last in frame green, ")
+            .unwrap_or_else(|| panic!("{blind}"));
+        let age: f64 = rest.split(" s before").next().unwrap().parse().unwrap();
+        let expected = (103.45 - gone) / 10.0;
+        assert!(
+            (age - expected).abs() <= 0.15,
+            "{blind}: expected about {expected:.1} s"
+        );
+        assert!(blind.ends_with("ego 10.0 m/s"), "{blind}");
+        // A narrow camera looking down at the road never frames it.
+        let down = Rig {
+            cameras: vec![CameraSpec {
+                pitch: -80.0,
+                fov: 30.0,
+                ..front.cameras[0].clone()
+            }],
+        };
+        let never = detail(0.0, &down);
+        assert!(
+            never.starts_with("map light, lamp never in frame, lane 1 of "),
+            "{never}"
+        );
     }
 
     #[test]

@@ -135,7 +135,10 @@ pub fn run_route(
         world.trigger_scenarios(progress);
         let node = follower.step(ego.position.truncate());
         let frames = match &mut cameras {
-            Some(cameras) if agent.wants_frames(frame) => cameras.render(&world, ego, frame),
+            Some(cameras) if agent.wants_frames(frame) => {
+                scorer.frame_lamps(world.time, &ego, world.light_states(), &cameras.rig);
+                cameras.render(&world, ego, frame)
+            }
             _ => Vec::new(),
         };
         let obs = Observation::of_ego(world.time, frame, &ego, &node, frames);

@@ -122,9 +122,16 @@ pub struct ClassCount {
 }
 
 /// The class of an event: its kind and the first words of its detail, e.g.
-/// "collisions_vehicle: crossing, in a junction" or "red_light: placed light".
+/// "collisions_vehicle: crossing, in a junction", "red_light: placed light, lamp last in frame
+/// red" (what the agent's frames last showed of the light; its age is left out) or
+/// "red_light: map light" (an agent without cameras).
 pub fn event_class(event: &RouteEvent) -> String {
-    let words = if event.kind == "collisions_vehicle" {
+    let lamp = event
+        .detail
+        .split(", ")
+        .nth(1)
+        .is_some_and(|w| w.starts_with("lamp "));
+    let words = if event.kind == "collisions_vehicle" || (event.kind == "red_light" && lamp) {
         2
     } else {
         1
@@ -300,9 +307,14 @@ mod tests {
             "red_light",
             "placed light, lane 1 of 3, head 2 m ahead 9 m right, ego 7.5 m/s",
         );
+        // A red its agent's frames last showed green: the age is not part of the class.
+        let blind = (
+            "red_light",
+            "map light, lamp last in frame green, 25.3 s before, lane 1 of 1, head -8 m ahead 2 m right, ego 4.2 m/s",
+        );
         let records = [
             run(100.0, 1000.0, &[crossing, placed]),
-            run(50.0, 2000.0, &[crossing]),
+            run(50.0, 2000.0, &[crossing, blind]),
         ];
         let f = Figures::of(&records);
         assert_eq!((f.runs, f.completed), (2, 2));
@@ -312,7 +324,11 @@ mod tests {
         assert_eq!(class.count, 2);
         assert!((class.per_km - 1.0).abs() < 1e-12);
         assert_eq!(f.classes["red_light: placed light"].count, 1);
-        assert_eq!(f.classes.len(), 2);
+        assert_eq!(
+            f.classes["red_light: map light, lamp last in frame green"].count,
+            1
+        );
+        assert_eq!(f.classes.len(), 3);
         // Nothing driven: rates are 0, not a division by zero.
         let still = Figures::of(&[run(0.0, 1000.0, &[crossing])]);
         assert_eq!(

@@ -15,7 +15,7 @@ use ssrdrive_proto::{v1, wire};
 use super::log::{LOG_FORMAT, LOG_VERSION, LogWriter};
 use crate::driver::{Agent, AgentError, Observation, RouteContext};
 use crate::world::World;
-use crate::world::state::{ActorKind, LightState};
+use crate::world::state::ActorKind;
 
 /// Actors farther than this from the ego are left out of the ground truth, metres.
 const TRUTH_RADIUS: f64 = 60.0;
@@ -52,14 +52,6 @@ fn kind_name(kind: ActorKind) -> &'static str {
         ActorKind::Walker => "walker",
         ActorKind::Static => "static",
         ActorKind::Debris => "debris",
-    }
-}
-
-fn light_name(state: LightState) -> &'static str {
-    match state {
-        LightState::Green => "green",
-        LightState::Yellow => "yellow",
-        LightState::Red => "red",
     }
 }
 
@@ -168,7 +160,7 @@ impl Agent for LoggingAgent {
                 head_x: light.head.x,
                 head_y: light.head.y,
                 head_yaw: light.head_yaw,
-                state: light_name(*state).into(),
+                state: state.name().into(),
             })
             .collect();
         let tick = v1::LogTick {

@@ -27,11 +27,13 @@
 //! lane-aligned.
 
 use glam::{DVec2, DVec3};
+use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::frames::world_to_ego;
 
 use crate::map::{Lane, Map, StopLine, TrafficLight};
 use crate::world::state::{EgoState, LightState, Obb};
 
+use super::sightings::LampSightings;
 use super::{Infraction, InfractionKind, ScoringConfig, fmt_location};
 use crate::map::waypoint::Waypoint;
 
@@ -40,9 +42,25 @@ use crate::map::waypoint::Waypoint;
 pub(crate) struct RedLights {
     /// The last light penalised.
     last: Option<usize>,
+    /// What the agent's frames showed of each light (none for an agent without cameras).
+    sightings: Option<LampSightings>,
 }
 
 impl RedLights {
+    /// Note which lights' heads `rig` frames from `ego` at time `t` ([`LampSightings`]).
+    pub fn frame_lamps(
+        &mut self,
+        map: &Map,
+        t: f64,
+        ego: &EgoState,
+        lights: &[LightState],
+        rig: &Rig,
+    ) {
+        self.sightings
+            .get_or_insert_with(Default::default)
+            .observe(map, t, ego, lights, rig);
+    }
+
     /// Test every nearby red light against the ego's tail.
     pub fn update(
         &mut self,
@@ -83,7 +101,8 @@ impl RedLights {
             });
             if crossed {
                 let mut event = red_light_event(light, t, cfg);
-                event.detail = Some(red_light_context(map, light, ego, tail));
+                let seen = self.sightings.as_ref().map(|s| s.describe(light.id, t));
+                event.detail = Some(red_light_context(map, light, ego, tail, seen));
                 out.push(event);
                 self.last = Some(light.id);
             }
@@ -102,10 +121,18 @@ pub(crate) fn tail_segment(ego: &EgoState) -> (DVec2, DVec2) {
 }
 
 /// Where a red light was run from (ours, for failure analysis): whose light it is (the map
-/// file's or placed by the simulator), which of the approach's lanes the ego was in (1 is the
-/// leftmost), and where its head stood from the ego (ego frame, m), e.g. "placed light, lane 1
-/// of 3, head 2 m ahead 9 m right, ego 7.5 m/s".
-fn red_light_context(map: &Map, light: &TrafficLight, ego: &EgoState, tail: &Lane) -> String {
+/// file's or placed by the simulator), what the agent's frames last showed of it (`seen`, from
+/// [`LampSightings::describe`]; none for an agent without cameras), which of the approach's
+/// lanes the ego was in (1 is the leftmost), and where its head stood from the ego (ego frame,
+/// m), e.g. "placed light, lamp last in frame red, 0.0 s before, lane 1 of 3, head 2 m ahead
+/// 9 m right, ego 7.5 m/s".
+fn red_light_context(
+    map: &Map,
+    light: &TrafficLight,
+    ego: &EgoState,
+    tail: &Lane,
+    seen: Option<String>,
+) -> String {
     let lanes = light.stop_lines.len();
     // Stop lines are per incoming lane; count from the left by their offset across the road.
     let left_of = |a: DVec2| {
@@ -129,8 +156,9 @@ fn red_light_context(map: &Map, light: &TrafficLight, ego: &EgoState, tail: &Lan
     let d = light.head.truncate() - ego.position.truncate();
     let [ahead, left] = world_to_ego([d.x, d.y], ego.yaw);
     let side = if left >= 0.0 { "left" } else { "right" };
+    let seen = seen.map(|s| s + ", ").unwrap_or_default();
     format!(
-        "{} light, lane {lane} of {lanes}, head {ahead:.0} m ahead {:.0} m {side}, ego {:.1} m/s",
+        "{} light, {seen}lane {lane} of {lanes}, head {ahead:.0} m ahead {:.0} m {side}, ego {:.1} m/s",
         if light.from_map { "map" } else { "placed" },
         left.abs(),
         ego.speed

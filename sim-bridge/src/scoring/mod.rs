@@ -40,9 +40,11 @@ pub mod lanes;
 pub mod lights;
 pub mod progress;
 pub mod record;
+pub mod sightings;
 pub mod summary;
 
 use glam::DVec3;
+use ssrdrive_proto::camera::Rig;
 
 use crate::map::{LaneKind, Map};
 use crate::route::DenseRoute;
@@ -423,6 +425,14 @@ impl<'a> RouteScorer<'a> {
             last_time: 0.0,
             last_location: start,
         }
+    }
+
+    /// Note which traffic lights' heads the agent's camera `rig` frames from `ego` at sim time
+    /// `t` (`lights` indexed like `map.lights`), so that a red light's detail says what the
+    /// agent last had in frame of it ([`sightings`]). Call it on the ticks the agent gets
+    /// frames, before [`RouteScorer::tick`]; a scorer never told says nothing of sightings.
+    pub fn frame_lamps(&mut self, t: f64, ego: &EgoState, lights: &[LightState], rig: &Rig) {
+        self.red_lights.frame_lamps(self.map, t, ego, lights, rig);
     }
 
     /// Evaluate every criterion on the state at sim time `t` (seconds since the route started).

@@ -175,3 +175,14 @@ pub enum LightState {
     /// Stop.
     Red,
 }
+
+impl LightState {
+    /// "green", "yellow" or "red".
+    pub fn name(self) -> &'static str {
+        match self {
+            LightState::Green => "green",
+            LightState::Yellow => "yellow",
+            LightState::Red => "red",
+        }
+    }
+}
