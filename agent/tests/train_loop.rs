@@ -11,6 +11,7 @@ use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use ssr_agent::checkpoint;
+use ssr_agent::device::Backend;
 use ssr_agent::history::History;
 use ssr_agent::model::config::SsrConfig;
 use ssr_agent::model::float_values;
@@ -84,6 +85,7 @@ fn options(data: &Path, out: &Path) -> TrainOptions {
         out: out.to_path_buf(),
         resume: false,
         stop_at: None,
+        backend: Backend::Cpu,
         progress: false,
     }
 }
@@ -703,6 +705,27 @@ fn edit(path: &Path, from: &str, to: &str) {
     let text = std::fs::read_to_string(path).unwrap();
     assert!(text.contains(from), "{} has no {from}", path.display());
     std::fs::write(path, text.replacen(from, to, 1)).unwrap();
+}
+
+/// Without the `wgpu` feature a GPU run is refused before anything is written, naming the
+/// feature that gives one.
+#[cfg(not(feature = "wgpu"))]
+#[test]
+fn a_gpu_run_on_a_build_without_wgpu_says_how_to_get_one() {
+    let tmp = Scratch::new();
+    let config = config(2);
+    let data = tmp.fixture("data");
+    let out = tmp.0.path().join("gpu-run");
+    let gpu = TrainOptions {
+        backend: Backend::Wgpu,
+        ..options(&data, &out)
+    };
+    let error = train(config.clone(), gpu, open(&data, &config)).expect_err("refused");
+    assert!(
+        matches!(error, TrainError::Backend(_)) && error.to_string().contains("--features wgpu"),
+        "{error}"
+    );
+    assert!(!out.exists(), "nothing is written for a refused run");
 }
 
 #[test]

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use ssr_agent::checkpoint;
+use ssr_agent::device::Backend;
 use ssr_agent::history::History;
 use ssr_agent::model::config::{BackboneConfig, SsrConfig};
 use ssr_agent::train::config::{Head, Schedule, TrainConfig};
@@ -28,9 +29,13 @@ pub struct TrainArgs {
     #[arg(long, default_value = "runs/train")]
     out: PathBuf,
     /// Continue the run in --out from its last checkpoint (with its own settings; only
-    /// --stop-at and --quiet apply).
+    /// --stop-at, --backend and --quiet apply).
     #[arg(long)]
     resume: bool,
+    /// Where the network trains: the CPU (all cores), or a GPU through wgpu (a build with
+    /// `--features wgpu`). A run may resume on the other.
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
     /// Stop after this step with a checkpoint, keeping the schedule of --steps (split a run
     /// over several sittings, then --resume).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
@@ -294,6 +299,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         resume: args.resume,
         stop_at: args.stop_at,
+        backend: args.backend,
         progress: !args.quiet,
     };
     let summary = run::train(config, options, Arc::new(data))?;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use ssrdrive_proto::dataset::DatasetError;
 
 use crate::checkpoint::CheckpointError;
+use crate::device::BackendUnavailable;
 
 /// Why a training run could not start or go on.
 #[derive(Debug, thiserror::Error)]
@@ -16,6 +17,9 @@ pub enum TrainError {
     /// A checkpoint could not be read or written.
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    /// The backend asked for is not in this build.
+    #[error(transparent)]
+    Backend(#[from] BackendUnavailable),
     /// The training config is invalid (the message names the field).
     #[error("training config: {0}")]
     Config(String),

@@ -40,6 +40,7 @@ use super::resume::{Progress, load_model, read_progress, save_weights};
 use super::validation::{HeadVerdicts, ValidationMetrics, ValidationSums, spread};
 use crate::checkpoint;
 use crate::control::ControlConfig;
+use crate::device::Backend;
 use crate::history::History;
 use crate::model::classifier::predicted_classes;
 use crate::model::config::SsrConfig;
@@ -67,6 +68,8 @@ pub struct TrainOptions {
     /// Stop after this step (with a checkpoint), though the schedule spans all steps: splits a
     /// run over several sittings.
     pub stop_at: Option<u64>,
+    /// Where the network trains (resume state is backend-independent).
+    pub backend: Backend,
     /// Draw a progress bar on stderr.
     pub progress: bool,
 }
@@ -293,9 +296,10 @@ impl Trainer {
         options: TrainOptions,
         data: Arc<TrainingData>,
     ) -> Result<Self, TrainError> {
+        let inner = options.backend.device()?;
+        let device = inner.clone().autodiff();
         let out = options.out.clone();
         std::fs::create_dir_all(&out).map_err(io_error(&out))?;
-        let device = Device::flex().autodiff();
         let metrics_path = out.join("metrics.jsonl");
         let (config, model, optimizer, step) = if options.resume {
             let resume_dir = out.join("resume");
@@ -340,7 +344,7 @@ impl Trainer {
             data,
             options,
             device,
-            inner: Device::flex(),
+            inner,
             model: Some(model),
             optimizer,
             step,
