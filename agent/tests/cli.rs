@@ -169,6 +169,37 @@ fn bench_runs_a_small_config_and_prints_json() {
     assert!(train > forward && train < 60_000.0, "{train} vs {forward}");
     let (ok, _, stderr) = ssr_agent(&["bench", "--config", "/no/such/file.json"]);
     assert!(!ok && stderr.contains("--config"), "{stderr}");
+
+    // Another rig: a step takes a frame from each camera, and its rows say it is not TCP's.
+    let rig = dir.path().join("front-right.json");
+    let camera = |id: &str, yaw: f32| {
+        serde_json::json!({"id": id, "x": -1.5, "y": 0.0, "z": 2.0, "roll": 0.0, "pitch": 0.0,
+            "yaw": yaw, "width": 64, "height": 32, "fov": 100.0})
+    };
+    std::fs::write(
+        &rig,
+        serde_json::json!([camera("front", 0.0), camera("right", 90.0)]).to_string(),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = ssr_agent(&[
+        "bench",
+        "--config",
+        path.to_str().unwrap(),
+        "--rig",
+        rig.to_str().unwrap(),
+        "--iterations",
+        "1",
+        "--warmup",
+        "0",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let line: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let step = line["results"]["policy_step_rig_link_ms"].as_f64().unwrap();
+    assert!(step > 0.0 && step < 10_000.0, "{step}");
+    assert!(line["results"].get("policy_step_900x256_ms").is_none());
+    let (ok, _, stderr) = ssr_agent(&["bench", "--rig", "/no/such/rig.json"]);
+    assert!(!ok && stderr.contains("--rig"), "{stderr}");
 }
 
 #[test]

@@ -1,7 +1,8 @@
 //! `ssr-agent bench`: forward latency (median of timed runs after warm-up) with the per-stage
 //! breakdown of the paper's latency analysis (and the occupancy head, where the network has
-//! one), a full policy step from TCP's 900x256 frames (safety stop on, where it can be), and
-//! optionally a training step, plus parameter counts and per-episode state memory.
+//! one), a full policy step from the rig's frames (TCP's one 900x256 camera by default; safety
+//! stop on, where it can be), and optionally a training step, plus parameter counts and
+//! per-episode state memory.
 
 use std::time::Instant;
 
@@ -18,7 +19,7 @@ use ssr_agent::model::{ModelInput, Navigation, SsrModel, float_tensor};
 use ssr_agent::policy::{SsrPolicy, StepInput};
 use ssr_agent::pose::{EgoMotion, Pose2};
 use ssr_agent::train::loss::{AuxiliaryLosses, BetaTargets, ImitationTargets, LossWeights, losses};
-use ssrdrive_proto::camera::{CameraSpec, Rig};
+use ssrdrive_proto::camera::Rig;
 use ssrdrive_proto::command::{COMMANDS, RoadOption};
 use ssrdrive_proto::image::RgbImage;
 
@@ -43,6 +44,11 @@ pub struct BenchArgs {
     train_batch: usize,
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
+    /// The cameras the network sees: a preset (tcp, tcp-small) or a JSON rig file (a list of
+    /// CARLA-style camera descriptions). Every camera's image goes through the backbone, so a
+    /// rig of three costs about three backbone passes a step.
+    #[arg(long, default_value = "tcp")]
+    rig: String,
     /// Print one JSON object per measurement instead of a table.
     #[arg(long)]
     json: bool,
@@ -69,10 +75,9 @@ fn time_ms(warmup: usize, iterations: usize, mut f: impl FnMut()) -> f64 {
     )
 }
 
-/// A batch with TCP's camera, a previous BEV and a small ego motion, random images.
-fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput {
+/// A batch seen by `rig`'s cameras, with a previous BEV and a small ego motion, random images.
+fn model_input(config: &SsrConfig, batch: usize, rig: &Rig, device: &Device) -> ModelInput {
     let grid = config.bev.grid;
-    let rig = Rig::tcp();
     let motion = EgoMotion {
         dx: 0.4,
         dy: 0.0,
@@ -83,7 +88,7 @@ fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput 
             SampleGeometry::new(
                 &grid,
                 &config.bev.pillar_heights,
-                &rig,
+                rig,
                 Some(motion),
                 Some(6.0),
             )
@@ -94,11 +99,16 @@ fn model_input(config: &SsrConfig, batch: usize, device: &Device) -> ModelInput 
         .collect();
     ModelInput {
         images: Tensor::random(
-            [batch, 3, config.image_height, config.image_width],
+            [
+                batch * rig.cameras.len(),
+                3,
+                config.image_height,
+                config.image_width,
+            ],
             Distribution::Normal(0.0, 1.0),
             device,
         ),
-        cameras: 1,
+        cameras: rig.cameras.len(),
         geometry: GeometryTensors::batch(&geometry, &grid, config.bev.pillar_heights.len(), device),
         previous_bev: Tensor::random(
             [batch, grid.cells(), config.channels],
@@ -144,9 +154,15 @@ fn sync(device: &Device) {
     device.sync().expect("device work completes");
 }
 
-fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {
+fn bench_forward(
+    config: &SsrConfig,
+    batch: usize,
+    rig: &Rig,
+    args: &BenchArgs,
+    device: &Device,
+) -> Report {
     let model = config.init(device).valid();
-    let input = model_input(config, batch, device);
+    let input = model_input(config, batch, rig, device);
     let (w, i) = (args.warmup, args.iterations);
     let features = model.image_features(input.images.clone());
     let bev = model.encode_bev(features.clone(), &input);
@@ -214,7 +230,7 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
         ));
     }
     if batch == 1 {
-        rows.extend(policy_step_rows(model, config, (w, i), device));
+        rows.extend(policy_step_rows(model, config, rig, (w, i), device));
     }
     Report {
         config: config.name.clone(),
@@ -223,11 +239,13 @@ fn bench_forward(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &De
     }
 }
 
-/// A whole policy step (decode, encoders, heads, controller) as served, in the steady state
-/// of each history, and the memory an episode holds.
+/// A whole policy step (decode, encoders, heads, controller) as served, from one frame per
+/// camera of `rig`, in the steady state of each history, and the memory an episode holds. Its
+/// rows are named after TCP's 900x256 camera for that rig, `policy_step_rig_*` for another.
 fn policy_step_rows(
     model: SsrModel,
     config: &SsrConfig,
+    rig: &Rig,
     (w, i): (usize, usize),
     device: &Device,
 ) -> Vec<(&'static str, f64)> {
@@ -236,29 +254,44 @@ fn policy_step_rows(
     let mut control = ControlConfig::default();
     control.safety.enabled = model.occupancy.is_some();
     let policy = SsrPolicy::new(model, config.clone(), control, device.clone());
-    let camera = CameraSpec::tcp_front();
-    let frame = RgbImage {
-        width: camera.width,
-        height: camera.height,
-        rgb: (0..camera.width * camera.height * 3)
-            .map(|k| ((k * 2654435761) >> 24) as u8)
-            .collect(),
+    let frames: Vec<RgbImage> = rig
+        .cameras
+        .iter()
+        .map(|camera| RgbImage {
+            width: camera.width,
+            height: camera.height,
+            rgb: (0..camera.width * camera.height * 3)
+                .map(|k| ((k * 2654435761) >> 24) as u8)
+                .collect(),
+        })
+        .collect();
+    let names = if *rig == Rig::tcp() {
+        [
+            "policy_step_900x256_ms",
+            "policy_step_900x256_link_ms",
+            "policy_step_900x256_recursive_ms",
+        ]
+    } else {
+        [
+            "policy_step_rig_ms",
+            "policy_step_rig_link_ms",
+            "policy_step_rig_recursive_ms",
+        ]
     };
     // Timed in the steady state, where the episode has its history (the first steps of an
     // episode encode one BEV; later ones three on the chain, two on the link, one on the
     // recursion).
-    for (history, row) in [
-        (History::Chain, "policy_step_900x256_ms"),
-        (History::Link, "policy_step_900x256_link_ms"),
-        (History::Recursive, "policy_step_900x256_recursive_ms"),
-    ] {
+    for (history, row) in [History::Chain, History::Link, History::Recursive]
+        .into_iter()
+        .zip(names)
+    {
         let mut episode = policy.new_episode_with_history(history);
         let mut tick = 0;
         let mut step_once = || {
             tick += 1;
             let input = StepInput {
-                frames: vec![frame.clone()],
-                rig: Rig::tcp(),
+                frames: frames.clone(),
+                rig: rig.clone(),
                 pose: Pose2::new(0.3 * tick as f32, 0.0, 0.0),
                 speed: 6.0,
                 command: RoadOption::LaneFollow,
@@ -278,7 +311,7 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
     let device = device.clone().autodiff();
     let mut model = config.init(&device);
     let mut optimizer = AdamWConfig::new().with_weight_decay(0.01).init();
-    let input = model_input(config, batch, &device);
+    let input = model_input(config, batch, &Rig::tcp(), &device);
     let p = config.head.pred_len;
     let targets = ImitationTargets {
         waypoints: Tensor::random([batch, p, 2], Distribution::Normal(0.0, 3.0), &device),
@@ -337,6 +370,9 @@ fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Devi
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
+    let rig = Rig::from_name_or_file(&args.rig).context("--rig")?;
+    rig.validate()
+        .map_err(|e| anyhow::anyhow!("--rig {}: {e}", args.rig))?;
     let runs: Vec<(SsrConfig, usize)> = match &args.config {
         Some(spec) => vec![(
             SsrConfig::from_name_or_file(spec).context("--config")?,
@@ -350,8 +386,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     };
     if !args.json {
         println!(
-            "ssr-agent bench: backend {:?}, {} threads, median of {} runs after {} warm-up (ms)",
+            "ssr-agent bench: backend {:?}, rig {} ({} cameras), {} threads, median of {} runs after {} warm-up (ms)",
             args.backend,
+            args.rig,
+            rig.cameras.len(),
             std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
@@ -360,7 +398,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         );
     }
     for (config, batch) in &runs {
-        bench_forward(config, *batch, args, &device).print(args.json);
+        bench_forward(config, *batch, &rig, args, &device).print(args.json);
     }
     if args.train {
         let config = &runs[0].0;
