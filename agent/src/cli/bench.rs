@@ -37,7 +37,8 @@ pub struct BenchArgs {
     /// Untimed runs first.
     #[arg(long, default_value_t = 3)]
     warmup: usize,
-    /// Also time a training step (forward + FFP + losses + backward + AdamW) at --train-batch.
+    /// Also time a training step (forward + FFP + losses + backward + AdamW) at --train-batch,
+    /// with --rig's cameras.
     #[arg(long)]
     train: bool,
     #[arg(long, default_value_t = 8)]
@@ -307,11 +308,17 @@ fn policy_step_rows(
     rows
 }
 
-fn bench_train(config: &SsrConfig, batch: usize, args: &BenchArgs, device: &Device) -> Report {
+fn bench_train(
+    config: &SsrConfig,
+    batch: usize,
+    rig: &Rig,
+    args: &BenchArgs,
+    device: &Device,
+) -> Report {
     let device = device.clone().autodiff();
     let mut model = config.init(&device);
     let mut optimizer = AdamWConfig::new().with_weight_decay(0.01).init();
-    let input = model_input(config, batch, &Rig::tcp(), &device);
+    let input = model_input(config, batch, rig, &device);
     let p = config.head.pred_len;
     let targets = ImitationTargets {
         waypoints: Tensor::random([batch, p, 2], Distribution::Normal(0.0, 3.0), &device),
@@ -402,7 +409,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     if args.train {
         let config = &runs[0].0;
-        bench_train(config, args.train_batch, args, &device).print(args.json);
+        bench_train(config, args.train_batch, &rig, args, &device).print(args.json);
     }
     Ok(())
 }
