@@ -431,15 +431,15 @@ pub const WALKER_BRAKE_WEIGHT: f32 = 4.0;
 /// camera shows: the expert brakes or holds for the light ahead while its head is out of the
 /// cameras' view ([`FrameRecord::light_in_view`] false), whoever drove.
 ///
-/// Such frames taught "standing by a kerb-side head means red" and "a lamp leaving the top of
-/// the frame means brake": in 720 episodes of kerb-light towns the expert stood blind at red
-/// for 762 frames against 3 going at green, and braked while rolling past the head at walking
-/// pace 57 times against 133 going on (most of those waits followed collection's noise pushing
-/// it past its stopping point, which `sim-bridge collect` no longer does); on Town02 a learner
-/// braked as the lamp of a green light left its frame and waited there blind through the green
-/// (`sim-bridge replay LOG --ticks`). The other frames with the lamp out of view stay, a
-/// learner's included: going on past a head at green, and waiting for a car the camera shows,
-/// are labels the camera supports.
+/// Such frames taught "standing by a kerb-side head means red": in 720 episodes of kerb-light
+/// towns the expert stood blind at red for 762 frames against 3 going at green (most of those
+/// waits followed collection's noise pushing it past its stopping point, which `sim-bridge
+/// collect` no longer does). Leaving them out does not stop a learner braking as a green
+/// kerb-side lamp leaves its frame on Town02: networks trained without them, one with its
+/// planner drawn fresh, still do (models/candidates/README.md, v24 and v25), since the scene
+/// the front camera shows there reads as a yield. The other frames with the lamp out of view
+/// stay, a learner's included: going on past a head at green, and waiting for a car the camera
+/// shows, are labels the camera supports.
 pub fn blind_to_its_light(frame: &FrameRecord) -> bool {
     frame.light_in_view == Some(false) && frame.brake_reason == Some(BrakeReason::TrafficLight)
 }
