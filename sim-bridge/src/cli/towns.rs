@@ -19,7 +19,8 @@ pub enum TownsCommand {
         out_dir: PathBuf,
     },
     /// Write procedural training towns (`ssr_proc_NNN.xodr` or, with `--bends tight`,
-    /// `ssr_tight_NNN.xodr`, one per seed, `_kerb_` in the name with `--lights kerb`: grids of
+    /// `ssr_tight_NNN.xodr`, one per seed, `_kerb_` in the name with `--lights kerb`, `_kerbback_`
+    /// with `--lights kerb-set-back`: grids of
     /// varied spacing, angles, lanes, widths, bends, gaps and control; see
     /// `towngen::procedural`). Draw routes on them with `routes random` and collect with
     /// `collect --maps DIR`.
@@ -35,7 +36,8 @@ pub enum TownsCommand {
         /// Where the lights stand: `across` (across the junction, US-style, as CARLA's
         /// Town03-07; some towns leave them to the simulator, which places them likewise) or
         /// `kerb` (every light at the kerb just before its stop line, as CARLA's Town01 and
-        /// Town02 post them).
+        /// Town02 post them) or `kerb-set-back` (at the kerb 2-7 m before the line, varied by
+        /// light: beside or behind a car waiting there, seen only by a camera looking right).
         #[arg(long, value_enum, default_value_t = LightsArg::Across)]
         lights: LightsArg,
         /// Folder to write into.
@@ -65,6 +67,7 @@ impl From<BendsArg> for Bends {
 pub enum LightsArg {
     Across,
     Kerb,
+    KerbSetBack,
 }
 
 impl From<LightsArg> for LightPlacement {
@@ -72,6 +75,7 @@ impl From<LightsArg> for LightPlacement {
         match arg {
             LightsArg::Across => LightPlacement::Across,
             LightsArg::Kerb => LightPlacement::Kerb,
+            LightsArg::KerbSetBack => LightPlacement::KerbSetBack,
         }
     }
 }

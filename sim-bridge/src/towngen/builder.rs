@@ -8,7 +8,7 @@ use super::elevation::{self, Cubic};
 use super::geometry::{Frame, Path};
 use super::junction::{LaneLink, Leg, default_links, straight_on_from_rightmost};
 use super::profile::{LANE_WIDTH, Profile};
-use super::signals::{LightPlacement, approach_signal, far_side_light, kerb_light};
+use super::signals::{LightPlacement, approach_signal, far_side_light, kerb_light, kerb_set_back};
 use super::town::{Connection, Contact, Controller, Junction, Link, Road, SignalKind, Town};
 
 /// A junction being declared.
@@ -401,12 +401,13 @@ impl TownBuilder {
                 }
                 None => {
                     let length = self.streets[leg.road].path.length();
-                    let kerb = kind == SignalKind::TrafficLight
-                        && self.light_placement == LightPlacement::Kerb;
-                    roads[leg.road].signals.push(if kerb {
-                        kerb_light(id, leg, length)
-                    } else {
-                        approach_signal(id, kind, leg, length)
+                    let light = kind == SignalKind::TrafficLight;
+                    roads[leg.road].signals.push(match self.light_placement {
+                        LightPlacement::Kerb if light => kerb_light(id, leg, length, None),
+                        LightPlacement::KerbSetBack if light => {
+                            kerb_light(id, leg, length, Some(kerb_set_back(id)))
+                        }
+                        _ => approach_signal(id, kind, leg, length),
                     });
                 }
             }

@@ -26,7 +26,8 @@
 //! `ssr_proc_kerb_NNN`, `ssr_tight_kerb_NNN`, the same grid as the seed's other town, every
 //! light in the file (none left to the simulator, which would place it across the junction).
 //! No other training town posts every light beside its stop line, where a camera loses the
-//! lamp as the car comes up to it.
+//! lamp as the car comes up to it. `--lights kerb-set-back` stands them 2-7 m before the line
+//! (`ssr_tight_kerbback_NNN`): a car at the line has the head beside or behind it.
 //!
 //! Nothing else is random: the same seed and family give the same bytes. None of these towns is
 //! an evaluation town; the held-out radial town is of another layout family.
@@ -74,6 +75,7 @@ pub fn name(seed: u64, family: Family) -> String {
     match family.lights {
         LightPlacement::Across => format!("ssr_{bends}_{seed:03}"),
         LightPlacement::Kerb => format!("ssr_{bends}_kerb_{seed:03}"),
+        LightPlacement::KerbSetBack => format!("ssr_{bends}_kerbback_{seed:03}"),
     }
 }
 

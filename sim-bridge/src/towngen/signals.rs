@@ -10,7 +10,8 @@
 //! the approach. An approach with no straight-on connection (a T-junction's
 //! stem) and every stop sign stand just before the junction on the right edge
 //! of the incoming road; every light of a [`LightPlacement::Kerb`] town just
-//! before the junction on the right kerb ([`kerb_light`]).
+//! before the junction on the right kerb ([`kerb_light`]), or 2-7 m before it in a
+//! [`LightPlacement::KerbSetBack`] town.
 
 use super::junction::Leg;
 use super::profile::Side;
@@ -27,6 +28,11 @@ pub enum LightPlacement {
     /// theirs: a car at the line has the head beside or above it, out of a forward camera's
     /// view, and keeps the lamp in view only by stopping short of the head.
     Kerb,
+    /// At the kerb on the right as [`LightPlacement::Kerb`], but set back 2-7 m before the stop
+    /// line (varied by light, [`kerb_set_back`]), as some near-side heads stand (one of CARLA's
+    /// Town02 lights, 5 m): a car waiting at the line has the head beside or behind it, in
+    /// view of a camera looking right only.
+    KerbSetBack,
 }
 
 /// How far before the junction a signal stands, in metres.
@@ -37,10 +43,23 @@ const BEFORE_JUNCTION: f64 = 1.0;
 /// edge of the road as that traffic sees it, governing exactly the incoming
 /// driving lanes.
 pub fn approach_signal(id: u32, kind: SignalKind, leg: &Leg, length: f64) -> Signal {
+    signal_before_junction(id, kind, leg, length, BEFORE_JUNCTION)
+}
+
+/// [`approach_signal`] standing `before` m before the junction (at most half the road's
+/// length, so a short street keeps it on its own road).
+fn signal_before_junction(
+    id: u32,
+    kind: SignalKind,
+    leg: &Leg,
+    length: f64,
+    before: f64,
+) -> Signal {
     let side = leg.in_side();
+    let before = before.min(length / 2.0);
     let s = match leg.contact {
-        Contact::End => length - BEFORE_JUNCTION,
-        Contact::Start => BEFORE_JUNCTION,
+        Contact::End => length - before,
+        Contact::Start => before,
     };
     let n = leg.n_in();
     assert!(n > 0, "a signal on an approach with no lanes in");
@@ -60,13 +79,22 @@ const POST_FROM_KERB: f64 = 0.5;
 /// The [`LightPlacement::Kerb`] light for the traffic entering a junction along `leg`: as
 /// [`approach_signal`] places it, but on the kerb (its post half a metre onto the sidewalk),
 /// beside the rightmost lane as CARLA's Town01 and Town02 post theirs, not at the sidewalk's
-/// back.
-pub fn kerb_light(id: u32, leg: &Leg, length: f64) -> Signal {
+/// back; `set_back` stands it that many metres before the junction instead of
+/// [`BEFORE_JUNCTION`].
+pub fn kerb_light(id: u32, leg: &Leg, length: f64, set_back: Option<f64>) -> Signal {
     let side = leg.in_side();
+    let before = set_back.unwrap_or(BEFORE_JUNCTION);
     Signal {
         t: side.sign() * (leg.profile.kerb_offset(side) + POST_FROM_KERB),
-        ..approach_signal(id, SignalKind::TrafficLight, leg, length)
+        ..signal_before_junction(id, SignalKind::TrafficLight, leg, length, before)
     }
+}
+
+/// How far before its junction a [`LightPlacement::KerbSetBack`] light stands: 2-7 m in steps of
+/// half a metre, drawn from the light's id so that neighbouring approaches differ and the
+/// same town gives the same bytes.
+pub fn kerb_set_back(id: u32) -> f64 {
+    2.0 + 0.5 * f64::from(id.wrapping_mul(7) % 11)
 }
 
 /// The traffic light, across the junction, for the traffic on the connecting road of length

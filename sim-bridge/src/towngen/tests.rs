@@ -365,50 +365,67 @@ fn signals_govern_their_approach_and_stand_where_its_drivers_see_them() {
 
 #[test]
 fn kerb_towns_are_their_seeds_grid_with_every_light_at_the_kerb_before_its_stop_line() {
-    let mut lights = 0;
-    for seed in 1..=6 {
-        let kerb = Family {
-            bends: Bends::Tight,
-            lights: LightPlacement::Kerb,
-        };
-        let across = Family {
-            lights: LightPlacement::Across,
-            ..kerb
-        };
-        let xodr = generate_procedural(seed, kerb);
-        assert!(xodr.contains("name=\"ssr_tight_kerb_"), "named apart");
-        assert_eq!(
-            geometry_lines(&xodr),
-            geometry_lines(&generate_procedural(seed, across)),
-            "seed {seed}: the same roads as the town with its lights across"
-        );
-        let (net, _) = xodr::load_str_with_provenance(&xodr).unwrap();
-        for signal in net.signals().iter().filter(|s| s.kind == "1000001") {
-            lights += 1;
-            let mut nearest = f32::MAX;
-            for &id in &signal.lanes {
+    // Where the head stands along its lane, from the stop line (negative: before it).
+    for (placement, name, before_line) in [
+        (LightPlacement::Kerb, "ssr_tight_kerb_", -2.0..=0.0),
+        (
+            LightPlacement::KerbSetBack,
+            "ssr_tight_kerbback_",
+            -7.5..=-1.5,
+        ),
+    ] {
+        let (mut lights, mut set_backs) = (0, BTreeSet::new());
+        for seed in 1..=6 {
+            let kerb = Family {
+                bends: Bends::Tight,
+                lights: placement,
+            };
+            let across = Family {
+                lights: LightPlacement::Across,
+                ..kerb
+            };
+            let xodr = generate_procedural(seed, kerb);
+            assert!(xodr.contains(&format!("name=\"{name}")), "named apart");
+            assert_eq!(
+                geometry_lines(&xodr),
+                geometry_lines(&generate_procedural(seed, across)),
+                "seed {seed}: the same roads as the town with its lights across"
+            );
+            let (net, _) = xodr::load_str_with_provenance(&xodr).unwrap();
+            for signal in net.signals().iter().filter(|s| s.kind == "1000001") {
+                lights += 1;
+                let mut nearest = f32::MAX;
+                for &id in &signal.lanes {
+                    assert!(
+                        junction_of(&net, id).is_none(),
+                        "seed {seed}: across a junction"
+                    );
+                    let (ahead, across) = from_lane_end(&net, signal, id);
+                    assert!(
+                        before_line.contains(&ahead) && across < 16.0,
+                        "{name}{seed}: light {:?} {ahead:.1} m ahead of, {across:.1} m beside its line",
+                        signal.id
+                    );
+                    set_backs.insert((ahead * 2.0).round() as i32);
+                    nearest = nearest.min(across);
+                }
+                // On the kerb: beside the rightmost lane (and its parking lane), not at the
+                // sidewalk's back.
                 assert!(
-                    junction_of(&net, id).is_none(),
-                    "seed {seed}: across a junction"
-                );
-                let (ahead, across) = from_lane_end(&net, signal, id);
-                assert!(
-                    (-2.0..=0.0).contains(&ahead) && across < 16.0,
-                    "seed {seed}: light {:?} {ahead:.1} m ahead of, {across:.1} m beside its line",
+                    nearest < 5.0,
+                    "seed {seed}: light {:?} {nearest:.1} m from its nearest lane",
                     signal.id
                 );
-                nearest = nearest.min(across);
             }
-            // On the kerb: beside the rightmost lane (and its parking lane), not at the
-            // sidewalk's back.
+        }
+        assert!(lights > 20, "{name}: {lights} lights in 6 towns");
+        if placement == LightPlacement::KerbSetBack {
             assert!(
-                nearest < 5.0,
-                "seed {seed}: light {:?} {nearest:.1} m from its nearest lane",
-                signal.id
+                set_backs.len() >= 6,
+                "set-backs vary by light: {set_backs:?}"
             );
         }
     }
-    assert!(lights > 20, "{lights} lights in 6 towns");
 }
 
 #[test]
