@@ -37,7 +37,7 @@ pub enum TownsCommand {
         /// Town03-07; some towns leave them to the simulator, which places them likewise) or
         /// `kerb` (every light at the kerb just before its stop line, as CARLA's Town01 and
         /// Town02 post them) or `kerb-set-back` (at the kerb 2-7 m before the line, varied by
-        /// light: beside or behind a car waiting there, seen only by a camera looking right).
+        /// light: beside or behind a car waiting at the line, out of a forward camera's view).
         #[arg(long, value_enum, default_value_t = LightsArg::Across)]
         lights: LightsArg,
         /// Folder to write into.

@@ -46,8 +46,7 @@ pub fn approach_signal(id: u32, kind: SignalKind, leg: &Leg, length: f64) -> Sig
     signal_before_junction(id, kind, leg, length, BEFORE_JUNCTION)
 }
 
-/// [`approach_signal`] standing `before` m before the junction (at most half the road's
-/// length, so a short street keeps it on its own road).
+/// [`approach_signal`] standing `before` m before the junction.
 fn signal_before_junction(
     id: u32,
     kind: SignalKind,
@@ -56,7 +55,6 @@ fn signal_before_junction(
     before: f64,
 ) -> Signal {
     let side = leg.in_side();
-    let before = before.min(length / 2.0);
     let s = match leg.contact {
         Contact::End => length - before,
         Contact::Start => before,
@@ -80,10 +78,10 @@ const POST_FROM_KERB: f64 = 0.5;
 /// [`approach_signal`] places it, but on the kerb (its post half a metre onto the sidewalk),
 /// beside the rightmost lane as CARLA's Town01 and Town02 post theirs, not at the sidewalk's
 /// back; `set_back` stands it that many metres before the junction instead of
-/// [`BEFORE_JUNCTION`].
+/// [`BEFORE_JUNCTION`] (at most half the road's length, so that a short street keeps it).
 pub fn kerb_light(id: u32, leg: &Leg, length: f64, set_back: Option<f64>) -> Signal {
     let side = leg.in_side();
-    let before = set_back.unwrap_or(BEFORE_JUNCTION);
+    let before = set_back.map_or(BEFORE_JUNCTION, |b| b.min(length / 2.0));
     Signal {
         t: side.sign() * (leg.profile.kerb_offset(side) + POST_FROM_KERB),
         ..signal_before_junction(id, SignalKind::TrafficLight, leg, length, before)
