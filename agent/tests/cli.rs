@@ -385,6 +385,45 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
     let (ok, _, stderr) = train(&["--deepen-backbone", "2,2,2,2"]);
     assert!(!ok && stderr.contains("--init"), "{stderr}");
 
+    // The first run's network at another input size, named after it; the data must hold it.
+    let resized = dir.join("resized");
+    let resize = |size: &str| {
+        ssr_agent(&[
+            "train",
+            "--data",
+            data,
+            "--out",
+            resized.to_str().unwrap(),
+            "--quiet",
+            "--steps",
+            "1",
+            "--batch-size",
+            "2",
+            "--init",
+            first.to_str().unwrap(),
+            "--input-size",
+            size,
+        ])
+    };
+    let (ok, _, stderr) = resize("48x32");
+    assert!(ok, "{stderr}");
+    let info = ssr_agent::checkpoint::inspect(&resized.join("final.safetensors")).unwrap();
+    assert_eq!(info.config.name, "tiny-no-stl-no-ffp-input-48x32");
+    assert_eq!(
+        (info.config.image_width, info.config.image_height),
+        (48, 32)
+    );
+    let (ok, _, stderr) = resize("96x32");
+    assert!(
+        !ok && stderr.contains("smaller than the network's 96x32 input"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = resize("48");
+    assert!(
+        !ok && stderr.contains("'48' is not WIDTHxHEIGHT"),
+        "{stderr}"
+    );
+
     let (ok, _, stderr) = train(&["--stop-at", "0"]);
     assert!(!ok && stderr.contains("--stop-at"), "{stderr}");
     let (ok, _, stderr) = ssr_agent(&[

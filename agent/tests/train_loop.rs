@@ -748,6 +748,14 @@ fn bad_datasets_and_run_folders_are_named() {
         "{error}"
     );
 
+    let mut finer = config.model.clone();
+    finer.image_width *= 2;
+    let error = open_error(&tmp.fixture("coarse"), &finer);
+    assert!(
+        error.contains("64x32 frames, smaller than the network's 128x32 input"),
+        "{error}"
+    );
+
     let mut far = config.clone();
     far.model.head.pred_len = 8;
     let error = open_error(&tmp.fixture("far"), &far.model);

@@ -54,6 +54,14 @@ pub struct TrainArgs {
     /// scratch. The run's model is named after the growth (cpu-default-blocks-2-3-4-3).
     #[arg(long, requires = "init", value_delimiter = ',')]
     deepen_backbone: Option<Vec<usize>>,
+    /// With --init: train the checkpoint's network at this camera input size, WIDTHxHEIGHT
+    /// (e.g. 416x128 for the cpu-default's 320x96). No weight depends on the size (the trunk is
+    /// convolutional and the BEV encoder samples its features at projected points), so the run
+    /// starts from the checkpoint's weights and sees finer frames: the input-size capacity
+    /// experiment. Record the data at that size (`sim-bridge collect --rig`); the run's model is
+    /// named after it (cpu-default-input-416x128).
+    #[arg(long, requires = "init", value_parser = parse_input_size)]
+    input_size: Option<(usize, usize)>,
     /// Start a fresh network of --model and the ablation flags from this checkpoint's
     /// perception (backbone, BEV encoder, occupancy head), drawing the scene tokens, heads and
     /// FFP from --seed: the ablations' shared start (agent/ablation/ablate.py).
@@ -197,6 +205,16 @@ impl TrainArgs {
             model.name = format!("{}-blocks-{}", model.name, tag.join("-"));
             model.backbone = deeper;
         }
+        if let Some((width, height)) = self.input_size {
+            // As for --deepen-backbone, a present --model can stand in for --init under clap.
+            anyhow::ensure!(
+                self.init.is_some(),
+                "--input-size changes the input of the --init checkpoint: give one"
+            );
+            model.name = format!("{}-input-{width}x{height}", model.name);
+            model.image_width = width;
+            model.image_height = height;
+        }
         model.tokens.dense_bev |= self.no_stl;
         model.tokens.gate_target_point &= !self.gate_command_only;
         model.ego_status |= self.ego_status;
@@ -330,4 +348,16 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     }
     println!("checkpoint: {}", summary.checkpoint.display());
     Ok(())
+}
+
+/// `WIDTHxHEIGHT`, both positive pixel counts.
+fn parse_input_size(text: &str) -> Result<(usize, usize), String> {
+    let size = text.split_once(['x', 'X']).and_then(|(w, h)| {
+        let (w, h) = (
+            w.trim().parse::<usize>().ok()?,
+            h.trim().parse::<usize>().ok()?,
+        );
+        (w > 0 && h > 0).then_some((w, h))
+    });
+    size.ok_or_else(|| format!("'{text}' is not WIDTHxHEIGHT in pixels, e.g. 416x128"))
 }

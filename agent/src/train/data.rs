@@ -148,6 +148,20 @@ fn check_manifest(
     if let Err(e) = m.rig.validate() {
         return refuse(format!("its camera rig is unusable: {e}"));
     }
+    let (width, height) = (config.image_width, config.image_height);
+    if let Some(small) = m
+        .rig
+        .cameras
+        .iter()
+        .find(|c| (c.width as usize) < width || (c.height as usize) < height)
+    {
+        return refuse(format!(
+            "camera {} records {}x{} frames, smaller than the network's {width}x{height} input: \
+             it would train on enlarged frames; record the data at the input size \
+             (`sim-bridge collect --rig`)",
+            small.id, small.width, small.height
+        ));
+    }
     Ok((history_offset, future_offset))
 }
 

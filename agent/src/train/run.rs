@@ -182,10 +182,10 @@ pub fn resumed_config(out: &Path) -> Result<TrainConfig, TrainError> {
 /// The weights of the checkpoint at `path`, which must have been saved from `model`'s config
 /// (a fine-tune changes the training, not the network), except that a fine-tune may add the
 /// occupancy, hazard, motion or light head to a checkpoint without one: the head starts from random
-/// weights; and it may deepen the backbone (more blocks per stage, nothing else; the run's
+/// weights; it may deepen the backbone (more blocks per stage, nothing else; the run's
 /// model then names itself): the new blocks start as the identity
 /// ([`crate::model::backbone::Backbone::deepened`]), so the run starts from the checkpoint's
-/// driving.
+/// driving; and it may take another camera input size, on which no weight depends.
 fn initial_weights(
     path: &Path,
     model: &SsrConfig,
@@ -198,10 +198,17 @@ fn initial_weights(
     let adds_light = model.light_head && !info.config.light_head;
     let from = info.config.backbone.clone();
     let deepens = model.backbone != from && model.backbone.deepens(&from);
-    let (name, backbone) = if deepens {
-        (model.name.clone(), model.backbone.clone())
+    let resized = (model.image_width, model.image_height)
+        != (info.config.image_width, info.config.image_height);
+    let name = if deepens || resized {
+        model.name.clone()
     } else {
-        (info.config.name.clone(), from.clone())
+        info.config.name.clone()
+    };
+    let backbone = if deepens {
+        model.backbone.clone()
+    } else {
+        from.clone()
     };
     let saved = SsrConfig {
         occupancy_head: info.config.occupancy_head || model.occupancy_head,
@@ -210,6 +217,8 @@ fn initial_weights(
         light_head: info.config.light_head || model.light_head,
         name,
         backbone,
+        image_width: model.image_width,
+        image_height: model.image_height,
         ..info.config
     };
     let differences = saved.differences(model);
