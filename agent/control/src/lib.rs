@@ -2,9 +2,9 @@
 //! speed PID that follow the waypoints ([`trajectory`]), the control branch's Beta distributions
 //! turned into actions ([`beta`]), TCP's situation-based fusion of the two ([`fusion`]), a
 //! timed rule that gets a car going again after a long stop ([`unstick`]), a rule that drives on
-//! through the light the car started on ([`commit`]), and a stop when the network believes the
-//! path just ahead occupied ([`safety`]), with the per-episode state all of them keep
-//! ([`EpisodeController`]).
+//! through the light the car started on ([`commit`]), a full stop where the network brakes for
+//! a stop sign ([`stop_sign`]), and a stop when the network believes the path just ahead
+//! occupied ([`safety`]), with the per-episode state all of them keep ([`EpisodeController`]).
 //!
 //! A crate of its own so that the agent server and the simulator's oracle-plan agent (which
 //! feeds it the expert's plan) drive through the same code; it depends on the contract crate
@@ -21,6 +21,7 @@ pub mod commit;
 pub mod fusion;
 pub mod pid;
 pub mod safety;
+pub mod stop_sign;
 pub mod trajectory;
 pub mod unstick;
 
@@ -33,6 +34,8 @@ use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::vehicle::SEDAN;
 use ssrdrive_support::ranges::first_outside;
+pub use stop_sign::FullStop;
+use stop_sign::FullStopState;
 use trajectory::TrajectoryFollower;
 pub use unstick::Unstick;
 use unstick::UnstickState;
@@ -105,6 +108,8 @@ pub struct ControlConfig {
     pub unstick: Unstick,
     /// Going on through the light the car started on (off by default).
     pub commit: Commit,
+    /// The full stop where the network brakes for a stop sign (off by default).
+    pub full_stop: FullStop,
     /// The safety stop on the network's occupancy (off by default).
     pub safety: SafetyStop,
 }
@@ -131,6 +136,7 @@ impl Default for ControlConfig {
             turn_count: 10,
             unstick: Unstick::default(),
             commit: Commit::default(),
+            full_stop: FullStop::default(),
             safety: SafetyStop::default(),
         }
     }
@@ -181,6 +187,7 @@ impl ControlConfig {
         ])?;
         self.unstick.validate()?;
         self.commit.validate()?;
+        self.full_stop.validate()?;
         self.safety.validate()
     }
 }
@@ -222,13 +229,16 @@ pub struct ControlDecision {
     /// Whether the commit rule drove on through a light this tick.
     #[serde(default)]
     pub committed: bool,
+    /// Whether the full stop braked for a stop sign this tick.
+    #[serde(default)]
+    pub full_stop: bool,
     /// Whether the safety stop overrode the control this tick.
     #[serde(default)]
     pub safety_stop: bool,
 }
 
 /// What the network believes of the scene beyond its plan, read by the rules that may override
-/// the plan: the [`safety`] stop, the [`unstick`] rule and the [`commit`] rule. The default
+/// the plan: the [`safety`] stop, the [`unstick`], [`commit`] and [`stop_sign`] rules. The default
 /// believes nothing (an agent without those heads, or an oracle).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Beliefs<'a> {
@@ -261,6 +271,7 @@ pub struct EpisodeController {
     fusion: Fusion,
     unstick: UnstickState,
     commit: CommitState,
+    full_stop: FullStopState,
     /// Ticks stopped since the safety stop first held the car in this standstill.
     held_ticks: u32,
     /// Whether the safety stop lets the current creep through (it held the car too long).
@@ -281,6 +292,7 @@ impl EpisodeController {
             fusion: Fusion::new(config.turn_window),
             unstick: UnstickState::default(),
             commit: CommitState::default(),
+            full_stop: FullStopState::default(),
             held_ticks: 0,
             yielding: false,
             config,
@@ -335,6 +347,9 @@ impl EpisodeController {
             unsticking,
             &self.config.commit,
         );
+        let (control, full_stop) =
+            self.full_stop
+                .apply(control, speed, &beliefs, &self.config.full_stop);
         let safety = &self.config.safety;
         let blocked = safety.blocked(waypoints, speed, beliefs.occupied);
         // Counted from the first tick it blocks a stopped car until the car moves: an
@@ -367,6 +382,7 @@ impl EpisodeController {
             turning,
             unsticking,
             committed,
+            full_stop,
             safety_stop,
         }
     }

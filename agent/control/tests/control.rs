@@ -7,7 +7,7 @@ use ssr_control::pid::Pid;
 use ssr_control::trajectory::TrajectoryFollower;
 use ssr_control::unstick::TICKS_PER_SECOND;
 use ssr_control::{
-    Beliefs, ControlConfig, EpisodeController, LightBelief, SafetyStop, Unstick, Vehicle,
+    Beliefs, ControlConfig, EpisodeController, FullStop, LightBelief, SafetyStop, Unstick, Vehicle,
 };
 use ssrdrive_proto::control::Control;
 
@@ -591,6 +591,39 @@ fn a_stopped_car_counts_a_stop_sign_as_served_unless_told_otherwise() {
         ..Beliefs::default()
     };
     assert_eq!(rule.free_to_go(&sign_only), None, "no head, no early creep");
+}
+
+#[test]
+fn the_full_stop_turns_a_roll_past_a_stop_sign_into_a_stop() {
+    let sign = Beliefs {
+        clear: Some(0.1),
+        stop_sign: Some(0.8),
+        ..Beliefs::default()
+    };
+    // The plan rolls on at walking pace.
+    let roll = [[0.7, 0.0], [1.4, 0.0], [2.1, 0.0], [2.8, 0.0]];
+    let tick = |speed: f32, controller: &mut EpisodeController| {
+        controller.act_with_branch(&roll, [10.0, 0.0], speed, None, sign)
+    };
+    let config = |enabled: bool| ControlConfig {
+        full_stop: FullStop {
+            enabled,
+            ..FullStop::default()
+        },
+        ..ControlConfig::default()
+    };
+    let mut off = EpisodeController::new(config(false));
+    let rolled = tick(1.4, &mut off);
+    assert!(!rolled.full_stop && rolled.control.brake < 0.5);
+
+    let mut on = EpisodeController::new(config(true));
+    let braked = tick(1.4, &mut on);
+    assert!(braked.full_stop && braked.control.brake == 1.0 && braked.control.throttle == 0.0);
+    // Once the car stood, the sign is served: the plan drives it on though the head still
+    // names the sign.
+    tick(0.0, &mut on);
+    let on_its_way = tick(1.4, &mut on);
+    assert!(!on_its_way.full_stop && on_its_way.control.brake < 0.5);
 }
 
 #[test]

@@ -440,6 +440,7 @@ fn debug_to_proto(output: &StepOutput) -> Option<v1::Debug> {
             turning: output.decision.turning,
             unsticking: output.decision.unsticking,
             committed: output.decision.committed,
+            full_stop: output.decision.full_stop,
             safety_stop: output.decision.safety_stop,
         }),
     })

@@ -102,6 +102,8 @@ pub struct TickTrace {
     pub unsticking: bool,
     /// The commit rule drove on through the light the car started on.
     pub committed: bool,
+    /// The full stop braked for a stop sign.
+    pub full_stop: bool,
     /// The safety stop braked.
     pub safety_stop: bool,
     /// The log's ground truth: the traffic lights within 60 m, in the recorded ego's frame.
@@ -165,6 +167,7 @@ impl TickTrace {
             turning: state.turning,
             unsticking: state.unsticking,
             committed: state.committed,
+            full_stop: state.full_stop,
             safety_stop: state.safety_stop,
             lights: LightInView::all(tick),
         }
