@@ -354,13 +354,14 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
 
     // A deeper backbone grown from the first run's checkpoint, named after the growth.
     let deep = dir.join("deep");
-    let deepen = |blocks: &str| {
-        ssr_agent(&[
+    // One step from the first run's checkpoint into `out`, with `extra` flags.
+    let from_first = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
             "train",
             "--data",
             data,
             "--out",
-            deep.to_str().unwrap(),
+            out.to_str().unwrap(),
             "--quiet",
             "--steps",
             "1",
@@ -368,10 +369,11 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
             "2",
             "--init",
             first.to_str().unwrap(),
-            "--deepen-backbone",
-            blocks,
-        ])
+        ];
+        args.extend_from_slice(extra);
+        ssr_agent(&args)
     };
+    let deepen = |blocks: &str| from_first(&deep, &["--deepen-backbone", blocks]);
     let (ok, _, stderr) = deepen("2,1,2,1");
     assert!(ok, "{stderr}");
     let info = ssr_agent::checkpoint::inspect(&deep.join("final.safetensors")).unwrap();
@@ -387,24 +389,7 @@ fn train_runs_ablations_from_flags_and_names_bad_data() {
 
     // The first run's network at another input size, named after it; the data must hold it.
     let resized = dir.join("resized");
-    let resize = |size: &str| {
-        ssr_agent(&[
-            "train",
-            "--data",
-            data,
-            "--out",
-            resized.to_str().unwrap(),
-            "--quiet",
-            "--steps",
-            "1",
-            "--batch-size",
-            "2",
-            "--init",
-            first.to_str().unwrap(),
-            "--input-size",
-            size,
-        ])
-    };
+    let resize = |size: &str| from_first(&resized, &["--input-size", size]);
     let (ok, _, stderr) = resize("48x32");
     assert!(ok, "{stderr}");
     let info = ssr_agent::checkpoint::inspect(&resized.join("final.safetensors")).unwrap();
