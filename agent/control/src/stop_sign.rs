@@ -4,9 +4,12 @@
 //! [`STOPPED_SPEED`] (0.1 m/s) near the sign (`RunningStopTest`, 0.8 penalty). While the
 //! network's hazard head puts what it brakes for down to a stop sign (probability at least
 //! [`FullStop::probability`]) and the car has not stopped for that sign yet, this rule brakes
-//! fully (steer as planned) until the car stands; the sign then counts as served, and the rule
-//! rests until the head has not named a sign for [`FullStop::rearm_s`] seconds (the car has
-//! left that sign behind). A car that stops on its own serves the sign the same way.
+//! fully (steer as planned) until the car stands, whatever the head says meanwhile (its "sign"
+//! flickers about the threshold as the car slows: on the radial town's route 8 a car braked on
+//! and off from 7 m/s and rolled over the line at 0.5 m/s). The sign then counts as served, and
+//! the rule rests until the head has not named a sign for [`FullStop::rearm_s`] seconds (the
+//! car has left that sign behind). A car that stops on its own while the head names a sign
+//! serves it the same way.
 //!
 //! The rule reads only what the network believes (the same head the [`super::unstick`] rule
 //! reads), and acts where the network itself is braking for a sign, so it turns a roll into a
@@ -55,6 +58,8 @@ impl FullStop {
 pub struct FullStopState {
     /// The car has stood since the head last named a sign.
     served: bool,
+    /// The rule is braking the car to a standstill.
+    stopping: bool,
     /// Ticks since the head last named a sign.
     ticks_without_sign: u32,
 }
@@ -78,11 +83,13 @@ impl FullStopState {
                 self.served = false;
             }
         }
+        self.stopping |= sign && !self.served;
         if speed < STOPPED_SPEED {
-            self.served |= sign;
+            self.served |= sign || self.stopping;
+            self.stopping = false;
             return (control, false);
         }
-        if sign && !self.served {
+        if self.stopping {
             let stop = Control {
                 steer: control.steer,
                 throttle: 0.0,
@@ -130,6 +137,15 @@ mod tests {
         // Standing: served; the network's own start goes through while it still sees the sign.
         assert_eq!(state.apply(GO, 0.05, &beliefs(0.9), &rule), (GO, false));
         assert_eq!(state.apply(GO, 1.0, &beliefs(0.9), &rule), (GO, false));
+    }
+
+    #[test]
+    fn once_braking_for_a_sign_it_brakes_to_a_standstill_through_a_flicker() {
+        let (rule, mut state) = (on(), FullStopState::default());
+        assert!(state.apply(GO, 5.0, &beliefs(0.7), &rule).1);
+        assert!(state.apply(GO, 0.5, &beliefs(0.3), &rule).1);
+        assert!(!state.apply(GO, 0.0, &beliefs(0.3), &rule).1);
+        assert!(!state.apply(GO, 1.0, &beliefs(0.7), &rule).1, "served");
     }
 
     #[test]
