@@ -85,7 +85,7 @@ impl FullStopState {
         }
         self.stopping |= sign && !self.served;
         if speed < STOPPED_SPEED {
-            self.served |= sign || self.stopping;
+            self.served |= self.stopping;
             self.stopping = false;
             return (control, false);
         }
