@@ -276,6 +276,8 @@ pub struct EpisodeController {
     held_ticks: u32,
     /// Whether the safety stop lets the current creep through (it held the car too long).
     yielding: bool,
+    /// Ticks the safety stop goes on holding after the path last looked blocked.
+    hold_ticks_left: u32,
     config: ControlConfig,
 }
 
@@ -295,6 +297,7 @@ impl EpisodeController {
             full_stop: FullStopState::default(),
             held_ticks: 0,
             yielding: false,
+            hold_ticks_left: 0,
             config,
         }
     }
@@ -351,7 +354,15 @@ impl EpisodeController {
             self.full_stop
                 .apply(control, speed, &beliefs, &self.config.full_stop);
         let safety = &self.config.safety;
-        let blocked = safety.blocked(waypoints, speed, beliefs.occupied);
+        let blocked = if safety.blocked(waypoints, speed, beliefs.occupied) {
+            self.hold_ticks_left = (safety.hold_s * unstick::TICKS_PER_SECOND).round() as u32;
+            true
+        } else if self.hold_ticks_left > 0 {
+            self.hold_ticks_left -= 1;
+            true
+        } else {
+            false
+        };
         // Counted from the first tick it blocks a stopped car until the car moves: an
         // occupancy cell near the threshold comes and goes, and must not restart the count.
         self.held_ticks = if speed >= unstick::STOPPED_SPEED {

@@ -780,6 +780,36 @@ fn the_safety_stop_overrides_the_fused_control_and_the_creep() {
 }
 
 #[test]
+fn a_safety_stop_with_hold_s_brakes_on_that_long_after_the_path_last_looked_blocked() {
+    let ahead = [[2.0, 0.0], [4.0, 0.0], [6.0, 0.0], [8.0, 0.0]];
+    // Blocked on the first tick only, then clear: how many ticks after it still brake.
+    let braked_after = |hold_s: f32| {
+        let mut config = safety_on();
+        config.safety.hold_s = hold_s;
+        let mut controller = EpisodeController::new(config);
+        (0..ticks(3.0))
+            .map(|tick| {
+                let occupied: &[[f32; 2]] = if tick == 0 { &[[5.0, 0.0]] } else { &[] };
+                let beliefs = Beliefs {
+                    occupied,
+                    ..Beliefs::default()
+                };
+                controller.act_with_branch(&ahead, [20.0, 0.0], 3.0, None, beliefs)
+            })
+            .skip(1)
+            .take_while(|d| d.safety_stop && d.control.brake == 1.0)
+            .count()
+    };
+    assert_eq!(braked_after(0.0), 0, "released on the first clear tick");
+    assert_eq!(braked_after(1.0), ticks(1.0));
+    assert_eq!(braked_after(0.5), ticks(0.5));
+
+    let mut config = safety_on();
+    config.safety.hold_s = -1.0;
+    assert!(config.validate().unwrap_err().contains("safety.hold_s"));
+}
+
+#[test]
 fn the_safety_stop_lets_a_creep_through_once_it_held_the_car_too_long() {
     let config = safety_on();
     let hold = [[0.0, 0.0]; 4];
