@@ -30,6 +30,7 @@ use commit::CommitState;
 use fusion::Fusion;
 pub use fusion::TurnLead;
 pub use safety::SafetyStop;
+use safety::SafetyState;
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
 use ssrdrive_proto::vehicle::SEDAN;
@@ -272,12 +273,7 @@ pub struct EpisodeController {
     unstick: UnstickState,
     commit: CommitState,
     full_stop: FullStopState,
-    /// Ticks stopped since the safety stop first held the car in this standstill.
-    held_ticks: u32,
-    /// Whether the safety stop lets the current creep through (it held the car too long).
-    yielding: bool,
-    /// Ticks the safety stop goes on holding after the path last looked blocked.
-    hold_ticks_left: u32,
+    safety: SafetyState,
     config: ControlConfig,
 }
 
@@ -295,9 +291,7 @@ impl EpisodeController {
             unstick: UnstickState::default(),
             commit: CommitState::default(),
             full_stop: FullStopState::default(),
-            held_ticks: 0,
-            yielding: false,
-            hold_ticks_left: 0,
+            safety: SafetyState::default(),
             config,
         }
     }
@@ -353,39 +347,14 @@ impl EpisodeController {
         let (control, full_stop) =
             self.full_stop
                 .apply(control, speed, &beliefs, &self.config.full_stop);
-        let safety = &self.config.safety;
-        let blocked = if safety.blocked(waypoints, speed, beliefs.occupied) {
-            self.hold_ticks_left = (safety.hold_s * unstick::TICKS_PER_SECOND).round() as u32;
-            true
-        } else if self.hold_ticks_left > 0 {
-            self.hold_ticks_left -= 1;
-            true
-        } else {
-            false
-        };
-        // Counted from the first tick it blocks a stopped car until the car moves: an
-        // occupancy cell near the threshold comes and goes, and must not restart the count.
-        self.held_ticks = if speed >= unstick::STOPPED_SPEED {
-            0
-        } else if blocked || self.held_ticks > 0 {
-            self.held_ticks + 1
-        } else {
-            0
-        };
-        let held_too_long =
-            self.held_ticks as f32 >= safety.yield_after_s * unstick::TICKS_PER_SECOND;
-        // Once it yields, the stop lets the whole creep through, not just its first tick.
-        self.yielding = unsticking && (self.yielding || held_too_long);
-        let safety_stop = blocked && !self.yielding;
-        let control = if safety_stop {
-            Control {
-                steer: control.steer,
-                throttle: 0.0,
-                brake: 1.0,
-            }
-        } else {
-            control
-        };
+        let (control, safety_stop) = self.safety.apply(
+            control,
+            waypoints,
+            speed,
+            beliefs.occupied,
+            unsticking,
+            &self.config.safety,
+        );
         ControlDecision {
             control,
             trajectory,

@@ -37,6 +37,9 @@
 //! routes, held by cells beside its path.
 
 use serde::{Deserialize, Serialize};
+use ssrdrive_proto::control::Control;
+
+use super::unstick::{STOPPED_SPEED, TICKS_PER_SECOND};
 
 /// Settings of the rule.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -138,6 +141,64 @@ impl SafetyStop {
                 hit
             })
         })
+    }
+}
+
+/// The stop's per-episode state.
+#[derive(Debug, Clone, Default)]
+pub struct SafetyState {
+    /// Ticks stopped since the stop first held the car in this standstill.
+    held_ticks: u32,
+    /// Whether the stop lets the current creep through (it held the car too long).
+    yielding: bool,
+    /// Ticks the stop goes on holding after the path last looked blocked.
+    hold_ticks_left: u32,
+}
+
+impl SafetyState {
+    /// The control to apply given the controller's `control` this tick (after the other
+    /// rules; `unsticking` says whether the unstick rule is creeping), and whether the stop
+    /// overrode it: full brake, steer kept.
+    pub fn apply(
+        &mut self,
+        control: Control,
+        waypoints: &[[f32; 2]],
+        speed: f32,
+        occupied: &[[f32; 2]],
+        unsticking: bool,
+        rule: &SafetyStop,
+    ) -> (Control, bool) {
+        let blocked = if rule.blocked(waypoints, speed, occupied) {
+            self.hold_ticks_left = (rule.hold_s * TICKS_PER_SECOND).round() as u32;
+            true
+        } else if self.hold_ticks_left > 0 {
+            self.hold_ticks_left -= 1;
+            true
+        } else {
+            false
+        };
+        // Counted from the first tick it blocks a stopped car until the car moves: an
+        // occupancy cell near the threshold comes and goes, and must not restart the count.
+        self.held_ticks = if speed >= STOPPED_SPEED {
+            0
+        } else if blocked || self.held_ticks > 0 {
+            self.held_ticks + 1
+        } else {
+            0
+        };
+        let held_too_long = self.held_ticks as f32 >= rule.yield_after_s * TICKS_PER_SECOND;
+        // Once it yields, the stop lets the whole creep through, not just its first tick.
+        self.yielding = unsticking && (self.yielding || held_too_long);
+        if blocked && !self.yielding {
+            let stop = Control {
+                steer: control.steer,
+                throttle: 0.0,
+                brake: 1.0,
+            };
+            (stop, true)
+        } else {
+            (control, false)
+        }
     }
 }
 
