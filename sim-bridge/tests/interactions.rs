@@ -224,7 +224,7 @@ fn the_expert_does_not_speed_up_while_its_heading_is_off_its_route() {
                 ego.speed
             );
         }
-        let node = follower.step(ego.position.truncate());
+        let node = follower.step(ego.position.truncate(), ego.yaw);
         let obs = Observation::of_ego(world.time, frame, &ego, &node, Vec::new());
         let control = expert.run_step(&obs, &world).unwrap();
         world.step(control);

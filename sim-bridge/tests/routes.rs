@@ -199,13 +199,13 @@ fn route_follower_passes_nodes_within_4_m_and_keeps_two() {
     ];
     let mut f = RouteFollower::new(plan);
     // At x = 0 the node at 3 m is within 4 m: it is passed, the target is the node at 20 m.
-    let target = f.step(DVec2::new(0.0, 0.0));
+    let target = f.step(DVec2::new(0.0, 0.0), 0.0);
     assert_eq!(target.position.x, 20.0);
     assert_eq!(target.option, RoadOption::Left);
     // Far from everything: no change.
-    assert_eq!(f.step(DVec2::new(-50.0, 0.0)).position.x, 20.0);
+    assert_eq!(f.step(DVec2::new(-50.0, 0.0), 0.0).position.x, 20.0);
     // Past the end: two nodes are always kept, so the target is the last node.
-    assert_eq!(f.step(DVec2::new(69.0, 0.0)).position.x, 70.0);
+    assert_eq!(f.step(DVec2::new(69.0, 0.0), 0.0).position.x, 70.0);
     assert_eq!(f.remaining(), 2);
     // Ego frame: x forward, y left.
     let p = to_ego_frame(
@@ -223,6 +223,30 @@ fn route_follower_passes_nodes_within_4_m_and_keeps_two() {
         (left.y - 3.0).abs() < 1e-9,
         "a point to the west is on the left of a north-facing ego"
     );
+}
+
+#[test]
+fn route_follower_does_not_skip_a_u_turn_loop_at_its_neck() {
+    // West along y = 0 into a teardrop loop, back east along y = -3.5 (a lane's width beside
+    // the way in): the loop's far node lies 30 m west; the first node of the way back lies
+    // within 4 m of the ego at the neck, and within the 50 m look-ahead, which adds up
+    // straight lines between nodes.
+    let node = |x: f64, y: f64| PlanNode {
+        position: DVec3::new(x, y, 0.0),
+        option: RoadOption::LaneFollow,
+    };
+    let plan = vec![node(10.0, 0.0), node(-30.0, -1.0), node(-1.0, -3.5), node(50.0, -3.5)];
+    let heading_west = std::f64::consts::PI;
+    let mut f = RouteFollower::new(plan.clone());
+    // At the neck, heading west: the loop is still ahead, the target stays on it.
+    assert_eq!(f.step(DVec2::new(0.0, 0.0), heading_west).position.x, -30.0);
+    assert_eq!(f.remaining(), 4);
+    // Round the loop, heading east on the way back: the node there is passed.
+    assert_eq!(f.step(DVec2::new(-2.0, -3.5), 0.0).position.x, 50.0);
+    // At the neck heading east (TCP's follower reads no heading, so it passes the node from
+    // any pose): the loop is skipped and the target jumps 50 m behind a car heading west.
+    let mut f = RouteFollower::new(plan);
+    assert_eq!(f.step(DVec2::new(0.0, 0.0), 0.0).position.x, 50.0);
 }
 
 #[test]

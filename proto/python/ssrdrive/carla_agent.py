@@ -85,7 +85,11 @@ def to_ego(point, position, yaw):
 
 class RouteFollower:
     """TCP's RoutePlanner.run_step: skip plan nodes within ``min_distance``, looking at most
-    ``max_distance`` along the plan, and return the next one (position, command value)."""
+    ``max_distance`` along the plan, and return the next one (position, command value).
+
+    One departure from TCP, as sim-bridge's follower: a node that the plan reaches heading more
+    than 120 degrees from the ego's ``yaw`` is not skipped, so that at the neck of a U-turn loop,
+    where the way back runs beside the way in, the target does not jump past the loop."""
 
     def __init__(self, plan, min_distance: float = 4.0, max_distance: float = 50.0):
         if not plan:
@@ -94,16 +98,20 @@ class RouteFollower:
         self.min_distance = min_distance
         self.max_distance = max_distance
 
-    def step(self, position):
+    def step(self, position, yaw: float):
         if len(self.route) == 1:
             return self.route[0]
+        heading = (math.cos(yaw), math.sin(yaw))
         to_pop, farthest, cumulative = 0, -math.inf, 0.0
         for i in range(1, len(self.route)):
             if cumulative > self.max_distance:
                 break
-            cumulative += math.dist(self.route[i][0], self.route[i - 1][0])
+            (x0, y0), (x1, y1) = self.route[i - 1][0][:2], self.route[i][0][:2]
+            length = math.hypot(x1 - x0, y1 - y0)
+            cumulative += length
+            against = (x1 - x0) * heading[0] + (y1 - y0) * heading[1] < -0.5 * length
             distance = math.dist(self.route[i][0], position)
-            if distance <= self.min_distance and distance > farthest:
+            if distance <= self.min_distance and distance > farthest and not against:
                 farthest, to_pop = distance, i
         for _ in range(to_pop):
             if len(self.route) > 2:
@@ -172,7 +180,7 @@ class SsrAgent(AutonomousAgent):
             self.yaw = compass_to_yaw(compass)
         yaw = self.yaw
         speed = float(input_data["speed"][1]["speed"])
-        node, command = self.follower.step(position)
+        node, command = self.follower.step(position, yaw)
         target_point = to_ego(node, position, yaw)
         images = [input_data[c.id][1] for c in self.rig]
         result = self.episode.step(

@@ -60,10 +60,19 @@ class GeometryTest(unittest.TestCase):
         plan = [((0.0, 0.0), 4), ((3.0, 0.0), 4), ((10.0, 0.0), 1), ((20.0, 0.0), 4)]
         follower = RouteFollower(plan)
         # (3, 0) is within 4 m of the start, so it is passed: the next node is (10, 0).
-        self.assertEqual(follower.step((0.0, 0.0)), ((10.0, 0.0), 1))
-        self.assertEqual(follower.step((5.0, 0.0)), ((10.0, 0.0), 1))
+        self.assertEqual(follower.step((0.0, 0.0), 0.0), ((10.0, 0.0), 1))
+        self.assertEqual(follower.step((5.0, 0.0), 0.0), ((10.0, 0.0), 1))
         # At x = 7, (10, 0) is within 4 m too: the target moves on to (20, 0).
-        self.assertEqual(follower.step((7.0, 0.0)), ((20.0, 0.0), 4))
+        self.assertEqual(follower.step((7.0, 0.0), 0.0), ((20.0, 0.0), 4))
+
+    def test_route_follower_does_not_skip_a_u_turn_loop_at_its_neck(self):
+        # West into a loop, back east a lane's width beside the way in (sim-bridge's test).
+        plan = [((10.0, 0.0), 4), ((-30.0, -1.0), 4), ((-1.0, -3.5), 4), ((50.0, -3.5), 4)]
+        follower = RouteFollower(plan)
+        # At the neck heading west, the way back's node (3.6 m off) is not passed.
+        self.assertEqual(follower.step((0.0, 0.0), math.pi), ((-30.0, -1.0), 4))
+        # Heading east on the way back, it is.
+        self.assertEqual(follower.step((-2.0, -3.5), 0.0), ((50.0, -3.5), 4))
 
 
 class AdapterTest(unittest.TestCase):
@@ -90,7 +99,7 @@ class AdapterTest(unittest.TestCase):
             self.assertTrue(-1.0 <= control.steer <= 1.0)
             self.assertTrue(0.0 <= control.brake <= 1.0)
         # Facing north along a plan that runs north, the target point is straight ahead.
-        node, command = agent.follower.step(gnss_to_world(1.0 / LAT_SCALE, 0.0))
+        node, command = agent.follower.step(gnss_to_world(1.0 / LAT_SCALE, 0.0), compass_to_yaw(0.0))
         forward, left = to_ego(node, (0.0, 1.0), compass_to_yaw(0.0))
         self.assertGreater(forward, 0.0)
         self.assertAlmostEqual(left, 0.0, places=6)

@@ -133,7 +133,7 @@ pub fn run_route(
         let ego = world.ego_state();
         progress = dense.advance_index(progress, ego.position.truncate(), 5);
         world.trigger_scenarios(progress);
-        let node = follower.step(ego.position.truncate());
+        let node = follower.step(ego.position.truncate(), ego.yaw);
         let frames = match &mut cameras {
             Some(cameras) if agent.wants_frames(frame) => {
                 scorer.frame_lamps(world.time, &ego, world.light_states(), &cameras.rig);

@@ -1,6 +1,6 @@
 //! What an agent is told about its route: the leaderboard's downsampled global plan (LB1.0's
 //! `downsample_route`, 50 m) and the TCP-style [`RouteFollower`]
-//! (`RoutePlanner(4, 50)`) that turns the ego position into the target point and command each
+//! (`RoutePlanner(4, 50)`) that turns the ego pose into the target point and command each
 //! tick.
 
 use std::collections::VecDeque;
@@ -17,6 +17,9 @@ pub const PLAN_SPACING: f64 = 50.0;
 pub const FOLLOWER_MIN_DISTANCE: f64 = 4.0;
 /// TCP's route follower: how far ahead it looks along the plan.
 pub const FOLLOWER_MAX_DISTANCE: f64 = 50.0;
+/// A node the plan reaches heading more than this far from the ego's heading (cosine -0.5:
+/// 120 degrees) is not passed however near it lies: the far side of a U-turn.
+pub const FOLLOWER_MIN_HEADING_COSINE: f64 = -0.5;
 
 /// One node of the global plan.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,14 +86,21 @@ impl RouteFollower {
         }
     }
 
-    /// Advance with the ego's position and return the next target node (its position and
-    /// command). Of the nodes within `max_distance` of plan length ahead, the farthest one that
-    /// is within `min_distance` of the ego is passed, with everything before it; at least two
-    /// nodes are always kept.
-    pub fn step(&mut self, ego: DVec2) -> PlanNode {
+    /// Advance with the ego's pose (position, and heading in rad counter-clockwise from +x) and
+    /// return the next target node (its position and command). Of the nodes within
+    /// `max_distance` of plan length ahead, the farthest one that is within `min_distance` of
+    /// the ego is passed, with everything before it; at least two nodes are always kept.
+    ///
+    /// One departure from TCP: a node that the plan reaches heading against the ego (more than
+    /// 120 degrees off, [`FOLLOWER_MIN_HEADING_COSINE`]) is not passed. At the neck of a U-turn
+    /// loop the way back runs a lane's width beside the way in, and TCP's follower, which
+    /// measures "ahead" in straight lines between sparse nodes, skips the whole loop there: the
+    /// target jumps 50 m behind the ego.
+    pub fn step(&mut self, ego: DVec2, yaw: f64) -> PlanNode {
         if self.nodes.len() <= 1 {
             return self.nodes[0];
         }
+        let heading = DVec2::from_angle(yaw);
         let mut to_pop = 0;
         let mut farthest = f64::NEG_INFINITY;
         let mut along = 0.0;
@@ -98,11 +108,11 @@ impl RouteFollower {
             if along > self.max_distance {
                 break;
             }
-            along += (self.nodes[i].position - self.nodes[i - 1].position)
-                .truncate()
-                .length();
+            let arrival = (self.nodes[i].position - self.nodes[i - 1].position).truncate();
+            along += arrival.length();
+            let against = arrival.dot(heading) < FOLLOWER_MIN_HEADING_COSINE * arrival.length();
             let d = (self.nodes[i].position.truncate() - ego).length();
-            if d <= self.min_distance && d > farthest {
+            if d <= self.min_distance && d > farthest && !against {
                 farthest = d;
                 to_pop = i;
             }
