@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use burn::tensor::{Device, Tensor};
-use common::fixture::{FIXTURE_ROUTES, write_fixture_dataset};
+use common::fixture::{FIXTURE_FRAMES, FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use ssr_agent::checkpoint;
 use ssr_agent::device::Backend;
@@ -549,8 +549,8 @@ fn a_dropped_history_trains_the_first_frame_path() {
         let batch = set
             .batch(&with_history, &config.model, History::Chain, |_| {
                 SampleDraw {
-                    photometric: None,
                     drop_history,
+                    ..SampleDraw::default()
                 }
             })
             .unwrap();
@@ -584,6 +584,51 @@ fn a_dropped_history_trains_the_first_frame_path() {
         error.contains("history_dropout must be in [0, 1]"),
         "{error}"
     );
+}
+
+#[test]
+fn a_later_target_is_the_followers_target_of_a_later_frame_in_the_samples_own_frame() {
+    let tmp = Scratch::new();
+    let data = tmp.fixture("later");
+    let config = config(2);
+    let set = open(&data, &config);
+    // The fixture drives straight along x at 2 + route m/s, 2 frames a second, its target point
+    // always 30 m ahead: a later frame's target lies 30 m + the distance driven meanwhile ahead.
+    let last_frames = (FIXTURE_FRAMES - 6) as u32;
+    let early = *set.train.iter().find(|s| s.frame == 0).unwrap();
+    let late = *set.train.iter().find(|s| s.frame >= last_frames).unwrap();
+    let target = |sample, later_target| {
+        let batch = set
+            .batch(&[sample], &config.model, History::Chain, |_| SampleDraw {
+                later_target,
+                ..SampleDraw::default()
+            })
+            .unwrap();
+        let device = Device::flex();
+        let shape = [1, config.model.bev.grid.cells(), config.model.channels];
+        let input = batch.current_input(&config.model, Tensor::zeros(shape, &device), &device);
+        float_values(input.navigation.target_point)
+    };
+    assert_eq!(target(early, None), vec![30.0, 0.0]);
+    // The whole window, 3 s later, at one of the fixture's speeds; half of it, 1.5 s.
+    let whole = target(early, Some(1.0));
+    let speed = (whole[0] - 30.0) / 3.0;
+    assert!(
+        (0..FIXTURE_ROUTES).any(|route| speed == 2.0 + route as f32),
+        "{whole:?}"
+    );
+    assert_eq!(whole[1], 0.0);
+    assert_eq!(target(early, Some(0.5)), vec![30.0 + 1.5 * speed, 0.0]);
+    // Too near the episode's end for a frame 3 s later: its own target.
+    assert_eq!(target(late, Some(1.0)), vec![30.0, 0.0]);
+
+    let error = TrainConfig {
+        later_target: -0.1,
+        ..config.clone()
+    }
+    .validate()
+    .unwrap_err();
+    assert!(error.contains("later_target must be in [0, 1]"), "{error}");
 }
 
 #[test]

@@ -98,6 +98,11 @@ pub struct TrainArgs {
     /// episode's first tick, so the network cannot just repeat what the expert was doing.
     #[arg(long, default_value_t = 0.0)]
     history_dropout: f64,
+    /// Share of samples (0 to 1) shown the target point the route follower gave up to 3 s
+    /// later (the next plan node, past one), their labels unchanged: against driving the
+    /// straight line to the target across a bend or a loop.
+    #[arg(long, default_value_t = 0.0)]
+    later_target: f64,
     /// The history the network trains with, written into its checkpoints as their serving
     /// setting: `chain` (the frame 0.5 s back attending to the frame 1 s back; served with
     /// three BEV passes a step) or `link` (the frame 0.5 s back on its own; two passes, about
@@ -256,6 +261,7 @@ impl TrainArgs {
         config.clip_norm = self.clip_norm;
         config.augment = self.augment;
         config.history_dropout = self.history_dropout;
+        config.later_target = self.later_target;
         config.history = self.history;
         config.labels = self.labels;
         config.balanced = !self.uniform_sampling;

@@ -82,6 +82,11 @@ pub struct TrainConfig {
     /// expert was just doing from the history instead of the scene); 0 = never.
     #[serde(default)]
     pub history_dropout: f64,
+    /// Share of samples shown a later frame's target point
+    /// ([`super::data::SampleDraw::later_target`]): against driving the straight line to the
+    /// target; 0 = never.
+    #[serde(default)]
+    pub later_target: f64,
     /// The history the network trains with, and is then served with: the frame 0.5 s back
     /// attending to the frame 1 s back ([`History::Chain`], three BEV passes a sample) or
     /// encoded on its own ([`History::Link`], two).
@@ -137,6 +142,7 @@ impl TrainConfig {
             future_bev: true,
             augment: 1.0,
             history_dropout: 0.0,
+            later_target: 0.0,
             history: History::Chain,
             labels: Labels::Plan,
             balanced: true,
@@ -183,11 +189,13 @@ impl TrainConfig {
                 return Err(format!("{field} must be positive, got {value}"));
             }
         }
-        if !(0.0..=1.0).contains(&self.history_dropout) {
-            return Err(format!(
-                "history_dropout must be in [0, 1], got {}",
-                self.history_dropout
-            ));
+        for (field, share) in [
+            ("history_dropout", self.history_dropout),
+            ("later_target", self.later_target),
+        ] {
+            if !(0.0..=1.0).contains(&share) {
+                return Err(format!("{field} must be in [0, 1], got {share}"));
+            }
         }
         if self.init.is_some() && self.init_perception.is_some() {
             return Err(

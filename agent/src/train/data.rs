@@ -30,7 +30,7 @@ use ssrdrive_proto::dataset::{
 
 use super::augment::Photometric;
 use super::loss::{BetaTargets, ImitationTargets};
-use super::occupancy::actors_in_frame_of;
+use super::occupancy::{actors_in_frame_of, point_in_frame_of};
 use crate::history::History;
 use crate::model::backbone::frame_to_input;
 use crate::model::bev::{GeometryTensors, HISTORY_S, SampleGeometry};
@@ -43,14 +43,26 @@ use crate::pose::{EgoMotion, Pose2};
 /// whose actors label the motion head.
 pub const FUTURE_BEV_S: f64 = crate::model::occupancy::MOTION_HORIZON_S;
 
-/// How one sample of a batch is varied: its photometric jitter and whether it trains the
-/// first-frame path (history and ego motion dropped, as on an episode's first tick).
+/// The farthest a sample's later target point is taken from ([`SampleDraw::later_target`]),
+/// seconds: the route follower's target of a frame up to this much later.
+pub const LATER_TARGET_S: f64 = 3.0;
+
+/// How one sample of a batch is varied: its photometric jitter, whether it trains the
+/// first-frame path (history and ego motion dropped, as on an episode's first tick), and
+/// whether it is shown a later frame's target point.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SampleDraw {
     /// The jitter applied to every frame of the sample; `None` leaves the frames as recorded.
     pub photometric: Option<Photometric>,
     /// Train the first-frame path: no history BEV and no ego motion.
     pub drop_history: bool,
+    /// Show the sample the target point the route follower gave this share (0 to 1] of
+    /// [`LATER_TARGET_S`] later (at least a frame), in the sample's own ego frame; the labels
+    /// stay. Often the same plan node; past one, the next: beyond the next bend, across ground
+    /// the labels do not cross. Against the shortcut of driving the straight line to the
+    /// target: at a U-turn loop's mouth (Town03) the bundled network drove across the grass to
+    /// the node at the loop's far end. A sample too near its episode's end keeps its own.
+    pub later_target: Option<f64>,
 }
 
 /// Where the waypoint labels come from.
@@ -94,6 +106,8 @@ pub struct TrainingData {
     episodes: Vec<Episode>,
     history_offset: usize,
     future_offset: usize,
+    /// Frames in [`LATER_TARGET_S`].
+    later_target_frames: usize,
     pred_len: usize,
     labels: Labels,
     /// Samples of the training routes.
@@ -209,6 +223,7 @@ impl TrainingData {
         let dataset = Dataset::open(root)?;
         let (history_offset, future_offset) = check_manifest(&dataset, root, config)?;
         let m = &dataset.manifest;
+        let later_target_frames = ((LATER_TARGET_S * m.rate_hz).round() as usize).max(1);
         let pred_len = config.head.pred_len;
         let total = m.episode_list.len();
         let mut episodes = Vec::with_capacity(total);
@@ -272,6 +287,7 @@ impl TrainingData {
             episodes,
             history_offset,
             future_offset,
+            later_target_frames,
             pred_len,
             labels,
             train,
@@ -354,6 +370,7 @@ impl TrainingData {
             let SampleDraw {
                 photometric,
                 drop_history,
+                later_target,
             } = draw(i);
             let back = self.history_offset as isize;
             let history = (!drop_history)
@@ -395,9 +412,21 @@ impl TrainingData {
             batch
                 .shown_speed
                 .push(config.shown_speed(now.speed as f32).unwrap_or(0.0));
-            batch
-                .target_point
-                .extend(now.target_point.map(|v| v as f32));
+            let later = later_target.and_then(|share| {
+                let frames = (share * self.later_target_frames as f64).ceil().max(1.0);
+                self.record(sample, frames as isize)
+            });
+            let target = match later {
+                Some(later) => point_in_frame_of(
+                    later.target_point,
+                    later.position,
+                    later.yaw,
+                    now.position,
+                    now.yaw,
+                ),
+                None => now.target_point,
+            };
+            batch.target_point.extend(target.map(|v| v as f32));
             let command = RoadOption::from_value(now.command).unwrap_or(RoadOption::LaneFollow);
             batch.command.extend(command.one_hot());
             let labels = match self.labels {

@@ -107,13 +107,16 @@ impl Drop for BatchLoader {
     }
 }
 
-/// A sample's photometric jitter and history dropout, from its seed.
+/// A sample's photometric jitter, history dropout and later target point, from its seed.
 fn draw(config: &TrainConfig, seed: u64) -> SampleDraw {
     let augment = config.augment;
+    let mut later = ChaCha8Rng::seed_from_u64(seed.rotate_left(17) ^ 0x7a9e);
     SampleDraw {
         photometric: (augment > 0.0).then(|| Photometric::draw(seed, augment)),
         drop_history: config.history_dropout > 0.0
             && ChaCha8Rng::seed_from_u64(!seed).random_bool(config.history_dropout),
+        later_target: (config.later_target > 0.0 && later.random_bool(config.later_target))
+            .then(|| 1.0 - later.random::<f64>()),
     }
 }
 
@@ -167,5 +170,26 @@ mod tests {
         assert!((0.25..0.35).contains(&share), "{share}");
         config.history_dropout = 1.0;
         assert_eq!(dropped(&config), 2000);
+    }
+
+    #[test]
+    fn later_targets_are_drawn_for_their_share_of_samples_independently_of_history_dropout() {
+        let mut config = TrainConfig::new(SsrConfig::cpu_default(), 1);
+        let draws = |config: &TrainConfig| -> Vec<SampleDraw> {
+            (0..2000)
+                .map(|i| draw(config, sample_seed(3, i / 8, (i % 8) as usize)))
+                .collect()
+        };
+        assert!(draws(&config).iter().all(|d| d.later_target.is_none()), "off by default");
+        config.later_target = 0.3;
+        config.history_dropout = 0.3;
+        let drawn = draws(&config);
+        let later: Vec<f64> = drawn.iter().filter_map(|d| d.later_target).collect();
+        let share = later.len() as f64 / 2000.0;
+        assert!((0.25..0.35).contains(&share), "{share}");
+        assert!(later.iter().all(|&s| s > 0.0 && s <= 1.0));
+        let both = drawn.iter().filter(|d| d.drop_history && d.later_target.is_some()).count();
+        let both = both as f64 / 2000.0;
+        assert!((0.05..0.13).contains(&both), "drawn independently: {both}");
     }
 }

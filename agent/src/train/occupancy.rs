@@ -60,22 +60,32 @@ pub fn actors_in_frame_of(
     to_position: [f64; 3],
     to_yaw: f64,
 ) -> Vec<ActorRecord> {
-    let (sin, cos) = yaw.sin_cos();
     actors
         .iter()
-        .map(|actor| {
-            let [x, y] = actor.centre;
-            let world = [
-                position[0] + x * cos - y * sin - to_position[0],
-                position[1] + x * sin + y * cos - to_position[1],
-            ];
-            ActorRecord {
-                centre: world_to_ego(world, to_yaw),
-                yaw: actor.yaw + yaw - to_yaw,
-                ..*actor
-            }
+        .map(|actor| ActorRecord {
+            centre: point_in_frame_of(actor.centre, position, yaw, to_position, to_yaw),
+            yaw: actor.yaw + yaw - to_yaw,
+            ..*actor
         })
         .collect()
+}
+
+/// A point given in the ego frame of a car at `position` heading `yaw`, in the ego frame of a
+/// car at `to_position` heading `to_yaw`.
+pub fn point_in_frame_of(
+    point: [f64; 2],
+    position: [f64; 3],
+    yaw: f64,
+    to_position: [f64; 3],
+    to_yaw: f64,
+) -> [f64; 2] {
+    let (sin, cos) = yaw.sin_cos();
+    let [x, y] = point;
+    let world = [
+        position[0] + x * cos - y * sin - to_position[0],
+        position[1] + x * sin + y * cos - to_position[1],
+    ];
+    world_to_ego(world, to_yaw)
 }
 
 /// Balanced binary cross-entropy of `logits` to `targets` (both `[B, Q, 2]`) over the samples
