@@ -11,6 +11,7 @@ use burn::tensor::{Device, Tensor};
 use common::fixture::{FIXTURE_FRAMES, FIXTURE_ROUTES, write_fixture_dataset};
 use common::tiny_config;
 use ssr_agent::checkpoint;
+use ssr_agent::control::ControlConfig;
 use ssr_agent::device::Backend;
 use ssr_agent::history::History;
 use ssr_agent::model::config::SsrConfig;
@@ -403,6 +404,50 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
     };
     let error = train_error(missing, &data, &tmp.dir("init-missing"));
     assert!(error.to_string().contains("no-such.safetensors"), "{error}");
+}
+
+#[test]
+fn a_fine_tuned_run_keeps_its_initial_checkpoints_controller_settings() {
+    let _rng = device_rng();
+    let tmp = Scratch::new();
+    let data = tmp.fixture("control");
+    let base = config(2);
+    let fresh = train(
+        base.clone(),
+        options(&data, &tmp.dir("control-fresh")),
+        open(&data, &base),
+    )
+    .unwrap()
+    .checkpoint;
+    let control_of =
+        |path: &Path| checkpoint::control_config(&checkpoint::inspect(path).unwrap()).unwrap();
+    assert_eq!(control_of(&fresh), ControlConfig::default(), "fresh weights");
+    let mut served = ControlConfig::default();
+    served.safety.enabled = true;
+    let init = tmp.dir("control-init").join("init.safetensors");
+    checkpoint::with_control(&fresh, &init, &served, &Device::flex()).unwrap();
+
+    // Stopped after a step and resumed: both halves write the initial checkpoint's settings.
+    let run = TrainConfig {
+        init: Some(init),
+        ..base.clone()
+    };
+    let out = tmp.dir("control-run");
+    let resumed = |stop_at: Option<u64>, resume: bool| {
+        let options = TrainOptions {
+            stop_at,
+            resume,
+            ..options(&data, &out)
+        };
+        train(run.clone(), options, open(&data, &run))
+    };
+    let first = resumed(Some(1), false).unwrap().checkpoint;
+    assert_eq!(control_of(&first), served);
+    assert_eq!(control_of(&resumed(None, true).unwrap().checkpoint), served);
+
+    std::fs::write(out.join("control.json"), "{ not json").unwrap();
+    let error = resumed(None, true).unwrap_err();
+    assert!(error.to_string().contains("control.json"), "{error}");
 }
 
 #[test]

@@ -4,6 +4,8 @@
 //! # A run's folder
 //! ```text
 //! <out>/train_config.json          TrainConfig (the run's definition)
+//! <out>/control.json               the controller settings its checkpoints carry: the
+//!                                  --init checkpoint's, else the defaults
 //! <out>/metrics.jsonl              a line per step ("kind": "step") and per validation
 //! <out>/checkpoints/step-NNNNNN.safetensors   servable checkpoints (config, rig, notes)
 //! <out>/final.safetensors          the last step's weights
@@ -162,6 +164,8 @@ struct Trainer {
     step: u64,
     metrics: std::fs::File,
     last_validation: Option<ValidationMetrics>,
+    /// The controller settings its checkpoints carry (`control.json`).
+    control: ControlConfig,
 }
 
 /// Trains (or resumes) a run; `config` is ignored when resuming.
@@ -190,8 +194,10 @@ fn initial_weights(
     path: &Path,
     model: &SsrConfig,
     device: &Device,
-) -> Result<SsrModel, TrainError> {
+) -> Result<(SsrModel, ControlConfig), TrainError> {
     let (mut weights, info) = checkpoint::load(path, device)?;
+    let control = checkpoint::control_config(&info)
+        .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
     let adds_occupancy = model.occupancy_head && !info.config.occupancy_head;
     let adds_hazard = model.hazard_head && !info.config.hazard_head;
     let adds_motion = model.motion_head && !info.config.motion_head;
@@ -247,7 +253,7 @@ fn initial_weights(
             .deepened(&from, &model.backbone, device)
             .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
     }
-    Ok(weights)
+    Ok((weights, control))
 }
 
 /// The config fields that shape the perception [`with_perception_of`] copies.
@@ -310,7 +316,8 @@ impl Trainer {
         let out = options.out.clone();
         std::fs::create_dir_all(&out).map_err(io_error(&out))?;
         let metrics_path = out.join("metrics.jsonl");
-        let (config, model, optimizer, step) = if options.resume {
+        let control_path = out.join("control.json");
+        let (config, model, optimizer, step, control) = if options.resume {
             let resume_dir = out.join("resume");
             let progress = read_progress(&out)?;
             let fail = |problem: String| TrainError::Resume {
@@ -326,23 +333,41 @@ impl Trainer {
                 .map_err(|e| fail(format!("optimizer.bpk: {e}")))?;
             let optimizer = optimizer_for(&config).load_record(record);
             keep_metrics_until(&metrics_path, progress.step)?;
-            (config, model, optimizer, progress.step)
+            // Runs from before the file carried the defaults.
+            let control = match std::fs::read_to_string(&control_path) {
+                Ok(json) => serde_json::from_str::<ControlConfig>(&json)
+                    .map_err(|e| e.to_string())
+                    .and_then(|c| c.validate().map(|()| c))
+                    .map_err(|e| fail(format!("{}: {e}", control_path.display())))?,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => ControlConfig::default(),
+                Err(e) => return Err(io_error(&control_path)(e)),
+            };
+            (config, model, optimizer, progress.step, control)
         } else {
             config.validate().map_err(TrainError::Config)?;
             device.seed(config.seed);
-            let model = match (&config.init, &config.init_perception) {
+            // Fine-tuning keeps the driving's controller settings; a fresh head gets the defaults.
+            let (model, control) = match (&config.init, &config.init_perception) {
                 (Some(path), _) => initial_weights(path, &config.model, &device)?,
-                (None, Some(path)) => with_perception_of(path, &config.model, &device)?,
-                (None, None) => config.model.init(&device),
+                (None, Some(path)) => (
+                    with_perception_of(path, &config.model, &device)?,
+                    ControlConfig::default(),
+                ),
+                (None, None) => (config.model.init(&device), ControlConfig::default()),
             };
             std::fs::write(
                 out.join("train_config.json"),
                 serde_json::to_string_pretty(&config).expect("configs serialise"),
             )
             .map_err(io_error(&out))?;
+            std::fs::write(
+                &control_path,
+                serde_json::to_string_pretty(&control).expect("configs serialise"),
+            )
+            .map_err(io_error(&control_path))?;
             std::fs::write(&metrics_path, b"").map_err(io_error(&metrics_path))?;
             let optimizer = optimizer_for(&config);
-            (config, model, optimizer, 0)
+            (config, model, optimizer, 0, control)
         };
         let metrics = std::fs::OpenOptions::new()
             .append(true)
@@ -359,6 +384,7 @@ impl Trainer {
             step,
             metrics,
             last_validation: None,
+            control,
         })
     }
 
@@ -549,7 +575,7 @@ impl Trainer {
                 (checkpoint::RIG_KEY, rig),
                 (
                     checkpoint::CONTROL_KEY,
-                    serde_json::to_string(&ControlConfig::default()).expect("configs serialise"),
+                    serde_json::to_string(&self.control).expect("configs serialise"),
                 ),
                 (
                     checkpoint::HISTORY_KEY,
