@@ -103,6 +103,13 @@ fn step_lines(out: &Path) -> Vec<StepMetrics> {
 }
 
 /// Why a fresh run of `config` on `data` into `out` failed.
+/// A run of `config` on `data` into `out`, trained to its end: its last checkpoint.
+fn trained(config: &TrainConfig, data: &Path, out: &Path) -> PathBuf {
+    train(config.clone(), options(data, out), open(data, config))
+        .unwrap()
+        .checkpoint
+}
+
 fn train_error(config: TrainConfig, data: &Path, out: &Path) -> TrainError {
     let set = open(data, &config);
     train(config, options(data, out), set).expect_err("the run fails")
@@ -367,9 +374,7 @@ fn fine_tuning_starts_from_a_checkpoint_of_the_same_network() {
     let data = tmp.fixture("init");
     let config = config(8);
     let first = tmp.dir("init-first");
-    let trained = train(config.clone(), options(&data, &first), open(&data, &config))
-        .unwrap()
-        .checkpoint;
+    let trained = trained(&config, &data, &first);
 
     // Step 1's loss is measured before the update: from the trained weights it is lower than
     // from fresh ones on the same batch.
@@ -412,13 +417,7 @@ fn a_fine_tuned_run_keeps_its_initial_checkpoints_controller_settings() {
     let tmp = Scratch::new();
     let data = tmp.fixture("control");
     let base = config(2);
-    let fresh = train(
-        base.clone(),
-        options(&data, &tmp.dir("control-fresh")),
-        open(&data, &base),
-    )
-    .unwrap()
-    .checkpoint;
+    let fresh = trained(&base, &data, &tmp.dir("control-fresh"));
     let control_of =
         |path: &Path| checkpoint::control_config(&checkpoint::inspect(path).unwrap()).unwrap();
     assert_eq!(control_of(&fresh), ControlConfig::default(), "fresh weights");
@@ -456,13 +455,7 @@ fn a_run_that_trains_only_a_head_keeps_the_rest_of_its_checkpoint() {
     let tmp = Scratch::new();
     let data = tmp.fixture("head-only");
     let base = config(3);
-    let init = train(
-        base.clone(),
-        options(&data, &tmp.dir("head-only-init")),
-        open(&data, &base),
-    )
-    .unwrap()
-    .checkpoint;
+    let init = trained(&base, &data, &tmp.dir("head-only-init"));
     let mut only = TrainConfig {
         init: Some(init.clone()),
         train_only: vec![Head::Light],
@@ -515,13 +508,7 @@ fn an_ablation_starts_from_a_checkpoints_perception() {
     let tmp = Scratch::new();
     let data = tmp.fixture("perception");
     let config = config(8);
-    let trained = train(
-        config.clone(),
-        options(&data, &tmp.dir("perception-first")),
-        open(&data, &config),
-    )
-    .unwrap()
-    .checkpoint;
+    let trained = trained(&config, &data, &tmp.dir("perception-first"));
 
     // Another token count, no FFP, a learning rate too small to move a weight: the checkpoint
     // of its first step holds the start, whose BEV encoder is the trained network's (the
