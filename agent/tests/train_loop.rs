@@ -420,7 +420,11 @@ fn a_fine_tuned_run_keeps_its_initial_checkpoints_controller_settings() {
     let fresh = trained(&base, &data, &tmp.dir("control-fresh"));
     let control_of =
         |path: &Path| checkpoint::control_config(&checkpoint::inspect(path).unwrap()).unwrap();
-    assert_eq!(control_of(&fresh), ControlConfig::default(), "fresh weights");
+    assert_eq!(
+        control_of(&fresh),
+        ControlConfig::default(),
+        "fresh weights"
+    );
     let mut served = ControlConfig::default();
     served.safety.enabled = true;
     let init = tmp.dir("control-init").join("init.safetensors");

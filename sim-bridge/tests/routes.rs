@@ -235,7 +235,12 @@ fn route_follower_does_not_skip_a_u_turn_loop_at_its_neck() {
         position: DVec3::new(x, y, 0.0),
         option: RoadOption::LaneFollow,
     };
-    let plan = vec![node(10.0, 0.0), node(-30.0, -1.0), node(-1.0, -3.5), node(50.0, -3.5)];
+    let plan = vec![
+        node(10.0, 0.0),
+        node(-30.0, -1.0),
+        node(-1.0, -3.5),
+        node(50.0, -3.5),
+    ];
     let heading_west = std::f64::consts::PI;
     let mut f = RouteFollower::new(plan.clone());
     // At the neck, heading west: the loop is still ahead, the target stays on it.

@@ -180,7 +180,10 @@ mod tests {
                 .map(|i| draw(config, sample_seed(3, i / 8, (i % 8) as usize)))
                 .collect()
         };
-        assert!(draws(&config).iter().all(|d| d.later_target.is_none()), "off by default");
+        assert!(
+            draws(&config).iter().all(|d| d.later_target.is_none()),
+            "off by default"
+        );
         config.later_target = 0.3;
         config.history_dropout = 0.3;
         let drawn = draws(&config);
@@ -188,7 +191,10 @@ mod tests {
         let share = later.len() as f64 / 2000.0;
         assert!((0.25..0.35).contains(&share), "{share}");
         assert!(later.iter().all(|&s| s > 0.0 && s <= 1.0));
-        let both = drawn.iter().filter(|d| d.drop_history && d.later_target.is_some()).count();
+        let both = drawn
+            .iter()
+            .filter(|d| d.drop_history && d.later_target.is_some())
+            .count();
         let both = both as f64 / 2000.0;
         assert!((0.05..0.13).contains(&both), "drawn independently: {both}");
     }
