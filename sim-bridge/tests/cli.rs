@@ -1056,3 +1056,63 @@ fn results_compare_pairs_two_agents_runs_and_says_when_they_share_none() {
         "{stderr}"
     );
 }
+
+#[test]
+fn results_summary_tabulates_files_side_by_side_and_names_a_bad_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let eval = |name: &str, ids: &str| {
+        let out = tmp.path().join(name);
+        let run = sim_bridge(&[
+            "eval",
+            "--routes",
+            "town05-short-style",
+            "--route-ids",
+            ids,
+            "--timeout",
+            "5",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_succeeded(&run);
+        out
+    };
+    let (one, two) = (eval("one.json", "0"), eval("two.json", "1,2"));
+    let run = sim_bridge(&[
+        "results",
+        "summary",
+        one.to_str().unwrap(),
+        two.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}");
+    let runs_of = |name: &str| {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(name))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        line[name.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    assert_eq!(runs_of(one.to_str().unwrap()), "1");
+    assert_eq!(runs_of(two.to_str().unwrap()), "2");
+    assert_eq!(runs_of("all (2 files)"), "3");
+
+    let broken = tmp.path().join("broken.json");
+    std::fs::write(&broken, "{\"not\": \"results\"}").unwrap();
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    for (path, says) in [(&broken, "broken.json"), (&empty, "holds no results files")] {
+        let run = sim_bridge(&[
+            "results",
+            "summary",
+            one.to_str().unwrap(),
+            path.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success() && stderr.contains(says), "{stderr}");
+    }
+}

@@ -1,13 +1,15 @@
 //! `sim-bridge results`: work on leaderboard results files; `merge` joins the files of one
 //! campaign's shares ([`sim_bridge::eval::merge`]), `compare` pairs two agents' runs
-//! ([`sim_bridge::eval::compare`]).
+//! ([`sim_bridge::eval::compare`]), `summary` tabulates files side by side
+//! ([`sim_bridge::eval::suite::figures_table`]).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use sim_bridge::eval::compare::{Runs, compare, runs_of};
 use sim_bridge::eval::merge::{Part, merge};
+use sim_bridge::eval::suite::{Figures, figures_table};
 use sim_bridge::scoring::{Results, summary_table};
 use ssrdrive_support::files::read_capped_text;
 
@@ -25,6 +27,18 @@ pub enum ResultsCommand {
     /// interval that holds 0 means these runs cannot tell the two apart (closed loop, one run's
     /// DS swings by tens of points from the smallest change).
     Compare(CompareArgs),
+    /// One line per results file (a suite's output folder counts as its parts' files): runs,
+    /// completed, km driven, mean DS, RC and IS, success rate and infractions per km driven;
+    /// then a line for all of them together and their failure classes. For tables of
+    /// campaigns run apart (towns, traffic modes, checkpoints).
+    Summary(SummaryArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct SummaryArgs {
+    /// Results files, or suites' output folders.
+    #[arg(required = true)]
+    paths: Vec<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -57,41 +71,76 @@ pub fn run(command: ResultsCommand) -> anyhow::Result<()> {
     match command {
         ResultsCommand::Merge(args) => run_merge(args),
         ResultsCommand::Compare(args) => run_compare(args),
+        ResultsCommand::Summary(args) => run_summary(args),
     }
 }
 
-fn read_results(path: &std::path::Path) -> anyhow::Result<Results> {
+fn read_results(path: &Path) -> anyhow::Result<Results> {
     let text = read_capped_text(path, MAX_RESULTS_BYTES)
         .with_context(|| format!("reading {}", path.display()))?;
     Results::from_json(&text).with_context(|| format!("reading {}", path.display()))
 }
 
-/// The runs of a results file, or of every part's file in a suite's folder (`suite.json`, the
-/// suite's summary, left out).
-fn read_runs(path: &std::path::Path) -> anyhow::Result<Runs> {
+/// The results files at `path`: the file itself, or every part's file in a suite's folder
+/// (`suite.json`, the suite's summary, left out), by name.
+fn results_files(path: &Path) -> anyhow::Result<Vec<PathBuf>> {
     if !path.is_dir() {
-        let results = read_results(path)?;
-        return Ok(runs_of("", &results.checkpoint.records));
+        return Ok(vec![path.to_path_buf()]);
     }
-    let mut runs = Runs::new();
+    let mut files = Vec::new();
     let entries = std::fs::read_dir(path).with_context(|| format!("reading {}", path.display()))?;
     for entry in entries {
         let file = entry
             .with_context(|| format!("reading {}", path.display()))?
             .path();
-        let part = file
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or_default();
-        if file.extension().is_some_and(|e| e == "json") && part != "suite" {
-            let results = read_results(&file)?;
-            runs.extend(runs_of(part, &results.checkpoint.records));
+        if file.extension().is_some_and(|e| e == "json") && part_of(&file) != "suite" {
+            files.push(file);
         }
     }
-    if runs.is_empty() {
+    if files.is_empty() {
         bail!("{} holds no results files", path.display());
     }
+    files.sort();
+    Ok(files)
+}
+
+/// A suite part's name: its results file's stem.
+fn part_of(file: &Path) -> &str {
+    file.file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or_default()
+}
+
+/// The runs of a results file, or of every part's file in a suite's folder (named by part).
+fn read_runs(path: &Path) -> anyhow::Result<Runs> {
+    let mut runs = Runs::new();
+    for file in results_files(path)? {
+        let part = if path.is_dir() { part_of(&file) } else { "" };
+        runs.extend(runs_of(part, &read_results(&file)?.checkpoint.records));
+    }
     Ok(runs)
+}
+
+fn run_summary(args: SummaryArgs) -> anyhow::Result<()> {
+    let mut files = Vec::new();
+    for path in &args.paths {
+        for file in results_files(path)? {
+            let records = read_results(&file)?.checkpoint.records;
+            files.push((file.display().to_string(), records));
+        }
+    }
+    let all: Vec<_> = files.iter().flat_map(|(_, r)| r.iter().cloned()).collect();
+    let all = Figures::of(&all);
+    let figures: Vec<(String, Figures)> = files
+        .iter()
+        .map(|(name, records)| (name.clone(), Figures::of(records)))
+        .collect();
+    let total = format!("all ({} files)", figures.len());
+    let mut lines: Vec<(&str, &Figures)> = figures.iter().map(|(n, f)| (n.as_str(), f)).collect();
+    if figures.len() > 1 {
+        lines.push((&total, &all));
+    }
+    super::print_stdout(&figures_table(&lines, &all))
 }
 
 fn run_compare(args: CompareArgs) -> anyhow::Result<()> {

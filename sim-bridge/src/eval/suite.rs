@@ -229,17 +229,36 @@ const TABLE_KINDS: [(InfractionKind, &str); 6] = [
 
 /// A plain-text table of `summary`: one line per part and one for the whole suite.
 pub fn suite_table(summary: &SuiteSummary) -> String {
+    let total = format!("all ({})", summary.suite);
+    let mut lines: Vec<(&str, &Figures)> = summary
+        .parts
+        .iter()
+        .map(|part| (part.name.as_str(), &part.figures))
+        .collect();
+    lines.push((&total, &summary.all));
+    figures_table(&lines, &summary.all)
+}
+
+/// A plain-text table of named groups of runs (a line each: runs, completed, km driven, DS, RC,
+/// IS, success rate and infractions per km), then the failure classes of `classes`.
+pub fn figures_table(lines: &[(&str, &Figures)], classes: &Figures) -> String {
+    let width = lines
+        .iter()
+        .map(|(name, _)| name.len())
+        .max()
+        .unwrap_or(0)
+        .max(20);
     let mut out = format!(
-        "{:<20} {:>5} {:>5} {:>7} {:>7} {:>7} {:>6} {:>6}",
+        "{:<width$} {:>5} {:>5} {:>7} {:>7} {:>7} {:>6} {:>6}",
         "part", "runs", "done", "km", "DS", "RC", "IS", "succ%"
     );
     for (_, head) in TABLE_KINDS {
         out.push_str(&format!(" {head:>7}"));
     }
     out.push('\n');
-    let line = |name: &str, f: &Figures| {
-        let mut l = format!(
-            "{:<20} {:>5} {:>5} {:>7.2} {:>7.2} {:>7.2} {:>6.3} {:>6.1}",
+    for (name, f) in lines {
+        out.push_str(&format!(
+            "{:<width$} {:>5} {:>5} {:>7.2} {:>7.2} {:>7.2} {:>6.3} {:>6.1}",
             name,
             f.runs,
             f.completed,
@@ -248,20 +267,18 @@ pub fn suite_table(summary: &SuiteSummary) -> String {
             f.scores.score_route,
             f.scores.score_penalty,
             f.bench2drive.success_rate
-        );
+        ));
         for (kind, _) in TABLE_KINDS {
-            l.push_str(&format!(" {:>7.2}", f.per_km.get(kind)));
+            out.push_str(&format!(" {:>7.2}", f.per_km.get(kind)));
         }
-        l.push('\n');
-        l
-    };
-    for part in &summary.parts {
-        out.push_str(&line(&part.name, &part.figures));
+        out.push('\n');
     }
-    out.push_str(&line(&format!("all ({})", summary.suite), &summary.all));
-    if !summary.all.classes.is_empty() {
-        out.push_str("\nfailure classes (all runs)              count  per km\n");
-        for (class, c) in &summary.all.classes {
+    if !classes.classes.is_empty() {
+        out.push_str(&format!(
+            "\n{:<40} {:>5} {:>7}\n",
+            "failure classes (all runs)", "count", "per km"
+        ));
+        for (class, c) in &classes.classes {
             out.push_str(&format!("{class:<40} {:>5} {:>7.2}\n", c.count, c.per_km));
         }
     }
