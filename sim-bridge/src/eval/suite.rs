@@ -274,12 +274,22 @@ pub fn figures_table(lines: &[(&str, &Figures)], classes: &Figures) -> String {
         out.push('\n');
     }
     if !classes.classes.is_empty() {
+        let width = classes
+            .classes
+            .keys()
+            .map(String::len)
+            .max()
+            .unwrap_or(0)
+            .max(40);
         out.push_str(&format!(
-            "\n{:<40} {:>5} {:>7}\n",
+            "\n{:<width$} {:>5} {:>7}\n",
             "failure classes (all runs)", "count", "per km"
         ));
         for (class, c) in &classes.classes {
-            out.push_str(&format!("{class:<40} {:>5} {:>7.2}\n", c.count, c.per_km));
+            out.push_str(&format!(
+                "{class:<width$} {:>5} {:>7.2}\n",
+                c.count, c.per_km
+            ));
         }
     }
     out
