@@ -988,26 +988,28 @@ fn a_step_log_keeps_the_lights_around_the_ego_as_ground_truth() {
     );
 }
 
+/// The expert's 5-second runs of Town05-style short routes `ids` (e.g. "0,1"), written to `out`.
+fn expert_results(out: &std::path::Path, ids: &str) -> std::path::PathBuf {
+    let run = sim_bridge(&[
+        "eval",
+        "--routes",
+        "town05-short-style",
+        "--route-ids",
+        ids,
+        "--timeout",
+        "5",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_succeeded(&run);
+    out.to_path_buf()
+}
+
 #[test]
 fn results_compare_pairs_two_agents_runs_and_says_when_they_share_none() {
     let tmp = tempfile::tempdir().unwrap();
-    let eval = |name: &str, ids: &str| {
-        let out = tmp.path().join(name);
-        let run = sim_bridge(&[
-            "eval",
-            "--routes",
-            "town05-short-style",
-            "--route-ids",
-            ids,
-            "--timeout",
-            "5",
-            "--quiet",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert_succeeded(&run);
-        out
-    };
+    let eval = |name: &str, ids: &str| expert_results(&tmp.path().join(name), ids);
     let (first, second, other) = (
         eval("a.json", "0,1"),
         eval("b.json", "1,0"),
@@ -1060,23 +1062,7 @@ fn results_compare_pairs_two_agents_runs_and_says_when_they_share_none() {
 #[test]
 fn results_summary_tabulates_files_side_by_side_and_names_a_bad_one() {
     let tmp = tempfile::tempdir().unwrap();
-    let eval = |name: &str, ids: &str| {
-        let out = tmp.path().join(name);
-        let run = sim_bridge(&[
-            "eval",
-            "--routes",
-            "town05-short-style",
-            "--route-ids",
-            ids,
-            "--timeout",
-            "5",
-            "--quiet",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert_succeeded(&run);
-        out
-    };
+    let eval = |name: &str, ids: &str| expert_results(&tmp.path().join(name), ids);
     let (one, two) = (eval("one.json", "0"), eval("two.json", "1,2"));
     let run = sim_bridge(&[
         "results",
