@@ -394,5 +394,13 @@ fn a_recorded_run_replays_without_drift() {
         assert!((hazard.iter().sum::<f64>() - 1.0).abs() < 1e-3, "{line}");
         assert!(line["light"].is_null(), "{line}");
         assert!(line["lights"].is_array(), "{line}");
+        // The fusion mixes the two sources' steers: the served one lies between them.
+        let steer = |field: &str| line[field][0].as_f64().unwrap();
+        let (plan, branch) = (steer("trajectory_control"), steer("branch_control"));
+        let fused = steer("control");
+        assert!(
+            plan.min(branch) - 1e-6 <= fused && fused <= plan.max(branch) + 1e-6,
+            "{line}"
+        );
     }
 }

@@ -90,6 +90,11 @@ pub struct TickTrace {
     pub control: [f64; 3],
     /// The recorded answer's control, where the log has one.
     pub recorded: Option<[f64; 3]>,
+    /// The replayed answer's two sources before the fusion: the trajectory's control (pure
+    /// pursuit and the speed PID on the plan) and the control branch's.
+    pub trajectory_control: Option<[f64; 3]>,
+    /// See `trajectory_control`.
+    pub branch_control: Option<[f64; 3]>,
     /// The speed head's prediction, m/s.
     pub predicted_speed: f64,
     /// The hazard head's probabilities: clear, light, stop sign, road user, lane change.
@@ -159,6 +164,10 @@ impl TickTrace {
             speed: request.map_or(0.0, |r| r.speed_mps),
             control: answer.control.as_ref().map_or([0.0; 3], control),
             recorded: tick.control.as_ref().map(control),
+            trajectory_control: debug
+                .and_then(|d| d.trajectory_control.as_ref())
+                .map(control),
+            branch_control: debug.and_then(|d| d.branch_control.as_ref()).map(control),
             predicted_speed: debug.map_or(0.0, |d| d.predicted_speed_mps),
             hazard: debug
                 .and_then(|d| d.hazard)
