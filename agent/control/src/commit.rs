@@ -14,13 +14,9 @@
 //! hazard head puts the scene down to a light is driven on at up to [`Commit::speed`] instead;
 //! the [`super::safety`] stop still acts on whatever the occupancy head sees on the path.
 //!
-//! With [`Commit::seen_green_s`] (off by default; a network with a light head), a lamp the car
-//! saw green while driving commits it the same way for that long: a light that was green cannot
-//! be red before its 3 s of yellow have passed. On held-out Town02 the v9-v19 blend drove up
-//! to a kerb-side head at green and braked as it left the frame (the hazard head's "light"
-//! rising from 0.09 to 0.84 in a second, with the lamp still green for 2 s), then stood blind
-//! through yellow and red and started 22 s later into its own red (`sim-bridge replay --ticks`,
-//! route 12, light 10: 5 of its 7 red lights on the 17 screen runs).
+//! A variant that committed a moving car for up to a yellow's length after a light head last
+//! saw its lamp green was tried and removed: on held-out Town02 the committed car rolled on
+//! through yellow into red (`agent/models/candidates/README.md`, v9-v19-blend-50-lh).
 
 use serde::{Deserialize, Serialize};
 use ssrdrive_proto::control::Control;
@@ -46,12 +42,6 @@ pub struct Commit {
     pub speed: f32,
     /// Throttle while below that speed.
     pub throttle: f32,
-    /// Seconds after the light head last saw the lamp green (at least
-    /// [`Commit::green_probability`]) during which a moving car goes on through "a light";
-    /// 0 = off. At most 3, a yellow's length.
-    pub seen_green_s: f32,
-    /// The light head's "green" from which a lamp counts as seen green.
-    pub green_probability: f32,
 }
 
 impl Default for Commit {
@@ -63,15 +53,13 @@ impl Default for Commit {
             within_s: 5.0,
             speed: 4.0,
             throttle: 0.5,
-            seen_green_s: 0.0,
-            green_probability: 0.8,
         }
     }
 }
 
 impl Commit {
     /// Checks ranges; the message names the field. `within_s` stays under a light's 10 s of
-    /// green, `seen_green_s` within a yellow's 3 s.
+    /// green.
     pub fn validate(&self) -> Result<(), String> {
         super::check_ranges(&[
             ("commit.held_probability", self.held_probability, 0.0, 1.0),
@@ -79,8 +67,6 @@ impl Commit {
             ("commit.within_s", self.within_s, 0.05, 9.0),
             ("commit.speed", self.speed, 0.1, 10.0),
             ("commit.throttle", self.throttle, 0.0, 1.0),
-            ("commit.seen_green_s", self.seen_green_s, 0.0, 3.0),
-            ("commit.green_probability", self.green_probability, 0.0, 1.0),
         ])
     }
 }
@@ -92,8 +78,6 @@ pub struct CommitState {
     held: bool,
     /// Ticks of commitment left after a start on green.
     ticks_left: u32,
-    /// Ticks of commitment left after the tick the lamp was last seen green.
-    green_ticks_left: u32,
 }
 
 impl CommitState {
@@ -115,19 +99,6 @@ impl CommitState {
         if !rule.enabled {
             return (control, false);
         }
-        let seen_green = beliefs
-            .light
-            .is_some_and(|lamp| lamp.green >= rule.green_probability);
-        // The green tick itself, and the `seen_green_s` of ticks after it.
-        let green_commits = if seen_green {
-            self.green_ticks_left = (rule.seen_green_s * TICKS_PER_SECOND).round() as u32;
-            rule.seen_green_s > 0.0
-        } else if self.green_ticks_left > 0 {
-            self.green_ticks_left -= 1;
-            true
-        } else {
-            false
-        };
         if speed < STOPPED_SPEED {
             self.ticks_left = 0;
             self.held |= light >= rule.held_probability;
@@ -136,7 +107,7 @@ impl CommitState {
         if std::mem::take(&mut self.held) && !unsticking && clear >= rule.start_probability {
             self.ticks_left = (rule.within_s * TICKS_PER_SECOND).round() as u32;
         }
-        if self.ticks_left == 0 && !green_commits {
+        if self.ticks_left == 0 {
             return (control, false);
         }
         self.ticks_left = self.ticks_left.saturating_sub(1);
@@ -151,7 +122,6 @@ impl CommitState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::LightBelief;
 
     const BRAKE: Control = Control {
         steer: 0.1,
@@ -254,61 +224,6 @@ mod tests {
                 "light {light}, clear {clear}, crept {crept}"
             );
         }
-    }
-
-    /// Beliefs with the light head's "green" at `green` beside the hazard head's.
-    fn with_lamp(clear: f32, light: f32, green: f32) -> Beliefs<'static> {
-        Beliefs {
-            light: Some(LightBelief {
-                green,
-                stop: 1.0 - green,
-            }),
-            ..hazard(clear, light)
-        }
-    }
-
-    #[test]
-    fn a_moving_car_that_saw_its_lamp_green_goes_on_for_seen_green_s() {
-        let rule = Commit {
-            seen_green_s: 2.5,
-            ..on()
-        };
-        let mut state = CommitState::default();
-        // Driving up to the head at green, then its lamp leaves the frame: "a light".
-        for _ in 0..40 {
-            let drive = state.apply(DRIVE, 4.0, 0.0, &with_lamp(0.9, 0.05, 0.95), false, &rule);
-            assert_eq!(drive, (DRIVE, false), "nothing to override");
-        }
-        let window = (rule.seen_green_s * TICKS_PER_SECOND) as usize;
-        for tick in 0..window {
-            let (control, overridden) =
-                state.apply(BRAKE, 3.0, 0.1, &with_lamp(0.1, 0.84, 0.0), false, &rule);
-            assert!(overridden, "tick {tick} after the last green");
-            assert_eq!((control.steer, control.brake), (0.1, 0.0));
-        }
-        assert_eq!(
-            state.apply(BRAKE, 3.0, 0.1, &with_lamp(0.1, 0.84, 0.0), false, &rule),
-            (BRAKE, false),
-            "a yellow's length later it may be red"
-        );
-        // Off by default, and a lamp seen red or unsure commits nothing.
-        for (rule, green) in [(on(), 0.95), (rule.clone(), 0.5)] {
-            let mut state = CommitState::default();
-            state.apply(DRIVE, 4.0, 0.0, &with_lamp(0.9, 0.05, green), false, &rule);
-            assert_eq!(
-                state.apply(BRAKE, 3.0, 0.1, &with_lamp(0.1, 0.84, 0.0), false, &rule),
-                (BRAKE, false),
-                "seen_green_s {}, green {green}",
-                rule.seen_green_s
-            );
-        }
-        let error = Commit {
-            seen_green_s: 4.0,
-            ..on()
-        }
-        .validate()
-        .unwrap_err();
-        assert!(error.contains("commit.seen_green_s"), "{error}");
     }
 
     #[test]
