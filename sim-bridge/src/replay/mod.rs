@@ -90,10 +90,9 @@ pub struct TickTrace {
     pub control: [f64; 3],
     /// The recorded answer's control, where the log has one.
     pub recorded: Option<[f64; 3]>,
-    /// The replayed answer's two sources before the fusion: the trajectory's control (pure
-    /// pursuit and the speed PID on the plan) and the control branch's.
+    /// The trajectory's control before the fusion (pure pursuit and the speed PID on the plan).
     pub trajectory_control: Option<[f64; 3]>,
-    /// See `trajectory_control`.
+    /// The control branch's control before the fusion.
     pub branch_control: Option<[f64; 3]>,
     /// The speed head's prediction, m/s.
     pub predicted_speed: f64,
